@@ -1,0 +1,1 @@
+//! Serial line streams (skeleton).

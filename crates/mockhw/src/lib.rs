@@ -1,0 +1,1 @@
+//! magcal-mockhw (skeleton).
