@@ -1,0 +1,259 @@
+//! Does a recording span the three dimensions? Checked before fitting, with advice when it does not.
+//!
+//! The spread of the raw readings is measured along the principal directions of their covariance. A rotation about a
+//! single axis keeps the field's component along that axis constant, so the readings lie in a plane and neither the
+//! vector nor the scalar fit can observe offset and scale along the plane's normal.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// A principal spread below this fraction of the largest is refused.
+pub const REFUSE_RATIO: f64 = 0.1;
+/// A principal spread below this fraction of the largest gets a warning.
+pub const WARN_RATIO: f64 = 0.3;
+/// Below this largest spread (µT) the sensor did not rotate at all.
+const STILL_SPREAD_UT: f64 = 1.0;
+
+/// The spread of the readings along their principal directions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coverage {
+    /// Standard deviation of the readings along each principal direction, µT, largest first.
+    pub spread_ut: [f64; 3],
+    /// The principal directions, unit vectors in sensor axes, in the same order.
+    pub directions: [[f64; 3]; 3],
+}
+
+impl Coverage {
+    /// Measures the spread of raw readings (µT).
+    pub fn of(raw_ut: &[[f64; 3]]) -> Coverage {
+        let n = raw_ut.len().max(1) as f64;
+        let mean = raw_ut
+            .iter()
+            .fold(Vector3::zeros(), |acc, m| acc + Vector3::from(*m))
+            / n;
+        let cov = raw_ut.iter().fold(Matrix3::zeros(), |acc, m| {
+            let d = Vector3::from(*m) - mean;
+            acc + d * d.transpose()
+        }) / n;
+        Coverage::from_covariance(&cov)
+    }
+
+    /// The spread along the principal directions of the readings' covariance matrix (µT²).
+    pub(crate) fn from_covariance(cov: &Matrix3<f64>) -> Coverage {
+        let eig = SymmetricEigen::new(*cov);
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| eig.eigenvalues[j].total_cmp(&eig.eigenvalues[i]));
+        Coverage {
+            spread_ut: order.map(|i| eig.eigenvalues[i].max(0.0).sqrt()),
+            directions: order.map(|i| {
+                let v = eig.eigenvectors.column(i);
+                // Sign: make the largest component positive, so messages read "+Z" rather than "−Z".
+                let s = v[v.iamax()].signum();
+                [v[0] * s, v[1] * s, v[2] * s]
+            }),
+        }
+    }
+
+    /// The weakest spread relative to the strongest (1 for a full sphere, 0 for a plane).
+    pub fn ratio(&self) -> f64 {
+        if self.spread_ut[0] > 0.0 {
+            self.spread_ut[2] / self.spread_ut[0]
+        } else {
+            0.0
+        }
+    }
+
+    /// Refuses coverage too poor to fit, saying which direction is unobserved and how to rotate.
+    pub fn check(&self) -> Result<(), CoverageError> {
+        let [s0, s1, s2] = self.spread_ut;
+        if s0 < STILL_SPREAD_UT {
+            return Err(CoverageError::Still { spread_ut: s0 });
+        }
+        if s1 < REFUSE_RATIO * s0 {
+            return Err(CoverageError::OneDirection {
+                observed: self.directions[0],
+                spread_ut: [s0, s1],
+            });
+        }
+        if s2 < REFUSE_RATIO * s0 {
+            return Err(CoverageError::Planar {
+                unobserved: self.directions[2],
+                spread_ut: s2,
+                largest_ut: s0,
+            });
+        }
+        Ok(())
+    }
+
+    /// A warning when the weakest direction is observed, but poorly.
+    pub fn warning(&self) -> Option<String> {
+        (self.ratio() < WARN_RATIO).then(|| {
+            format!(
+                "coverage is thin along {} (spread {:.1} µT against {:.1} µT): uncertainties along it are large; \
+                 {}",
+                describe(self.directions[2]),
+                self.spread_ut[2],
+                self.spread_ut[0],
+                advice(self.directions[2])
+            )
+        })
+    }
+}
+
+/// Coverage too poor for any fit.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CoverageError {
+    /// The readings hardly vary: the sensor was not rotated.
+    #[error(
+        "the readings hardly vary (spread {spread_ut:.2} µT): the sensor was not rotated. \
+         Turn it through all orientations (every face up and down) while recording."
+    )]
+    Still {
+        /// Largest spread, µT.
+        spread_ut: f64,
+    },
+    /// The readings vary along a single direction only.
+    #[error(
+        "the readings vary along one direction only ({}; spreads {:.1} and {:.1} µT): the sensor barely rotated. \
+         Turn it through all orientations (every face up and down) while recording.",
+        describe(*observed), spread_ut[0], spread_ut[1]
+    )]
+    OneDirection {
+        /// The one direction observed, sensor axes.
+        observed: [f64; 3],
+        /// The two largest spreads, µT.
+        spread_ut: [f64; 2],
+    },
+    /// The readings lie in a plane: a rotation about one axis.
+    #[error(
+        "planar rotation: the readings barely vary along {} (spread {:.2} µT against {:.1} µT), so offset and \
+         scale along it are unobserved. The sensor turned about that axis only; {}",
+        describe(*unobserved), spread_ut, largest_ut, advice(*unobserved)
+    )]
+    Planar {
+        /// The unobserved direction (the rotation axis), sensor axes.
+        unobserved: [f64; 3],
+        /// Spread along it, µT.
+        spread_ut: f64,
+        /// Largest spread, µT.
+        largest_ut: f64,
+    },
+}
+
+/// "sensor axis ≈ +Z" for a direction close to an axis, the vector otherwise.
+pub fn describe(d: [f64; 3]) -> String {
+    let k = (0..3).max_by(|&i, &j| d[i].abs().total_cmp(&d[j].abs())).unwrap_or(0);
+    let axis = ["X", "Y", "Z"][k];
+    let sign = if d[k] >= 0.0 { "+" } else { "−" };
+    if d[k].abs() > 0.95 {
+        format!("sensor axis ≈ {sign}{axis}")
+    } else {
+        format!("sensor direction [{:.2}, {:.2}, {:.2}]", d[0], d[1], d[2])
+    }
+}
+
+fn advice(d: [f64; 3]) -> String {
+    format!(
+        "also tip the sensor so that {} points along and against the field (lay it on its side and rotate again), \
+         or use the cube24 routine.",
+        describe(d).replace("sensor axis ≈ ", "")
+    )
+}
+
+/// Fraction of the sphere of directions visited, on a grid of `cells` roughly equal-area cells (latitude bands of
+/// equal height, each divided into as many longitude cells as keeps their area near `4π/cells`).
+pub fn sphere_fraction(directions: impl IntoIterator<Item = [f64; 3]>, cells: usize) -> f64 {
+    let bands = ((cells as f64 * std::f64::consts::PI / 4.0).sqrt().round() as usize).max(1);
+    let per_band: Vec<usize> = (0..bands)
+        .map(|i| {
+            let z0 = -1.0 + 2.0 * i as f64 / bands as f64;
+            let z1 = z0 + 2.0 / bands as f64;
+            let mid = ((z0 + z1) / 2.0).clamp(-1.0, 1.0);
+            let circumference = (1.0 - mid * mid).sqrt();
+            ((cells as f64 / bands as f64) * circumference * std::f64::consts::PI / 2.0)
+                .round()
+                .max(1.0) as usize
+        })
+        .collect();
+    let offsets: Vec<usize> = per_band
+        .iter()
+        .scan(0, |acc, &n| {
+            let o = *acc;
+            *acc += n;
+            Some(o)
+        })
+        .collect();
+    let total: usize = per_band.iter().sum();
+    let mut seen = vec![false; total];
+    for d in directions {
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if !(n > 0.0) {
+            continue;
+        }
+        let z = (d[2] / n).clamp(-1.0, 1.0);
+        let band = (((z + 1.0) / 2.0 * bands as f64) as usize).min(bands - 1);
+        let lon = d[1].atan2(d[0]) + std::f64::consts::PI;
+        let cell = ((lon / std::f64::consts::TAU * per_band[band] as f64) as usize).min(per_band[band] - 1);
+        seen[offsets[band] + cell] = true;
+    }
+    seen.iter().filter(|s| **s).count() as f64 / total as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn turntable(axis_tilt_deg: f64) -> Vec<[f64; 3]> {
+        // Field 50 µT at 60° inclination; the sensor turns about its Z axis, tilted by `axis_tilt_deg`.
+        (0..720)
+            .map(|i| {
+                let a = (i as f64 / 2.0).to_radians();
+                let (h, v) = (25.0, 43.3);
+                let tilt = axis_tilt_deg.to_radians();
+                let x = h * a.cos();
+                let y = h * a.sin();
+                [x, y * tilt.cos() - v * tilt.sin(), y * tilt.sin() + v * tilt.cos() + 5.0]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_turntable_rotation_is_refused_naming_the_axis() {
+        let err = Coverage::of(&turntable(0.0)).check().unwrap_err();
+        match &err {
+            CoverageError::Planar { unobserved, .. } => assert!(unobserved[2].abs() > 0.99),
+            other => panic!("{other:?}"),
+        }
+        let msg = err.to_string();
+        assert!(msg.contains("planar rotation") && msg.contains("≈ +Z"), "{msg}");
+        assert!(msg.contains("tip the sensor"), "{msg}");
+    }
+
+    #[test]
+    fn a_still_sensor_and_a_line_are_refused() {
+        let still = vec![[10.0, 20.0, 30.0]; 100];
+        assert!(matches!(Coverage::of(&still).check(), Err(CoverageError::Still { .. })));
+        let line: Vec<[f64; 3]> = (0..100).map(|i| [i as f64, 0.01 * (i % 3) as f64, 0.0]).collect();
+        assert!(matches!(
+            Coverage::of(&line).check(),
+            Err(CoverageError::OneDirection { .. })
+        ));
+    }
+
+    #[test]
+    fn a_full_sphere_passes_without_warning() {
+        let pts: Vec<[f64; 3]> = (0..2000)
+            .map(|i| {
+                let z = -1.0 + 2.0 * (i as f64 + 0.5) / 2000.0;
+                let phi = i as f64 * 2.399963;
+                let r = (1.0 - z * z).sqrt();
+                [50.0 * r * phi.cos(), 50.0 * r * phi.sin(), 50.0 * z]
+            })
+            .collect();
+        let c = Coverage::of(&pts);
+        assert!(c.check().is_ok() && c.warning().is_none());
+        assert!((sphere_fraction(pts.iter().copied(), 100) - 1.0).abs() < 1e-9);
+        let north: Vec<[f64; 3]> = pts.iter().copied().filter(|p| p[2] > 0.0).collect();
+        let f = sphere_fraction(north, 100);
+        assert!((f - 0.5).abs() < 0.08, "{f}");
+    }
+}

@@ -1,0 +1,28 @@
+//! Why a fit can fail.
+
+use crate::coverage::CoverageError;
+
+/// A fit that could not be made, with what the user can do about it.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    /// Fewer usable samples than the fit needs.
+    #[error("too few usable samples: {got}, need at least {needed}")]
+    TooFewSamples {
+        /// Samples the fit needs.
+        needed: usize,
+        /// Samples that were usable.
+        got: usize,
+    },
+    /// The rotation did not span the three dimensions.
+    #[error(transparent)]
+    Coverage(#[from] CoverageError),
+    /// The algebraic fit did not find an ellipsoid (the points lie on another quadric).
+    #[error(
+        "the readings do not lie on an ellipsoid (the algebraic fit found a {0}); \
+         is the sensor saturated, or the field disturbed during the recording?"
+    )]
+    NotAnEllipsoid(&'static str),
+    /// The normal equations were singular.
+    #[error("the least-squares problem is singular: {0}")]
+    Singular(&'static str),
+}

@@ -1,0 +1,266 @@
+//! The sensor's noise floor, measured from the recording itself.
+//!
+//! White noise of standard deviation σ gives k-th order differences of variance `C(2k, k)·σ²`, while a smooth signal
+//! contributes less the higher the order; the estimate is the smallest normalised RMS over orders 1–4 (outliers
+//! trimmed). When the recording holds a still segment, its spread is used instead. Readings on a grid (the chip's LSB)
+//! are detected, and when the noise is below the LSB the quantisation floor `LSB/√12` is added.
+
+/// How the noise floor was obtained.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NoiseSource {
+    /// From a still segment of the recording (sample indices `[start, end)`).
+    Still {
+        /// First sample of the segment.
+        start: usize,
+        /// One past its last sample.
+        end: usize,
+    },
+    /// From k-th order differences of the whole recording (the order that was least contaminated by signal).
+    Differences {
+        /// Order of the differences.
+        order: usize,
+    },
+}
+
+/// The measured noise of the raw readings, per sensor axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseFloor {
+    /// Standard deviation of the random noise, µT.
+    pub sigma_ut: [f64; 3],
+    /// The readings' grid step (LSB), µT, when they lie on one.
+    pub lsb_ut: Option<[f64; 3]>,
+    /// The floor a residual cannot go below: `sigma`, plus `LSB/√12` in quadrature where σ is below the LSB
+    /// (above it, quantisation is already part of what the differences measure), µT.
+    pub floor_ut: [f64; 3],
+    /// Where the figure comes from.
+    pub source: NoiseSource,
+}
+
+impl NoiseFloor {
+    /// The floor in calibrated axes for the matrix `A` of `B = A·B̂ + b`: `sqrt(Σ_k A_jk² floor_k²)` per axis.
+    pub fn calibrated_ut(&self, a: &crate::frames::Mat3) -> [f64; 3] {
+        let f = self.floor_ut;
+        std::array::from_fn(|j| (0..3).map(|k| (a[j][k] * f[k]).powi(2)).sum::<f64>().sqrt())
+    }
+
+    /// Mean over the axes of the squared calibrated floor, square-rooted: the per-axis figure to compare a residual
+    /// RMS with.
+    pub fn calibrated_rms_ut(&self, a: &crate::frames::Mat3) -> f64 {
+        rms3(self.calibrated_ut(a))
+    }
+}
+
+/// The per-axis RMS of three per-axis figures.
+pub fn rms3(v: [f64; 3]) -> f64 {
+    ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) / 3.0).sqrt()
+}
+
+/// Samples used to find the LSB grid (the start of the recording is enough and keeps this O(1)).
+const LSB_PROBE: usize = 20_000;
+/// Length of the windows searched for a still segment, samples.
+const STILL_WINDOW: usize = 50;
+/// A still segment must be at least this many windows long.
+const STILL_MIN_WINDOWS: usize = 4;
+
+/// Estimates the noise floor of raw readings (µT).
+pub fn estimate(raw_ut: &[[f64; 3]]) -> NoiseFloor {
+    let axis = |k: usize| raw_ut.iter().map(|m| m[k]).collect::<Vec<f64>>();
+    let columns = [axis(0), axis(1), axis(2)];
+    let mut best = (f64::INFINITY, 1, [0.0; 3]);
+    for order in 1..=4 {
+        let s: [f64; 3] = std::array::from_fn(|k| difference_sigma(&columns[k], order));
+        let total = s.iter().map(|x| x * x).sum::<f64>();
+        if total < best.0 {
+            best = (total, order, s);
+        }
+    }
+    let (_, order, diff_sigma) = best;
+    let (sigma_ut, source) = match still_segment(&columns, diff_sigma) {
+        Some((start, end, s)) => (s, NoiseSource::Still { start, end }),
+        None => (diff_sigma, NoiseSource::Differences { order }),
+    };
+    let lsb: [Option<f64>; 3] = std::array::from_fn(|k| {
+        grid_step(&columns[k][..columns[k].len().min(LSB_PROBE)])
+    });
+    let lsb_ut = if lsb.iter().all(Option::is_some) {
+        Some(lsb.map(|x| x.unwrap_or_default()))
+    } else {
+        None
+    };
+    let floor_ut = std::array::from_fn(|k| match lsb[k] {
+        Some(q) if sigma_ut[k] < q => (sigma_ut[k].powi(2) + q * q / 12.0).sqrt(),
+        _ => sigma_ut[k],
+    });
+    NoiseFloor {
+        sigma_ut,
+        lsb_ut,
+        floor_ut,
+        source,
+    }
+}
+
+fn binomial(n: usize, k: usize) -> f64 {
+    (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
+}
+
+/// Normalised RMS of the `order`-th differences, with gross outliers (gaps, spikes) trimmed.
+fn difference_sigma(x: &[f64], order: usize) -> f64 {
+    let coef: Vec<f64> = (0..=order)
+        .map(|j| binomial(order, j) * if j % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
+    if x.len() <= order + 2 {
+        return f64::NAN;
+    }
+    let diffs: Vec<f64> = x
+        .windows(order + 1)
+        .map(|w| w.iter().zip(&coef).map(|(v, c)| v * c).sum())
+        .collect();
+    let norm = binomial(2 * order, order);
+    let rms = |limit: f64| {
+        let (sum, n) = diffs
+            .iter()
+            .filter(|d| d.abs() <= limit)
+            .fold((0.0, 0usize), |(s, n), d| (s + d * d, n + 1));
+        if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+    };
+    let first = rms(f64::INFINITY);
+    // Trimming at 5 RMS removes jumps without biasing a Gaussian estimate by more than 1e-5.
+    rms(5.0 * first) / norm.sqrt()
+}
+
+/// The longest run of windows whose spread (no motion removed) is no more than the difference-based noise allows,
+/// if long enough.
+fn still_segment(columns: &[Vec<f64>; 3], diff_sigma: [f64; 3]) -> Option<(usize, usize, [f64; 3])> {
+    let n = columns[0].len();
+    let windows = n / STILL_WINDOW;
+    let still = |w: usize| {
+        (0..3).all(|k| {
+            let seg = &columns[k][w * STILL_WINDOW..(w + 1) * STILL_WINDOW];
+            plain_sigma(seg) <= 1.3 * diff_sigma[k].max(1e-9)
+        })
+    };
+    let (mut best, mut run_start) = ((0, 0), None);
+    for w in 0..=windows {
+        match (w < windows && still(w), run_start) {
+            (true, None) => run_start = Some(w),
+            (false, Some(s)) => {
+                if w - s > best.1 - best.0 {
+                    best = (s, w);
+                }
+                run_start = None;
+            }
+            _ => {}
+        }
+    }
+    if best.1 - best.0 < STILL_MIN_WINDOWS {
+        return None;
+    }
+    let sigma = std::array::from_fn(|k| {
+        let var = (best.0..best.1)
+            .map(|w| plain_sigma(&columns[k][w * STILL_WINDOW..(w + 1) * STILL_WINDOW]).powi(2))
+            .sum::<f64>()
+            / (best.1 - best.0) as f64;
+        var.sqrt()
+    });
+    Some((best.0 * STILL_WINDOW, best.1 * STILL_WINDOW, sigma))
+}
+
+/// Sample standard deviation.
+fn plain_sigma(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+}
+
+/// The step of the grid the values lie on, if they lie on one.
+fn grid_step(x: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    if v.len() < 8 {
+        return None;
+    }
+    let gaps: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();
+    let step = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+    // A grid finer than this is indistinguishable from values written with six decimals.
+    if step < 1e-4 {
+        return None;
+    }
+    // Values written with ~6 decimals: allow that rounding when checking the gaps are multiples of the step.
+    let tol = 2e-6_f64.max(0.02 * step);
+    let on_grid = gaps
+        .iter()
+        .filter(|g| (*g / step - (*g / step).round()).abs() * step < tol)
+        .count();
+    if (on_grid as f64) < 0.99 * gaps.len() as f64 {
+        return None;
+    }
+    // Refine: the mean of the single-step gaps.
+    let singles: Vec<f64> = gaps.iter().copied().filter(|g| (g - step).abs() < tol).collect();
+    Some(singles.iter().sum::<f64>() / singles.len() as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal};
+
+    fn rotating(n: usize, rate_hz: f64, sigma: f64, lsb: Option<f64>, seed: u64) -> Vec<[f64; 3]> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / rate_hz;
+                let clean = [
+                    40.0 * (0.7 * t).cos(),
+                    40.0 * (0.7 * t).sin() * (0.3 * t).cos(),
+                    25.0 * (0.3 * t).sin() + 10.0,
+                ];
+                clean.map(|c| {
+                    let v = c + noise.sample(&mut rng);
+                    lsb.map_or(v, |q| (v / q).round() * q)
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn measures_white_noise_under_a_moving_signal() {
+        for (rate, sigma) in [(20.0, 0.05), (100.0, 0.3), (50.0, 0.1)] {
+            let f = estimate(&rotating(20_000, rate, sigma, None, 7));
+            for s in f.sigma_ut {
+                assert!((s / sigma - 1.0).abs() < 0.05, "{rate} Hz, σ {sigma}: got {s}");
+            }
+            assert!(f.lsb_ut.is_none());
+        }
+    }
+
+    #[test]
+    fn finds_the_lsb_and_adds_the_quantisation_floor() {
+        let lsb = 100.0 / 1090.0;
+        let f = estimate(&rotating(20_000, 75.0, 0.02, Some(lsb), 3));
+        let found = f.lsb_ut.expect("grid not found");
+        for k in 0..3 {
+            assert!((found[k] / lsb - 1.0).abs() < 1e-3, "{found:?}");
+            assert!(f.floor_ut[k] >= lsb / 12f64.sqrt());
+        }
+    }
+
+    #[test]
+    fn prefers_a_still_segment() {
+        let mut data = vec![[10.0, 20.0, 30.0]; 1000];
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let noise = Normal::new(0.0, 0.2).unwrap();
+        for m in &mut data {
+            *m = m.map(|v| v + noise.sample(&mut rng));
+        }
+        data.extend(rotating(5000, 50.0, 0.2, None, 2));
+        let f = estimate(&data);
+        assert!(matches!(f.source, NoiseSource::Still { start: 0, end } if end >= 900));
+        for s in f.sigma_ut {
+            assert!((s / 0.2 - 1.0).abs() < 0.1, "{s}");
+        }
+    }
+}
