@@ -186,7 +186,7 @@ pub fn sphere_fraction(directions: impl IntoIterator<Item = [f64; 3]>, cells: us
     let mut seen = vec![false; total];
     for d in directions {
         let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        if !(n > 0.0) {
+        if n.is_nan() || n <= 0.0 {
             continue;
         }
         let z = (d[2] / n).clamp(-1.0, 1.0);

@@ -106,7 +106,7 @@ impl Model {
             let change = frames::norm(frames::sub(next, field));
             field = next;
             // Stop at f64 precision (a NaN input stops at once: it cannot converge).
-            if !(change > 1e-12 * frames::norm(field)) {
+            if change.is_nan() || change <= 1e-12 * frames::norm(field) {
                 break;
             }
         }
