@@ -1,1 +1,43 @@
-//! magcal-recording (skeleton).
+//! The magcal-recording v1 file format: the one format every magcal tool reads and writes, and that users can
+//! write by hand.
+//!
+//! A recording is a CSV file with a metadata block in front:
+//!
+//! ```text
+//! # magcal-recording v1
+//! # sensor: lis3mdl
+//! # sample_rate_hz: 100
+//! # field_ned_ut: 19.8, 1.2, 45.3
+//! t,mx,my,mz,temp,qw,qx,qy,qz
+//! 0.000,12.345,-3.210,40.120,23.5,1,0,0,0
+//! ```
+//!
+//! - Leading `# key: value` lines are [`Metadata`]; unknown keys are kept in order, `#` lines without a key are
+//!   comments and ignored. The magic first line is optional, but any other version than `v1` is refused.
+//! - Then one header row, in any column order: `t` (s), `mx,my,mz` (µT, required), `temp` (°C), `qw,qx,qy,qz`
+//!   (unit quaternion, scalar first, Hamilton, rotating sensor-frame vectors into NED), `rx,ry,rz` (expected
+//!   field, µT), `gx,gy,gz` (rad/s), any number of currents `i_<name>` (A). Other columns are carried as text.
+//! - Then data rows. An empty field or `nan` marks a missing value of an optional channel; a group (`q`, `r`,
+//!   `g`) with a missing field is missing as a whole. Blank lines are skipped, CRLF is accepted.
+//!
+//! [`Recording::read`] checks all of it and reports the first problem with file, line and column
+//! ([`ReadError`], one [`ReadErrorKind`] per kind of failure). [`Recording::write`] writes a whole recording
+//! atomically; [`RecordingWriter`] writes one row at a time so that a killed recorder leaves a readable file.
+
+mod error;
+mod layout;
+mod metadata;
+mod read;
+mod recording;
+mod sample;
+mod write;
+
+pub use error::{ColumnRef, HeaderError, ReadError, ReadErrorKind};
+pub use layout::Layout;
+pub use metadata::{Date, DateError, Location, Metadata};
+pub use recording::{Channel, MissingCounts, Recording, Row, TextColumn};
+pub use sample::{Sample, SampleError};
+pub use write::{
+    CURRENT_DECIMALS, DEFAULT_FLUSH_INTERVAL, GYRO_DECIMALS, QUAT_DECIMALS, RecordingWriter,
+    T_DECIMALS, TEMP_DECIMALS, UT_DECIMALS,
+};

@@ -1,0 +1,203 @@
+//! Errors of the reader: where in the file ([`ReadError`]) and what went wrong ([`ReadErrorKind`]).
+
+use std::fmt;
+
+/// A column of the header row, as named in errors.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ColumnRef {
+    /// 1-based position of the column in the header row.
+    pub index: usize,
+    /// The column's name in the header row.
+    pub name: String,
+}
+
+/// Why a recording could not be read, and where: file name, 1-based line in the file and, where one applies,
+/// the column.
+///
+/// Displays as `name:line:column (colname): message`, `name:line: message` for line-level problems, or
+/// `name: message` for problems with the file as a whole.
+#[derive(Debug)]
+pub struct ReadError(Box<Inner>);
+
+#[derive(Debug)]
+struct Inner {
+    file: String,
+    line: Option<u64>,
+    column: Option<ColumnRef>,
+    kind: ReadErrorKind,
+}
+
+impl ReadError {
+    pub(crate) fn new(
+        file: &str,
+        line: Option<u64>,
+        column: Option<ColumnRef>,
+        kind: ReadErrorKind,
+    ) -> ReadError {
+        ReadError(Box::new(Inner {
+            file: file.to_owned(),
+            line,
+            column,
+            kind,
+        }))
+    }
+
+    /// What went wrong (for matching on the kind of failure).
+    pub fn kind(&self) -> &ReadErrorKind {
+        &self.0.kind
+    }
+
+    /// The file name (or the name given to [`crate::Recording::from_reader`]).
+    pub fn file(&self) -> &str {
+        &self.0.file
+    }
+
+    /// 1-based line in the file, when the problem is on one line.
+    pub fn line(&self) -> Option<u64> {
+        self.0.line
+    }
+
+    /// The column, when the problem is in one field.
+    pub fn column(&self) -> Option<&ColumnRef> {
+        self.0.column.as_ref()
+    }
+}
+
+impl fmt::Display for ReadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file())?;
+        if let Some(line) = self.line() {
+            write!(f, ":{line}")?;
+            if let Some(col) = self.column() {
+                write!(f, ":{} ({})", col.index, col.name)?;
+            }
+        }
+        write!(f, ": {}", self.kind())
+    }
+}
+
+impl std::error::Error for ReadError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self.kind() {
+            ReadErrorKind::Io(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+/// What went wrong while reading a recording. One variant per kind of failure.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadErrorKind {
+    /// The file could not be opened or read.
+    #[error("cannot read: {0}")]
+    Io(#[source] std::io::Error),
+    /// The file holds nothing but blank lines (or nothing at all).
+    #[error("empty file")]
+    Empty,
+    /// The magic line names a version of the format other than v1.
+    #[error("unsupported format version {found:?} (this reader understands magcal-recording v1)")]
+    UnsupportedVersion {
+        /// The version text found after `magcal-recording`.
+        found: String,
+    },
+    /// A known metadata key has a value that does not parse or is out of range.
+    #[error("malformed metadata value for {key:?}: {value:?}: {reason}")]
+    BadMetadata {
+        /// The metadata key.
+        key: String,
+        /// The value as written.
+        value: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A metadata key appears twice.
+    #[error("duplicate metadata key {key:?}")]
+    DuplicateMetadata {
+        /// The repeated key.
+        key: String,
+    },
+    /// There is metadata but no header row, or the first row after the metadata is data, not column names.
+    #[error("missing header row{}", if *data_first { ": the first row after the metadata holds numbers" } else { "" })]
+    MissingHeader {
+        /// True if a row of numbers stands where the header should be.
+        data_first: bool,
+    },
+    /// One of the required columns `mx`, `my`, `mz` is not in the header.
+    #[error("missing required column {0:?} (mx, my and mz are required)")]
+    MissingColumn(&'static str),
+    /// Two columns of the header have the same name.
+    #[error("duplicate column name {0:?}")]
+    DuplicateColumn(String),
+    /// A column of the header has an empty name.
+    #[error("empty column name")]
+    EmptyColumnName,
+    /// Only part of a column group (`qw..qz`, `rx..rz`, `gx..gz`) is in the header.
+    #[error("incomplete column group: has {present} but lacks {missing}")]
+    IncompleteGroup {
+        /// The group's columns that are present, comma separated.
+        present: String,
+        /// The group's columns that are absent, comma separated.
+        missing: String,
+    },
+    /// A numeric field is neither a number, empty, nor `nan`.
+    #[error("not a number: {0:?}")]
+    NotANumber(String),
+    /// `mx`, `my` or `mz` is NaN or infinite.
+    #[error("magnetic field must be finite, got {0:?}")]
+    NonFiniteMag(String),
+    /// `mx`, `my` or `mz` is empty.
+    #[error("empty magnetic field value (mx, my and mz are required in every row)")]
+    EmptyMag,
+    /// An optional numeric channel holds an infinite value (missing values are written as an empty field or `nan`).
+    #[error("infinite value {0:?} (write a missing value as an empty field or nan)")]
+    Infinite(String),
+    /// A data row has fewer fields than the header.
+    #[error("short row: {found} fields, the header has {expected}")]
+    ShortRow {
+        /// Number of columns in the header.
+        expected: usize,
+        /// Number of fields in the row.
+        found: usize,
+    },
+    /// A data row has more fields than the header.
+    #[error("long row: {found} fields, the header has {expected}")]
+    LongRow {
+        /// Number of columns in the header.
+        expected: usize,
+        /// Number of fields in the row.
+        found: usize,
+    },
+    /// `t` is empty, NaN or infinite.
+    #[error("t must be a finite number in every row, got {0:?}")]
+    NonFiniteTime(String),
+    /// `t` is smaller than in the row before.
+    #[error("t goes backwards: {t_s} s after {previous_s} s")]
+    TimeBackwards {
+        /// `t` in the previous data row.
+        previous_s: f64,
+        /// `t` in this row.
+        t_s: f64,
+    },
+    /// A complete quaternion whose norm is outside 1 ± 0.01.
+    #[error("quaternion far from unit length: |q| = {norm}")]
+    QuatNotUnit {
+        /// The quaternion's norm.
+        norm: f64,
+    },
+    /// A `#` line (metadata or comment) after the header row.
+    #[error("metadata or comment line after the header row (metadata must come before the header)")]
+    LineAfterHeader,
+    /// The header is followed by no data row.
+    #[error("no data rows")]
+    NoData,
+    /// The bytes of a line or field are not valid UTF-8.
+    #[error("invalid UTF-8")]
+    InvalidUtf8,
+}
+
+/// Metadata or a layout that would not read back as itself if written (see [`crate::Recording::new`] and
+/// [`crate::RecordingWriter::create`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("cannot write this header: {0}")]
+pub struct HeaderError(pub String);

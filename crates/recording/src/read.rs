@@ -1,0 +1,296 @@
+//! The reader: metadata lines by hand, then the header and data rows with the `csv` crate, parsed straight into
+//! the column vectors.
+
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, Read};
+use std::path::Path;
+
+use csv::{ByteRecord, ReaderBuilder, Terminator};
+
+use crate::error::{ColumnRef, ReadError, ReadErrorKind};
+use crate::layout::{Header, Role};
+use crate::metadata::{MetaLine, Metadata, classify_line};
+use crate::recording::Recording;
+use crate::sample::{group_or_nan, normalise_quat};
+
+/// Buffer size for reading; large enough that the per-read overhead does not show.
+const BUFFER_BYTES: usize = 256 * 1024;
+
+/// The UTF-8 byte order mark some editors put at the start of a file.
+const BOM: &[u8] = b"\xef\xbb\xbf";
+
+/// A problem in a data row: the 0-based column, if it is in one field, and what.
+type RowProblem = (Option<usize>, ReadErrorKind);
+
+impl Recording {
+    /// Reads a recording from a file; errors name the file as given.
+    pub fn read(path: &Path) -> Result<Recording, ReadError> {
+        let name = path.display().to_string();
+        match File::open(path) {
+            Ok(file) => Recording::from_reader(&name, file),
+            Err(e) => Err(ReadError::new(&name, None, None, ReadErrorKind::Io(e))),
+        }
+    }
+
+    /// Reads a recording from any byte source; `name` stands for the file in errors.
+    pub fn from_reader<R: Read>(name: &str, reader: R) -> Result<Recording, ReadError> {
+        let mut input = BufReader::with_capacity(BUFFER_BYTES, reader);
+        let (meta, header_text, header_line) = read_metadata(name, &mut input)?;
+        let column_ref = |names: &[String], i: usize| ColumnRef {
+            index: i + 1,
+            name: names[i].clone(),
+        };
+
+        // The csv reader starts at the header line. Only '\n' ends a row (a '\r' before it is trimmed like any
+        // blank), and a final '\n' is added so that every row, the last one too, ends with one: the reader's line
+        // count after a row is then always one past the row's last line.
+        let rest = io::Cursor::new(header_text).chain(input).chain(&b"\n"[..]);
+        let mut csv = ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .terminator(Terminator::Any(b'\n'))
+            .buffer_capacity(BUFFER_BYTES)
+            .from_reader(rest);
+        let mut record = ByteRecord::new();
+        let read_error =
+            |e: csv::Error| ReadError::new(name, None, None, ReadErrorKind::Io(e.into()));
+
+        csv.read_byte_record(&mut record).map_err(read_error)?;
+        let mut names = Vec::with_capacity(record.len());
+        for (i, field) in record.iter().enumerate() {
+            let Ok(text) = std::str::from_utf8(field.trim_ascii()) else {
+                let column = ColumnRef {
+                    index: i + 1,
+                    name: String::from_utf8_lossy(field).into_owned(),
+                };
+                return Err(ReadError::new(
+                    name,
+                    Some(header_line),
+                    Some(column),
+                    ReadErrorKind::InvalidUtf8,
+                ));
+            };
+            names.push(text.to_owned());
+        }
+        let header = Header::parse(&names).map_err(|(column, kind)| {
+            ReadError::new(
+                name,
+                Some(header_line),
+                column.map(|i| column_ref(&names, i)),
+                kind,
+            )
+        })?;
+
+        let mut rows = RowParser {
+            roles: &header.roles,
+            out: Recording::empty(meta, &header.layout),
+        };
+        while csv.read_byte_record(&mut record).map_err(read_error)? {
+            if let Err((column, kind)) = rows.push(&record) {
+                // The row's first line: the csv reader has counted the row's own '\n' and any inside quotes.
+                let breaks_inside =
+                    record.as_slice().iter().filter(|b| **b == b'\n').count() as u64;
+                let line = header_line + csv.position().line().saturating_sub(2 + breaks_inside);
+                return Err(ReadError::new(
+                    name,
+                    Some(line),
+                    column.map(|i| column_ref(&names, i)),
+                    kind,
+                ));
+            }
+        }
+        if rows.out.is_empty() {
+            return Err(ReadError::new(name, None, None, ReadErrorKind::NoData));
+        }
+        Ok(rows.out)
+    }
+}
+
+/// Reads the metadata block line by line, up to and including the header line. Returns the metadata, the
+/// header line (without a byte order mark) and its 1-based line number.
+fn read_metadata(
+    name: &str,
+    input: &mut impl BufRead,
+) -> Result<(Metadata, Vec<u8>, u64), ReadError> {
+    let at = |line: Option<u64>, kind: ReadErrorKind| ReadError::new(name, line, None, kind);
+    let mut meta = Metadata::default();
+    let mut line: Vec<u8> = Vec::new();
+    let mut line_no: u64 = 0;
+    let mut seen_content = false;
+    loop {
+        line.clear();
+        let n = input
+            .read_until(b'\n', &mut line)
+            .map_err(|e| at(None, ReadErrorKind::Io(e)))?;
+        if n == 0 {
+            let kind = if seen_content {
+                ReadErrorKind::MissingHeader { data_first: false }
+            } else {
+                ReadErrorKind::Empty
+            };
+            return Err(at(None, kind));
+        }
+        line_no += 1;
+        if line_no == 1 && line.starts_with(BOM) {
+            line.drain(..BOM.len());
+        }
+        let text = line.trim_ascii();
+        if text.is_empty() {
+            continue;
+        }
+        seen_content = true;
+        if !text.starts_with(b"#") {
+            return Ok((meta, line, line_no));
+        }
+        let text =
+            std::str::from_utf8(text).map_err(|_| at(Some(line_no), ReadErrorKind::InvalidUtf8))?;
+        match classify_line(text) {
+            MetaLine::Magic(version) if version != "v1" => {
+                let found = version.to_owned();
+                return Err(at(
+                    Some(line_no),
+                    ReadErrorKind::UnsupportedVersion { found },
+                ));
+            }
+            MetaLine::Pair(key, value) => meta
+                .set(key, value)
+                .map_err(|kind| at(Some(line_no), kind))?,
+            MetaLine::Magic(_) | MetaLine::Comment => {}
+        }
+    }
+}
+
+/// Parses data rows into the columns of a recording.
+struct RowParser<'h> {
+    roles: &'h [Role],
+    out: Recording,
+}
+
+/// The field without the CRs at its end.
+fn strip_trailing_cr(field: &[u8]) -> &[u8] {
+    let end = field.iter().rposition(|b| *b != b'\r').map_or(0, |i| i + 1);
+    &field[..end]
+}
+
+/// A numeric field: NaN when empty or `nan` (any case, any sign).
+fn number(text: &str) -> Result<f64, ReadErrorKind> {
+    if text.is_empty() {
+        return Ok(f64::NAN);
+    }
+    text.parse()
+        .map_err(|_| ReadErrorKind::NotANumber(text.to_owned()))
+}
+
+impl RowParser<'_> {
+    /// Checks one record and appends it; blank lines are skipped.
+    fn push(&mut self, record: &ByteRecord) -> Result<(), RowProblem> {
+        let expected = self.roles.len();
+        let found = record.len();
+        let first = record.get(0).unwrap_or_default().trim_ascii();
+        if found == 1 && first.is_empty() {
+            return Ok(());
+        }
+        if first.starts_with(b"#") {
+            return Err((None, ReadErrorKind::LineAfterHeader));
+        }
+        if found < expected {
+            return Err((None, ReadErrorKind::ShortRow { expected, found }));
+        }
+        if found > expected {
+            return Err((None, ReadErrorKind::LongRow { expected, found }));
+        }
+
+        let mut t_s = f64::NAN;
+        let mut mag_ut = [f64::NAN; 3];
+        let mut temp_c = f64::NAN;
+        let mut quat = [f64::NAN; 4];
+        let mut ref_ut = [f64::NAN; 3];
+        let mut gyro_rad_s = [f64::NAN; 3];
+        let mut time_column = 0;
+        for (k, (field, role)) in record.iter().zip(self.roles).enumerate() {
+            let numeric = || -> Result<(&str, f64), RowProblem> {
+                let text = std::str::from_utf8(field.trim_ascii())
+                    .map_err(|_| (Some(k), ReadErrorKind::InvalidUtf8))?;
+                Ok((text, number(text).map_err(|kind| (Some(k), kind))?))
+            };
+            let optional = || -> Result<f64, RowProblem> {
+                let (text, value) = numeric()?;
+                if value.is_infinite() {
+                    return Err((Some(k), ReadErrorKind::Infinite(text.to_owned())));
+                }
+                Ok(value)
+            };
+            match *role {
+                Role::Time => {
+                    let (text, value) = numeric()?;
+                    if !value.is_finite() {
+                        return Err((Some(k), ReadErrorKind::NonFiniteTime(text.to_owned())));
+                    }
+                    t_s = value;
+                    time_column = k;
+                }
+                Role::Mag(a) => {
+                    let (text, value) = numeric()?;
+                    if text.is_empty() {
+                        return Err((Some(k), ReadErrorKind::EmptyMag));
+                    }
+                    if !value.is_finite() {
+                        return Err((Some(k), ReadErrorKind::NonFiniteMag(text.to_owned())));
+                    }
+                    mag_ut[a] = value;
+                }
+                Role::Temp => temp_c = optional()?,
+                Role::Quat(a) => quat[a] = optional()?,
+                Role::Ref(a) => ref_ut[a] = optional()?,
+                Role::Gyro(a) => gyro_rad_s[a] = optional()?,
+                Role::Current(j) => self.out.currents[j].values.push(optional()?),
+                Role::Extra(j) => {
+                    // Kept as written, except that CRs ending the line belong to the line end (CRLF).
+                    let field = if k + 1 == expected {
+                        strip_trailing_cr(field)
+                    } else {
+                        field
+                    };
+                    let text = std::str::from_utf8(field)
+                        .map_err(|_| (Some(k), ReadErrorKind::InvalidUtf8))?;
+                    self.out.extra[j].values.push(text.to_owned());
+                }
+            }
+        }
+
+        let out = &mut self.out;
+        if let Some(t) = &mut out.t_s {
+            if let Some(&previous_s) = t.last()
+                && t_s < previous_s
+            {
+                return Err((
+                    Some(time_column),
+                    ReadErrorKind::TimeBackwards { previous_s, t_s },
+                ));
+            }
+            t.push(t_s);
+        }
+        out.mag_ut.push(mag_ut);
+        if let Some(temp) = &mut out.temp_c {
+            temp.push(temp_c);
+        }
+        if let Some(q) = &mut out.quat {
+            let quat = group_or_nan(quat);
+            if quat[0].is_nan() {
+                q.push(quat);
+            } else {
+                q.push(
+                    normalise_quat(quat)
+                        .map_err(|norm| (None, ReadErrorKind::QuatNotUnit { norm }))?,
+                );
+            }
+        }
+        if let Some(r) = &mut out.ref_ut {
+            r.push(group_or_nan(ref_ut));
+        }
+        if let Some(g) = &mut out.gyro_rad_s {
+            g.push(group_or_nan(gyro_rad_s));
+        }
+        Ok(())
+    }
+}
