@@ -23,6 +23,26 @@
 //! [`Recording::read`] checks all of it and reports the first problem with file, line and column
 //! ([`ReadError`], one [`ReadErrorKind`] per kind of failure). [`Recording::write`] writes a whole recording
 //! atomically; [`RecordingWriter`] writes one row at a time so that a killed recorder leaves a readable file.
+//!
+//! ```
+//! use magcal_recording::{Layout, Metadata, ReadErrorKind, Recording, RecordingWriter, Sample};
+//!
+//! let text = "# sensor: lis3mdl\nt,mx,my,mz,temp\n0.00,12.3,-3.2,40.1,\n0.01,12.4,-3.1,40.0,23.5\n";
+//! let rec = Recording::from_reader("bench.csv", text.as_bytes())?;
+//! assert_eq!(rec.len(), 2);
+//! assert_eq!(rec.missing_counts().temp, Some(1));
+//!
+//! let err = Recording::from_reader("bench.csv", "t,mx,my,mz\n0,1,1.2.3,1\n".as_bytes()).unwrap_err();
+//! assert!(matches!(err.kind(), ReadErrorKind::NotANumber(_)));
+//! assert_eq!(err.to_string(), "bench.csv:2:3 (my): not a number: \"1.2.3\"");
+//!
+//! let dir = tempfile::tempdir()?;
+//! let layout = Layout { t: true, ..Layout::default() };
+//! let mut writer = RecordingWriter::create(&dir.path().join("live.csv"), &Metadata::default(), &layout)?;
+//! writer.write_sample(&Sample { t_s: 0.0, mag_ut: [12.3, -3.2, 40.1], ..Sample::default() })?;
+//! writer.finish()?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 mod error;
 mod layout;
