@@ -1,2 +1,2 @@
-//! skeleton
+//! `magcal`: the bench calibration workflow in one command.
 fn main() {}

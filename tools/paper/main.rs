@@ -1,2 +1,32 @@
-//! skeleton
-fn main() {}
+//! `magcal-paper`: the seed paper's experiment, simulated, printed in the form of its table.
+
+use clap::Parser;
+use magcal_app::seed::{SeedExperiment, run, table};
+
+/// Simulate the seed paper's experiment (a sensor whose distortion is the inverse of the paper's a, b, mounted a few
+/// degrees off the reference axes) and print vector against scalar calibration in the form of the paper's table.
+#[derive(Parser, Debug)]
+#[command(version, about)]
+struct Args {
+    /// Mounting misalignment, degrees.
+    #[arg(long, default_value_t = SeedExperiment::default().mount_deg)]
+    mount_deg: f64,
+    /// Raw noise per axis, µT.
+    #[arg(long, default_value_t = SeedExperiment::default().noise_ut)]
+    noise: f64,
+    /// Seed.
+    #[arg(long, default_value_t = SeedExperiment::default().seed)]
+    seed: u64,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let exp = SeedExperiment {
+        mount_deg: args.mount_deg,
+        noise_ut: args.noise,
+        seed: args.seed,
+        ..SeedExperiment::default()
+    };
+    print!("{}", table(&run(&exp)?));
+    Ok(())
+}

@@ -1,2 +1,2 @@
-//! skeleton
+//! `magcal-record` (being written).
 fn main() {}

@@ -1,0 +1,280 @@
+//! From a recording to a fitted calibration: pick the method, build the expected field, check, fit, measure.
+
+use magcal_calib::coverage::sphere_fraction;
+use magcal_calib::frames;
+use magcal_calib::noise::{self, NoiseFloor, rms3};
+use magcal_calib::scalar::{self, ScalarFit, ScalarOptions};
+use magcal_calib::vector::{self, VectorFit, VectorOptions};
+use magcal_calib::{FitError, Inputs, Model};
+use magcal_recording::Recording;
+
+use crate::field::ReferenceField;
+
+/// Which calibration method to use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Vector when the recording has an attitude reference, scalar otherwise.
+    #[default]
+    Auto,
+    /// The seed paper's vector method (needs the expected field per sample).
+    Vector,
+    /// The ellipsoid (constant magnitude) method.
+    Scalar,
+}
+
+impl Method {
+    /// The name used in reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Auto => "auto",
+            Method::Vector => "vector",
+            Method::Scalar => "scalar",
+        }
+    }
+}
+
+/// The fit itself, by method.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Fit {
+    /// A vector fit.
+    Vector(Box<VectorFit>),
+    /// A scalar fit.
+    Scalar(ScalarFit),
+}
+
+/// How many samples went where.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SampleCounts {
+    /// Rows in the recording.
+    pub total: usize,
+    /// Rows the fit used.
+    pub used: usize,
+    /// Rows left out because their attitude reference was missing (vector method).
+    pub missing_reference: usize,
+}
+
+/// A fitted calibration and what was measured around it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Calibration {
+    /// The fit.
+    pub fit: Fit,
+    /// The field it was fitted against.
+    pub field: ReferenceField,
+    /// The raw readings' noise floor.
+    pub noise: NoiseFloor,
+    /// Residual RMS per axis (vector) or of the magnitude (scalar), µT.
+    pub residual_rms_ut: f64,
+    /// The noise floor to compare it with, in calibrated units, µT.
+    pub noise_floor_ut: f64,
+    /// Fraction of the sphere of field directions the recording visited (100 cells).
+    pub sphere_coverage: f64,
+    /// Sample counts.
+    pub samples: SampleCounts,
+    /// Things the user should know (coverage warnings, what the method cannot see).
+    pub notes: Vec<String>,
+}
+
+impl Calibration {
+    /// The method that was used.
+    pub fn method(&self) -> Method {
+        match self.fit {
+            Fit::Vector(_) => Method::Vector,
+            Fit::Scalar(_) => Method::Scalar,
+        }
+    }
+
+    /// The fitted model.
+    pub fn model(&self) -> Model {
+        match &self.fit {
+            Fit::Vector(v) => v.model(),
+            Fit::Scalar(s) => s.model(),
+        }
+    }
+
+    /// Standard errors of `A` and `b`.
+    pub fn standard_errors(&self) -> ([[f64; 3]; 3], [f64; 3]) {
+        match &self.fit {
+            Fit::Vector(v) => (v.a_se, v.b_se_ut),
+            Fit::Scalar(s) => (s.a_se, s.b_se_ut),
+        }
+    }
+}
+
+/// Why a recording could not be calibrated.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrateError {
+    /// The vector method was asked for without an attitude reference.
+    #[error(
+        "the vector method needs the expected field per sample: columns rx,ry,rz, or qw,qx,qy,qz plus the world field \
+         (--field-ned N,E,D, --location LAT,LON,ALT --date YYYY-MM-DD, or field_ned_ut / location + date in the \
+         recording's metadata); {0}"
+    )]
+    NoReference(&'static str),
+    /// The fit failed.
+    #[error(transparent)]
+    Fit(#[from] FitError),
+}
+
+/// The expected field in sensor axes per sample (NaN where the reference is missing), if the recording has one.
+pub fn expected_field(
+    rec: &Recording,
+    field: &ReferenceField,
+) -> Result<Vec<[f64; 3]>, CalibrateError> {
+    if let Some(r) = &rec.ref_ut {
+        return Ok(r.clone());
+    }
+    let Some(q) = &rec.quat else {
+        return Err(CalibrateError::NoReference("this recording has neither"));
+    };
+    let Some(f) = field.vector() else {
+        return Err(CalibrateError::NoReference(
+            "this recording has the attitude but no world field vector",
+        ));
+    };
+    Ok(q.iter()
+        .map(|q| frames::expected_sensor_field(*q, f))
+        .collect())
+}
+
+/// Calibrates a recording.
+pub fn calibrate(
+    rec: &Recording,
+    method: Method,
+    field: ReferenceField,
+) -> Result<Calibration, CalibrateError> {
+    let has_reference = rec.ref_ut.is_some() || (rec.quat.is_some() && field.vector().is_some());
+    let method = match method {
+        Method::Auto if has_reference => Method::Vector,
+        Method::Auto => Method::Scalar,
+        m => m,
+    };
+    let noise = noise::estimate(&rec.mag_ut);
+    let raw_noise_var_ut2 = noise.floor_ut.map(|f| f * f);
+    let mut notes = Vec::new();
+    let (fit, residual_rms_ut, used) = match method {
+        Method::Vector => {
+            let expected = expected_field(rec, &field)?;
+            let v = vector::fit(
+                &rec.mag_ut,
+                &expected,
+                &VectorOptions {
+                    raw_noise_var_ut2,
+                    ..Default::default()
+                },
+            )?;
+            let rms = rms3(v.residual_rms_ut);
+            let n = v.n;
+            (Fit::Vector(Box::new(v)), rms, n)
+        }
+        _ => {
+            let s = scalar::fit(
+                &rec.mag_ut,
+                &ScalarOptions {
+                    field_ut: field.magnitude(),
+                    ..Default::default()
+                },
+            )?;
+            notes.push(format!(
+                "rotation not observable: {}",
+                scalar::ROTATION_NOTE
+            ));
+            if !s.field_given {
+                notes.push(format!(
+                    "field magnitude unknown: the calibrated sphere keeps the raw ellipsoid's mean radius, {:.2} µT \
+                     (give --field-ut, --field-ned or --location/--date for absolute scale)",
+                    s.field_ut
+                ));
+            }
+            let rms = s.residual_rms_ut;
+            let n = s.n;
+            (Fit::Scalar(s), rms, n)
+        }
+    };
+    let coverage = match &fit {
+        Fit::Vector(v) => v.coverage,
+        Fit::Scalar(s) => s.coverage,
+    };
+    notes.extend(coverage.warning());
+    let mut cal = Calibration {
+        fit,
+        field,
+        noise,
+        residual_rms_ut,
+        noise_floor_ut: 0.0,
+        sphere_coverage: 0.0,
+        samples: SampleCounts {
+            total: rec.len(),
+            used,
+            missing_reference: rec.len() - used,
+        },
+        notes,
+    };
+    let model = cal.model();
+    cal.noise_floor_ut = cal.noise.calibrated_rms_ut(&model.a);
+    cal.sphere_coverage = sphere_fraction(
+        rec.mag_ut.iter().map(|m| model.apply(*m, &Inputs::NONE)),
+        100,
+    );
+    Ok(cal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use magcal_sim::{AttitudeOutput, ChipModel, Scenario, SensorTruth, Trajectory, simulate};
+
+    fn scenario(attitude: AttitudeOutput) -> Scenario {
+        let chip = ChipModel::by_name("lis3mdl").unwrap();
+        let mut s = Scenario::new(
+            &chip,
+            Trajectory::Tumble {
+                duration_s: 60.0,
+                rate_rad_s: 1.0,
+            },
+            11,
+        );
+        s.sensor = SensorTruth::mounted(
+            [[1.08, 0.03, -0.01], [0.02, 0.95, 0.04], [-0.03, 0.01, 1.12]],
+            [12.0, -30.0, 8.0],
+            [0.02, -0.03, 0.01],
+        );
+        s.attitude = attitude;
+        s
+    }
+
+    #[test]
+    fn auto_picks_vector_with_a_reference_and_scalar_without() {
+        for (attitude, want) in [
+            (AttitudeOutput::Quaternion, Method::Vector),
+            (AttitudeOutput::ReferenceField, Method::Vector),
+            (AttitudeOutput::None, Method::Scalar),
+        ] {
+            let s = scenario(attitude);
+            let run = simulate(&s).unwrap();
+            let field = ReferenceField::Vector {
+                field_ned_ut: s.field_ned_ut,
+                source: "test".into(),
+            };
+            let cal = calibrate(&run.recording, Method::Auto, field).unwrap();
+            assert_eq!(cal.method(), want);
+            // The residual sits at the noise floor (no effects injected).
+            assert!(
+                (cal.residual_rms_ut / cal.noise_floor_ut - 1.0).abs() < 0.1,
+                "{cal:?}"
+            );
+            // A minute of tumbling at 1 rad/s visits about three quarters of 100 cells.
+            assert!(
+                cal.sphere_coverage > 0.6,
+                "coverage {}",
+                cal.sphere_coverage
+            );
+        }
+    }
+
+    #[test]
+    fn vector_without_a_world_field_says_what_is_missing() {
+        let run = simulate(&scenario(AttitudeOutput::Quaternion)).unwrap();
+        let err = calibrate(&run.recording, Method::Vector, ReferenceField::Unknown).unwrap_err();
+        assert!(err.to_string().contains("--field-ned"), "{err}");
+    }
+}

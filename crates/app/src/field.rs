@@ -1,0 +1,211 @@
+//! The world field a calibration is fitted against, and where it came from.
+
+use magcal_recording::{Date, Location, Metadata};
+use world_magnetic_model::GeomagneticField;
+use world_magnetic_model::time::{Date as WmmDate, Month};
+use world_magnetic_model::uom::si::angle::degree;
+use world_magnetic_model::uom::si::f32::{Angle, Length};
+use world_magnetic_model::uom::si::length::meter;
+use world_magnetic_model::uom::si::magnetic_flux_density::microtesla;
+
+/// The world field used by a fit.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ReferenceField {
+    /// A full NED vector, µT.
+    Vector {
+        /// N, E, D, µT.
+        field_ned_ut: [f64; 3],
+        /// Where it came from, in words.
+        source: String,
+    },
+    /// Only the magnitude, µT (enough for the scalar method).
+    Magnitude {
+        /// |B|, µT.
+        field_ut: f64,
+        /// Where it came from, in words.
+        source: String,
+    },
+    /// Nothing known: the scalar method then keeps the raw ellipsoid's mean radius.
+    Unknown,
+}
+
+impl ReferenceField {
+    /// The NED vector, if known.
+    pub fn vector(&self) -> Option<[f64; 3]> {
+        match self {
+            ReferenceField::Vector { field_ned_ut, .. } => Some(*field_ned_ut),
+            _ => None,
+        }
+    }
+
+    /// The magnitude, if known.
+    pub fn magnitude(&self) -> Option<f64> {
+        match self {
+            ReferenceField::Vector { field_ned_ut, .. } => {
+                Some(magcal_calib::frames::norm(*field_ned_ut))
+            }
+            ReferenceField::Magnitude { field_ut, .. } => Some(*field_ut),
+            ReferenceField::Unknown => None,
+        }
+    }
+
+    /// Where it came from.
+    pub fn source(&self) -> &str {
+        match self {
+            ReferenceField::Vector { source, .. } | ReferenceField::Magnitude { source, .. } => {
+                source
+            }
+            ReferenceField::Unknown => "unknown",
+        }
+    }
+}
+
+/// What the user said about the field on the command line.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FieldArgs {
+    /// `--field-ned N,E,D` (µT).
+    pub field_ned_ut: Option<[f64; 3]>,
+    /// `--location LAT,LON,ALT` and `--date YYYY-MM-DD` for the World Magnetic Model.
+    pub location: Option<(Location, Date)>,
+    /// `--field-ut F`: magnitude only (µT).
+    pub field_ut: Option<f64>,
+}
+
+/// Why no field could be worked out.
+#[derive(Debug, thiserror::Error)]
+pub enum FieldError {
+    /// The World Magnetic Model refused the place or date.
+    #[error("World Magnetic Model at {lat}, {lon}, {alt} m on {date}: {why}")]
+    Wmm {
+        /// Latitude, degrees.
+        lat: f64,
+        /// Longitude, degrees.
+        lon: f64,
+        /// Altitude, m.
+        alt: f64,
+        /// Date.
+        date: Date,
+        /// What the model said.
+        why: String,
+    },
+}
+
+/// Resolves the field: the command line first (`--field-ned`, then `--location/--date`, then `--field-ut`), then the
+/// recording's metadata (`field_ned_ut`, then `location` + `date`).
+pub fn resolve(args: &FieldArgs, meta: &Metadata) -> Result<ReferenceField, FieldError> {
+    if let Some(f) = args.field_ned_ut {
+        return Ok(ReferenceField::Vector {
+            field_ned_ut: f,
+            source: "--field-ned".to_owned(),
+        });
+    }
+    if let Some((loc, date)) = &args.location {
+        return wmm(loc, date, "--location/--date");
+    }
+    if let Some(f) = args.field_ut {
+        return Ok(ReferenceField::Magnitude {
+            field_ut: f,
+            source: "--field-ut".to_owned(),
+        });
+    }
+    if let Some(f) = meta.field_ned_ut {
+        return Ok(ReferenceField::Vector {
+            field_ned_ut: f,
+            source: "recording metadata field_ned_ut".to_owned(),
+        });
+    }
+    if let (Some(loc), Some(date)) = (&meta.location, &meta.date) {
+        return wmm(loc, date, "recording metadata location + date");
+    }
+    Ok(ReferenceField::Unknown)
+}
+
+/// The World Magnetic Model's field at a place and date (NED, µT; north is true north).
+pub fn wmm(loc: &Location, date: &Date, via: &str) -> Result<ReferenceField, FieldError> {
+    let err = |why: String| FieldError::Wmm {
+        lat: loc.lat_deg,
+        lon: loc.lon_deg,
+        alt: loc.alt_m,
+        date: *date,
+        why,
+    };
+    let month = Month::try_from(date.month).map_err(|e| err(e.to_string()))?;
+    let day =
+        WmmDate::from_calendar_date(date.year, month, date.day).map_err(|e| err(e.to_string()))?;
+    let g = GeomagneticField::new(
+        Length::new::<meter>(loc.alt_m as f32),
+        Angle::new::<degree>(loc.lat_deg as f32),
+        Angle::new::<degree>(loc.lon_deg as f32),
+        day,
+    )
+    .map_err(|e| err(e.to_string()))?;
+    let field_ned_ut = [g.x(), g.y(), g.z()].map(|c| f64::from(c.get::<microtesla>()));
+    Ok(ReferenceField::Vector {
+        field_ned_ut,
+        source: format!(
+            "World Magnetic Model ({via}: {}, {}, {} m, {date})",
+            loc.lat_deg, loc.lon_deg, loc.alt_m
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_wmm_gives_a_plausible_field_for_berlin() {
+        let loc = Location {
+            lat_deg: 52.51,
+            lon_deg: 13.32,
+            alt_m: 50.0,
+        };
+        let date: Date = "2021-05-10".parse().unwrap();
+        let f = wmm(&loc, &date, "test").unwrap();
+        let v = f.vector().unwrap();
+        // Berlin: ~17.5 µT north, ~1.4 µT east, ~46.5 µT down, |B| ≈ 49.8 µT.
+        assert!(
+            (v[0] - 17.5).abs() < 1.5 && v[1].abs() < 3.0 && (v[2] - 46.5).abs() < 1.5,
+            "{v:?}"
+        );
+    }
+
+    #[test]
+    fn a_date_outside_the_model_is_a_clear_error() {
+        let loc = Location {
+            lat_deg: 45.19,
+            lon_deg: 5.73,
+            alt_m: 200.0,
+        };
+        let date: Date = "2016-06-02".parse().unwrap();
+        let msg = wmm(&loc, &date, "test").unwrap_err().to_string();
+        assert!(
+            msg.contains("2016-06-02") && msg.contains("World Magnetic Model"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn the_command_line_wins_over_the_metadata() {
+        let meta = Metadata {
+            field_ned_ut: Some([1.0, 2.0, 3.0]),
+            ..Metadata::default()
+        };
+        let args = FieldArgs {
+            field_ned_ut: Some([20.0, 0.0, 40.0]),
+            ..FieldArgs::default()
+        };
+        assert_eq!(
+            resolve(&args, &meta).unwrap().vector(),
+            Some([20.0, 0.0, 40.0])
+        );
+        assert_eq!(
+            resolve(&FieldArgs::default(), &meta).unwrap().vector(),
+            Some([1.0, 2.0, 3.0])
+        );
+        assert_eq!(
+            resolve(&FieldArgs::default(), &Metadata::default()).unwrap(),
+            ReferenceField::Unknown
+        );
+    }
+}

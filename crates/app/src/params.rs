@@ -1,0 +1,333 @@
+//! The parameters file (`--out params.toml`): the final model, written atomically, read back for `apply`.
+
+use std::path::Path;
+
+use magcal_calib::{Effect, Model};
+use serde::{Deserialize, Serialize};
+
+use crate::files::write_atomic;
+
+/// The format line every parameters file carries.
+pub const FORMAT: &str = "magcal-params v1";
+
+/// A parameters file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParamsFile {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// `vector` or `scalar`.
+    pub method: String,
+    /// The sensor, from the recording's metadata.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<String>,
+    /// The recording it was fitted on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recording: Option<String>,
+    /// `B = A·B̂ + b`.
+    pub calibration: LinearParams,
+    /// Body-fixed corrections `apply` removes, in order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub corrections: Vec<Correction>,
+}
+
+/// `A` and `b`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LinearParams {
+    /// `A`, row-major.
+    #[serde(rename = "A")]
+    pub a: [[f64; 3]; 3],
+    /// `b`, µT.
+    pub b_ut: [f64; 3],
+}
+
+/// A body-fixed correction as written in the file (current channels by name, not index).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "id", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Correction {
+    /// See [`Effect::TemperatureBias`].
+    TemperatureBias {
+        /// µT/°C.
+        coef_ut_per_c: [f64; 3],
+        /// °C.
+        t_ref_c: f64,
+    },
+    /// See [`Effect::TemperatureScale`].
+    TemperatureScale {
+        /// 1/°C.
+        coef_per_c: [f64; 3],
+        /// °C.
+        t_ref_c: f64,
+    },
+    /// See [`Effect::CurrentBias`].
+    CurrentBias {
+        /// The `i_<name>` column.
+        channel: String,
+        /// µT/A.
+        coef_ut_per_a: [f64; 3],
+    },
+    /// See [`Effect::Nonlinearity`].
+    Nonlinearity {
+        /// 1/µT².
+        cubic_per_ut2: [f64; 3],
+    },
+    /// See [`Effect::BiasStep`].
+    BiasStep {
+        /// s.
+        t_s: f64,
+        /// µT.
+        step_ut: [f64; 3],
+    },
+    /// See [`Effect::BiasDrift`].
+    BiasDrift {
+        /// µT/s.
+        rate_ut_per_s: [f64; 3],
+        /// s.
+        t_ref_s: f64,
+    },
+}
+
+/// A parameters file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamsError {
+    /// Unreadable.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Not valid TOML of this format.
+    #[error("{path}: {why}")]
+    Format {
+        /// The file.
+        path: String,
+        /// Why.
+        why: String,
+    },
+}
+
+impl Correction {
+    /// The file form of a body-fixed effect; `channels` names the recording's current columns.
+    pub fn from_effect(e: &Effect, channels: &[String]) -> Option<Correction> {
+        Some(match *e {
+            Effect::TemperatureBias {
+                coef_ut_per_c,
+                t_ref_c,
+            } => Correction::TemperatureBias {
+                coef_ut_per_c,
+                t_ref_c,
+            },
+            Effect::TemperatureScale {
+                coef_per_c,
+                t_ref_c,
+            } => Correction::TemperatureScale {
+                coef_per_c,
+                t_ref_c,
+            },
+            Effect::CurrentBias {
+                channel,
+                coef_ut_per_a,
+            } => Correction::CurrentBias {
+                channel: channels.get(channel)?.clone(),
+                coef_ut_per_a,
+            },
+            Effect::Nonlinearity { cubic_per_ut2 } => Correction::Nonlinearity { cubic_per_ut2 },
+            Effect::BiasStep { t_s, step_ut } => Correction::BiasStep { t_s, step_ut },
+            Effect::BiasDrift {
+                rate_ut_per_s,
+                t_ref_s,
+            } => Correction::BiasDrift {
+                rate_ut_per_s,
+                t_ref_s,
+            },
+            _ => return None,
+        })
+    }
+
+    /// The effect, with current channels indexed into `channels`.
+    fn to_effect(&self, channels: &[String]) -> Result<Effect, String> {
+        Ok(match self {
+            Correction::TemperatureBias {
+                coef_ut_per_c,
+                t_ref_c,
+            } => Effect::TemperatureBias {
+                coef_ut_per_c: *coef_ut_per_c,
+                t_ref_c: *t_ref_c,
+            },
+            Correction::TemperatureScale {
+                coef_per_c,
+                t_ref_c,
+            } => Effect::TemperatureScale {
+                coef_per_c: *coef_per_c,
+                t_ref_c: *t_ref_c,
+            },
+            Correction::CurrentBias {
+                channel,
+                coef_ut_per_a,
+            } => Effect::CurrentBias {
+                channel: channels.iter().position(|c| c == channel).ok_or_else(|| {
+                    format!("current channel {channel} is not among {channels:?}")
+                })?,
+                coef_ut_per_a: *coef_ut_per_a,
+            },
+            Correction::Nonlinearity { cubic_per_ut2 } => Effect::Nonlinearity {
+                cubic_per_ut2: *cubic_per_ut2,
+            },
+            Correction::BiasStep { t_s, step_ut } => Effect::BiasStep {
+                t_s: *t_s,
+                step_ut: *step_ut,
+            },
+            Correction::BiasDrift {
+                rate_ut_per_s,
+                t_ref_s,
+            } => Effect::BiasDrift {
+                rate_ut_per_s: *rate_ut_per_s,
+                t_ref_s: *t_ref_s,
+            },
+        })
+    }
+}
+
+impl ParamsFile {
+    /// The file form of a model.
+    pub fn new(method: &str, model: &Model, channels: &[String]) -> ParamsFile {
+        ParamsFile {
+            format: FORMAT.to_owned(),
+            method: method.to_owned(),
+            sensor: None,
+            recording: None,
+            calibration: LinearParams {
+                a: model.a,
+                b_ut: model.b_ut,
+            },
+            corrections: model
+                .corrections()
+                .filter_map(|e| Correction::from_effect(e, channels))
+                .collect(),
+        }
+    }
+
+    /// The model, with current corrections indexed into `channels` (the `i_<name>` columns `apply` will be given).
+    pub fn model(&self, channels: &[String]) -> Result<Model, String> {
+        let mut model = Model::linear(self.calibration.a, self.calibration.b_ut);
+        for c in &self.corrections {
+            model
+                .add_correction(c.to_effect(channels)?)
+                .map_err(|e| e.to_string())?;
+        }
+        Ok(model)
+    }
+
+    /// Writes the file atomically.
+    pub fn write(&self, path: &Path) -> std::io::Result<()> {
+        let text = toml::to_string_pretty(self).map_err(std::io::Error::other)?;
+        write_atomic(
+            path,
+            format!("# magcal calibration parameters: B = A·raw + b − Σ corrections\n{text}")
+                .as_bytes(),
+        )
+    }
+
+    /// Reads a file.
+    pub fn read(path: &Path) -> Result<ParamsFile, ParamsError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ParamsError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        let file: ParamsFile = toml::from_str(&text).map_err(|e| ParamsError::Format {
+            path: name.clone(),
+            why: e.to_string(),
+        })?;
+        if file.format != FORMAT {
+            return Err(ParamsError::Format {
+                path: name,
+                why: format!("format is {:?}, expected {FORMAT:?}", file.format),
+            });
+        }
+        Ok(file)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use magcal_calib::Inputs;
+
+    #[test]
+    fn a_model_with_corrections_round_trips_and_applies_the_same() {
+        let mut model = Model::linear(
+            [[1.1, 0.01, 0.0], [0.0, 0.9, 0.02], [0.01, 0.0, 1.05]],
+            [3.0, -4.0, 5.0],
+        );
+        model
+            .add_correction(Effect::TemperatureBias {
+                coef_ut_per_c: [0.3, 0.0, -0.1],
+                t_ref_c: 24.0,
+            })
+            .unwrap();
+        model
+            .add_correction(Effect::CurrentBias {
+                channel: 1,
+                coef_ut_per_a: [2.0, 1.0, 0.0],
+            })
+            .unwrap();
+        let channels = vec!["i_led".to_owned(), "i_motor".to_owned()];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.toml");
+        ParamsFile::new("vector", &model, &channels)
+            .write(&path)
+            .unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(
+            text.contains("id = \"current_bias\"") && text.contains("channel = \"i_motor\""),
+            "{text}"
+        );
+        // Read back with the channels in another order: the correction follows the name.
+        let back = ParamsFile::read(&path)
+            .unwrap()
+            .model(&["i_motor".to_owned(), "i_led".to_owned()])
+            .unwrap();
+        let raw = [20.0, -10.0, 35.0];
+        let a = model.apply(
+            raw,
+            &Inputs {
+                t_s: 0.0,
+                temp_c: 30.0,
+                currents_a: &[0.1, 0.5],
+            },
+        );
+        let b = back.apply(
+            raw,
+            &Inputs {
+                t_s: 0.0,
+                temp_c: 30.0,
+                currents_a: &[0.5, 0.1],
+            },
+        );
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_wrong_format_or_unknown_channel_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.toml");
+        std::fs::write(&path, "format = \"other\"\nmethod = \"x\"\n[calibration]\nA = [[1,0,0],[0,1,0],[0,0,1]]\nb_ut = [0,0,0]\n").unwrap();
+        assert!(
+            ParamsFile::read(&path)
+                .unwrap_err()
+                .to_string()
+                .contains("expected")
+        );
+        let mut model = Model::linear(magcal_calib::frames::IDENTITY, [0.0; 3]);
+        model
+            .add_correction(Effect::CurrentBias {
+                channel: 0,
+                coef_ut_per_a: [1.0; 3],
+            })
+            .unwrap();
+        let file = ParamsFile::new("vector", &model, &["i_a".to_owned()]);
+        assert!(file.model(&["i_b".to_owned()]).unwrap_err().contains("i_a"));
+    }
+}

@@ -1,0 +1,318 @@
+//! A scenario and its simulation into a recording.
+
+use magcal_calib::effects::{Context, Effect, EffectId, WorldContext};
+use magcal_calib::frames;
+use magcal_recording::{Layout, Metadata, Recording, Sample};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::chips::ChipModel;
+use crate::environment::{CurrentProfile, TemperatureProfile};
+use crate::sensor::SensorTruth;
+use crate::stream_rng;
+use crate::trajectory::Trajectory;
+
+/// Which attitude reference the recording carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AttitudeOutput {
+    /// `qw,qx,qy,qz` plus the world field in the metadata (vector calibration).
+    Quaternion,
+    /// `rx,ry,rz`: the expected field in sensor axes (vector calibration).
+    ReferenceField,
+    /// None (scalar calibration only).
+    None,
+}
+
+/// Everything that is simulated. Build one with [`Scenario::new`] and adjust the fields.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scenario {
+    /// Seed of every random draw.
+    pub seed: u64,
+    /// The `sensor` metadata.
+    pub sensor_name: String,
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// How the sensor is turned.
+    pub trajectory: Trajectory,
+    /// The world field the recording states (and, without world-frame effects, the true one), NED, µT.
+    pub field_ned_ut: [f64; 3],
+    /// The sensor's true calibration.
+    pub sensor: SensorTruth,
+    /// White noise per raw axis, µT.
+    pub noise_ut: [f64; 3],
+    /// Quantisation step of the raw reading, µT.
+    pub lsb_ut: Option<f64>,
+    /// Temperature over time (recorded as `temp` when set).
+    pub temperature: Option<TemperatureProfile>,
+    /// Quantisation step of the recorded temperature, °C.
+    pub temp_lsb_c: Option<f64>,
+    /// Currents (recorded as `i_<name>`).
+    pub currents: Vec<CurrentProfile>,
+    /// Physics left out of the 12-parameter model.
+    pub effects: Vec<Effect>,
+    /// Which attitude reference is recorded.
+    pub attitude: AttitudeOutput,
+    /// Random error of the recorded attitude, degrees RMS per axis (a motion-capture or jig error).
+    pub attitude_noise_deg: f64,
+    /// Record the gyro, with this white noise, rad/s.
+    pub gyro_noise_rad_s: Option<f64>,
+}
+
+impl Scenario {
+    /// A chip on the given trajectory at its default rate, in a 49.45 µT field (19.8 N, 1.2 E, 45.3 D), ideal
+    /// calibration, the chip's noise and LSB, its temperature sensor at a constant 25 °C if it has one, recording
+    /// the attitude quaternion.
+    pub fn new(chip: &ChipModel, trajectory: Trajectory, seed: u64) -> Scenario {
+        Scenario {
+            seed,
+            sensor_name: chip.name.to_owned(),
+            sample_rate_hz: chip.rate_hz,
+            trajectory,
+            field_ned_ut: [19.8, 1.2, 45.3],
+            sensor: SensorTruth::IDEAL,
+            noise_ut: chip.noise_ut,
+            lsb_ut: Some(chip.lsb_ut),
+            temperature: chip.temp_lsb_c.map(|_| TemperatureProfile::constant(25.0)),
+            temp_lsb_c: chip.temp_lsb_c,
+            currents: Vec::new(),
+            effects: Vec::new(),
+            attitude: AttitudeOutput::Quaternion,
+            attitude_noise_deg: 0.0,
+            gyro_noise_rad_s: None,
+        }
+    }
+}
+
+/// What the simulation knows and a fit should find.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Truth {
+    /// The true calibration.
+    pub sensor: SensorTruth,
+    /// The injected effects.
+    pub effects: Vec<Effect>,
+    /// The raw reading per sample before noise and quantisation, µT.
+    pub clean_raw_ut: Vec<[f64; 3]>,
+    /// The true field in the reference's axes per sample (without effects), µT.
+    pub field_ut: Vec<[f64; 3]>,
+}
+
+/// A simulated recording and its truth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimRun {
+    /// The recording, as a file would hold it.
+    pub recording: Recording,
+    /// The truth behind it.
+    pub truth: Truth,
+}
+
+/// A scenario that cannot be simulated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// An effect needs a channel the scenario does not have.
+    #[error("effect {effect} needs {needs}, which the scenario does not have")]
+    MissingChannel {
+        /// The effect.
+        effect: EffectId,
+        /// What it needs.
+        needs: &'static str,
+    },
+    /// The scenario's channels do not make a valid recording.
+    #[error("invalid recording layout: {0}")]
+    Layout(String),
+}
+
+/// Simulates a scenario.
+pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
+    for e in &s.effects {
+        match e {
+            Effect::TemperatureBias { .. } | Effect::TemperatureScale { .. }
+                if s.temperature.is_none() =>
+            {
+                return Err(SimError::MissingChannel {
+                    effect: e.id(),
+                    needs: "a temperature profile",
+                });
+            }
+            Effect::CurrentBias { channel, .. } if *channel >= s.currents.len() => {
+                return Err(SimError::MissingChannel {
+                    effect: e.id(),
+                    needs: "that current channel",
+                });
+            }
+            _ => {}
+        }
+    }
+    let poses = s
+        .trajectory
+        .poses(s.sample_rate_hz, &mut stream_rng(s.seed, 1));
+    let duration_s = poses.last().map_or(0.0, |p| p.t_s);
+    let mut env_rng = stream_rng(s.seed, 2);
+    let switches: Vec<Vec<f64>> = s
+        .currents
+        .iter()
+        .map(|c| c.switch_times(duration_s, &mut env_rng))
+        .collect();
+    let mut noise_rng = stream_rng(s.seed, 3);
+    let mut gauss = move || -> f64 { StandardNormal.sample(&mut noise_rng) };
+
+    let layout = Layout {
+        t: true,
+        temp: s.temperature.is_some(),
+        quat: s.attitude == AttitudeOutput::Quaternion,
+        reference: s.attitude == AttitudeOutput::ReferenceField,
+        gyro: s.gyro_noise_rad_s.is_some(),
+        currents: s.currents.iter().map(|c| c.name.clone()).collect(),
+        extra: Vec::new(),
+    };
+    let meta = Metadata {
+        sensor: Some(s.sensor_name.clone()),
+        sample_rate_hz: Some(s.sample_rate_hz),
+        field_ned_ut: (s.attitude == AttitudeOutput::Quaternion).then_some(s.field_ned_ut),
+        routine: Some(s.trajectory.routine().to_owned()),
+        other: vec![(
+            "simulated".to_owned(),
+            format!("magcal-sim, seed {}", s.seed),
+        )],
+        ..Metadata::default()
+    };
+    let mut recording =
+        Recording::new(meta, &layout).map_err(|e| SimError::Layout(e.to_string()))?;
+    let forward = s.sensor.forward();
+    let mut truth = Truth {
+        sensor: s.sensor,
+        effects: s.effects.clone(),
+        clean_raw_ut: Vec::with_capacity(poses.len()),
+        field_ut: Vec::with_capacity(poses.len()),
+    };
+    let quantise = |v: f64, step: Option<f64>| step.map_or(v, |q| (v / q).round() * q);
+    let mut currents_a = vec![0.0; s.currents.len()];
+    for pose in &poses {
+        let r = frames::quat_to_matrix(pose.quat);
+        let field = frames::mat_t_vec(&r, s.field_ned_ut);
+        // A world-fixed field seen from a turning sensor: dB/dt = −ω × B.
+        let rate = frames::cross(field, pose.omega_rad_s);
+        let temp_c = s.temperature.map_or(f64::NAN, |p| p.at(pose.t_s));
+        for (k, c) in s.currents.iter().enumerate() {
+            currents_a[k] = c.at(&switches[k], pose.t_s);
+        }
+        let ctx = Context {
+            t_s: pose.t_s,
+            temp_c,
+            currents_a: &currents_a,
+            field_ut: field,
+            field_rate_ut_per_s: rate,
+            world: Some(WorldContext {
+                sensor_to_ned: r,
+                field_ned_ut: s.field_ned_ut,
+            }),
+        };
+        let perturbed = s
+            .effects
+            .iter()
+            .fold(field, |acc, e| frames::add(acc, e.perturbation_ut(&ctx)));
+        let clean = forward(perturbed);
+        let raw: [f64; 3] =
+            std::array::from_fn(|k| quantise(clean[k] + s.noise_ut[k] * gauss(), s.lsb_ut));
+        truth.clean_raw_ut.push(clean);
+        truth.field_ut.push(field);
+
+        let mut sample = Sample {
+            t_s: pose.t_s,
+            mag_ut: raw,
+            temp_c: quantise(temp_c, s.temp_lsb_c),
+            currents_a: currents_a.clone(),
+            ..Sample::default()
+        };
+        match s.attitude {
+            AttitudeOutput::Quaternion => {
+                sample.quat = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut gauss)
+            }
+            AttitudeOutput::ReferenceField => {
+                let q = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut gauss);
+                sample.ref_ut = frames::expected_sensor_field(q, s.field_ned_ut);
+            }
+            AttitudeOutput::None => {}
+        }
+        if let Some(sigma) = s.gyro_noise_rad_s {
+            sample.gyro_rad_s = pose.omega_rad_s.map(|w| w + sigma * gauss());
+        }
+        recording
+            .push(&sample)
+            .map_err(|e| SimError::Layout(e.to_string()))?;
+    }
+    Ok(SimRun { recording, truth })
+}
+
+/// The attitude as the reference records it: the truth turned by a small random rotation.
+fn recorded_attitude(q: [f64; 4], noise_deg: f64, gauss: &mut impl FnMut() -> f64) -> [f64; 4] {
+    if noise_deg == 0.0 {
+        return q;
+    }
+    let e = Vector3::from_fn(|_, _| noise_deg.to_radians() * gauss());
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+        * UnitQuaternion::from_scaled_axis(e);
+    [q.w, q.i, q.j, q.k]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::chips::CHIPS;
+
+    fn tumble() -> Trajectory {
+        Trajectory::Tumble {
+            duration_s: 20.0,
+            rate_rad_s: 1.0,
+        }
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_recording() {
+        let s = Scenario::new(&CHIPS[0], tumble(), 5);
+        assert_eq!(simulate(&s).unwrap(), simulate(&s).unwrap());
+        let other = Scenario {
+            seed: 6,
+            ..s.clone()
+        };
+        assert_ne!(
+            simulate(&s).unwrap().recording.mag_ut,
+            simulate(&other).unwrap().recording.mag_ut
+        );
+    }
+
+    #[test]
+    fn readings_are_on_the_lsb_grid_and_near_the_truth() {
+        let chip = ChipModel::by_name("hmc5883l").unwrap();
+        let run = simulate(&Scenario::new(&chip, tumble(), 1)).unwrap();
+        for (m, clean) in run.recording.mag_ut.iter().zip(&run.truth.clean_raw_ut) {
+            for k in 0..3 {
+                let steps = m[k] / chip.lsb_ut;
+                assert!((steps - steps.round()).abs() < 1e-6);
+                assert!((m[k] - clean[k]).abs() < 6.0 * chip.noise_ut[k] + chip.lsb_ut);
+            }
+        }
+    }
+
+    #[test]
+    fn the_recorded_attitude_reproduces_the_field() {
+        let mut s = Scenario::new(&CHIPS[4], tumble(), 2);
+        s.noise_ut = [0.0; 3];
+        s.lsb_ut = None;
+        let run = simulate(&s).unwrap();
+        let q = run.recording.quat.as_ref().unwrap();
+        for (i, m) in run.recording.mag_ut.iter().enumerate() {
+            let expected = frames::expected_sensor_field(q[i], s.field_ned_ut);
+            assert!((0..3).all(|k| (m[k] - expected[k]).abs() < 1e-9));
+        }
+    }
+
+    #[test]
+    fn an_effect_without_its_channel_is_refused() {
+        let mut s = Scenario::new(&ChipModel::by_name("hmc5883l").unwrap(), tumble(), 2);
+        s.effects.push(Effect::TemperatureBias {
+            coef_ut_per_c: [0.1; 3],
+            t_ref_c: 25.0,
+        });
+        assert!(matches!(simulate(&s), Err(SimError::MissingChannel { .. })));
+    }
+}
