@@ -34,10 +34,11 @@ impl Method {
 }
 
 /// The fit itself, by method.
+#[allow(clippy::large_enum_variant, reason = "one per calibration; boxing buys nothing")]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Fit {
     /// A vector fit.
-    Vector(Box<VectorFit>),
+    Vector(VectorFit),
     /// A scalar fit.
     Scalar(ScalarFit),
 }
@@ -164,7 +165,7 @@ pub fn calibrate(
             )?;
             let rms = rms3(v.residual_rms_ut);
             let n = v.n;
-            (Fit::Vector(Box::new(v)), rms, n)
+            (Fit::Vector(v), rms, n)
         }
         _ => {
             let s = scalar::fit(
