@@ -1,11 +1,12 @@
 //! A scenario and its simulation into a recording.
 
-use magcal_calib::effects::{Context, Effect, EffectId, WorldContext};
+use magcal_calib::effects::{Effect, EffectId};
 use magcal_calib::frames;
 use magcal_recording::{Layout, Metadata, Recording, Sample};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::bench::{CleanReading, check_channels, clean_reading};
 use crate::chips::ChipModel;
 use crate::environment::{CurrentProfile, TemperatureProfile};
 use crate::sensor::SensorTruth;
@@ -123,25 +124,7 @@ pub enum SimError {
 
 /// Simulates a scenario.
 pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
-    for e in &s.effects {
-        match e {
-            Effect::TemperatureBias { .. } | Effect::TemperatureScale { .. }
-                if s.temperature.is_none() =>
-            {
-                return Err(SimError::MissingChannel {
-                    effect: e.id(),
-                    needs: "a temperature profile",
-                });
-            }
-            Effect::CurrentBias { channel, .. } if *channel >= s.currents.len() => {
-                return Err(SimError::MissingChannel {
-                    effect: e.id(),
-                    needs: "that current channel",
-                });
-            }
-            _ => {}
-        }
-    }
+    check_channels(&s.effects, s.temperature.is_some(), s.currents.len())?;
     let poses = s
         .trajectory
         .poses(s.sample_rate_hz, &mut stream_rng(s.seed, 1));
@@ -187,30 +170,21 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
     let quantise = |v: f64, step: Option<f64>| step.map_or(v, |q| (v / q).round() * q);
     let mut currents_a = vec![0.0; s.currents.len()];
     for pose in &poses {
-        let r = frames::quat_to_matrix(pose.quat);
-        let field = frames::mat_t_vec(&r, s.field_ned_ut);
-        // A world-fixed field seen from a turning sensor: dB/dt = −ω × B.
-        let rate = frames::cross(field, pose.omega_rad_s);
         let temp_c = s.temperature.map_or(f64::NAN, |p| p.at(pose.t_s));
         for (k, c) in s.currents.iter().enumerate() {
             currents_a[k] = c.at(&switches[k], pose.t_s);
         }
-        let ctx = Context {
-            t_s: pose.t_s,
-            temp_c,
-            currents_a: &currents_a,
+        let CleanReading {
             field_ut: field,
-            field_rate_ut_per_s: rate,
-            world: Some(WorldContext {
-                sensor_to_ned: r,
-                field_ned_ut: s.field_ned_ut,
-            }),
-        };
-        let perturbed = s
-            .effects
-            .iter()
-            .fold(field, |acc, e| frames::add(acc, e.perturbation_ut(&ctx)));
-        let clean = forward(perturbed);
+            raw_ut: clean,
+        } = clean_reading(
+            s.field_ned_ut,
+            &s.effects,
+            &forward,
+            pose,
+            temp_c,
+            &currents_a,
+        );
         let raw: [f64; 3] =
             std::array::from_fn(|k| quantise(clean[k] + s.noise_ut[k] * gauss(), s.lsb_ut));
         truth.clean_raw_ut.push(clean);

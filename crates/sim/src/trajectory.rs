@@ -108,60 +108,93 @@ impl Trajectory {
     }
 }
 
-fn to_array(q: &UnitQuaternion<f64>) -> [f64; 4] {
+pub(crate) fn to_array(q: &UnitQuaternion<f64>) -> [f64; 4] {
     [q.w, q.i, q.j, q.k]
 }
 
 /// Sinusoids per axis in the tumble's body rate.
 const TUMBLE_TONES: usize = 4;
 /// Integration sub-steps per sample.
-const TUMBLE_SUBSTEPS: usize = 4;
+pub(crate) const TUMBLE_SUBSTEPS: usize = 4;
 
-fn tumble(duration_s: f64, rate_rad_s: f64, dt: f64, rng: &mut impl RngExt) -> Vec<Pose> {
-    // Each axis: Σ a·sin(2π f t + φ) with random f, φ and equal amplitudes, scaled to the RMS rate.
-    let tones: Vec<[(f64, f64); TUMBLE_TONES]> = (0..3)
-        .map(|_| {
+/// The tumble's body rate: per axis a sum of random sinusoids, scaled to an RMS rate. Shared by the batch
+/// [`Trajectory::Tumble`] and the bench's virtual hand.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct TumbleRate {
+    /// Per axis, `(frequency Hz, phase rad)` of each tone.
+    tones: [[(f64, f64); TUMBLE_TONES]; 3],
+    /// Amplitude of every tone, rad/s.
+    amp_rad_s: f64,
+}
+
+impl TumbleRate {
+    /// Draws the tones (0.02–0.3 Hz, random phases) for an RMS body rate of `rate_rad_s`.
+    pub(crate) fn draw(rate_rad_s: f64, rng: &mut impl RngExt) -> TumbleRate {
+        let tones = std::array::from_fn(|_| {
             std::array::from_fn(|_| {
                 (
                     rng.random_range(0.02..0.3),
                     rng.random_range(0.0..std::f64::consts::TAU),
                 )
             })
-        })
-        .collect();
-    // Each tone contributes a²/2 to the axis' mean square; three axes of four tones make |ω|² = 6a².
-    let amp = rate_rad_s / (3.0 * TUMBLE_TONES as f64 / 2.0).sqrt();
-    let omega = |t: f64| -> Vector3<f64> {
+        });
+        // Each tone contributes a²/2 to the axis' mean square; three axes of four tones make |ω|² = 6a².
+        let amp_rad_s = rate_rad_s / (3.0 * TUMBLE_TONES as f64 / 2.0).sqrt();
+        TumbleRate { tones, amp_rad_s }
+    }
+
+    /// The body rate at `t_s`, rad/s in sensor axes.
+    pub(crate) fn omega(&self, t_s: f64) -> Vector3<f64> {
         Vector3::from_fn(|k, _| {
-            tones[k]
+            self.tones[k]
                 .iter()
-                .map(|(f, phi)| amp * (std::f64::consts::TAU * f * t + phi).sin())
+                .map(|(f, phi)| self.amp_rad_s * (std::f64::consts::TAU * f * t_s + phi).sin())
                 .sum()
         })
-    };
+    }
+
+    /// Turns `q` by the body rate from `t_s` over `dt_s`, in `substeps` midpoint steps (second-order accurate).
+    pub(crate) fn advance(
+        &self,
+        q: &mut UnitQuaternion<f64>,
+        t_s: f64,
+        dt_s: f64,
+        substeps: usize,
+    ) {
+        let h = dt_s / substeps as f64;
+        for s in 0..substeps {
+            // Body rates compose on the right.
+            let wm = self.omega(t_s + (s as f64 + 0.5) * h);
+            *q *= UnitQuaternion::from_scaled_axis(wm * h);
+        }
+    }
+}
+
+/// A uniformly random start attitude (a normalised random quaternion).
+pub(crate) fn random_attitude(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
     let start = Quaternion::new(
         rng.random_range(-1.0..1.0),
         rng.random_range(-1.0..1.0),
         rng.random_range(-1.0..1.0),
         rng.random_range(-1.0..1.0),
     );
-    let mut q = UnitQuaternion::from_quaternion(start);
+    UnitQuaternion::from_quaternion(start)
+}
+
+fn tumble(duration_s: f64, rate_rad_s: f64, dt: f64, rng: &mut impl RngExt) -> Vec<Pose> {
+    let rate = TumbleRate::draw(rate_rad_s, rng);
+    let mut q = random_attitude(rng);
     let n = (duration_s / dt).round() as usize;
-    let h = dt / TUMBLE_SUBSTEPS as f64;
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
         let t = i as f64 * dt;
-        let w = omega(t);
+        let w = rate.omega(t);
         out.push(Pose {
             t_s: t,
             quat: to_array(&q),
             omega_rad_s: [w.x, w.y, w.z],
         });
-        for s in 0..TUMBLE_SUBSTEPS {
-            // Body rates compose on the right; the midpoint rate keeps the step second-order accurate.
-            let wm = omega(t + (s as f64 + 0.5) * h);
-            q *= UnitQuaternion::from_scaled_axis(wm * h);
-        }
+        rate.advance(&mut q, t, dt, TUMBLE_SUBSTEPS);
     }
     out
 }
