@@ -34,7 +34,10 @@ impl Method {
 }
 
 /// The fit itself, by method.
-#[allow(clippy::large_enum_variant, reason = "one per calibration; boxing buys nothing")]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "one per calibration; boxing buys nothing"
+)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Fit {
     /// A vector fit.

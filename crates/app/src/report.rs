@@ -51,6 +51,9 @@ pub struct CalibrationReport {
     pub offset_ut: [f64; 3],
     /// Body-fixed corrections.
     pub corrections: Vec<Correction>,
+    /// Scalar method: the raw ellipsoid's semi-axes, largest first, µT.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ellipsoid_radii_ut: Option<[f64; 3]>,
 }
 
 /// Residual RMS against the noise floor.
@@ -155,6 +158,10 @@ impl Report {
                     .corrections()
                     .filter_map(|e| Correction::from_effect(e, channels))
                     .collect(),
+                ellipsoid_radii_ut: match &cal.fit {
+                    Fit::Scalar(s) => Some(s.radii_ut()),
+                    Fit::Vector(_) => None,
+                },
             },
             residual: ResidualReport {
                 rms_ut: cal.residual_rms_ut,

@@ -141,7 +141,9 @@ pub enum CoverageError {
 
 /// "sensor axis ≈ +Z" for a direction close to an axis, the vector otherwise.
 pub fn describe(d: [f64; 3]) -> String {
-    let k = (0..3).max_by(|&i, &j| d[i].abs().total_cmp(&d[j].abs())).unwrap_or(0);
+    let k = (0..3)
+        .max_by(|&i, &j| d[i].abs().total_cmp(&d[j].abs()))
+        .unwrap_or(0);
     let axis = ["X", "Y", "Z"][k];
     let sign = if d[k] >= 0.0 { "+" } else { "−" };
     if d[k].abs() > 0.95 {
@@ -192,7 +194,8 @@ pub fn sphere_fraction(directions: impl IntoIterator<Item = [f64; 3]>, cells: us
         let z = (d[2] / n).clamp(-1.0, 1.0);
         let band = (((z + 1.0) / 2.0 * bands as f64) as usize).min(bands - 1);
         let lon = d[1].atan2(d[0]) + std::f64::consts::PI;
-        let cell = ((lon / std::f64::consts::TAU * per_band[band] as f64) as usize).min(per_band[band] - 1);
+        let cell = ((lon / std::f64::consts::TAU * per_band[band] as f64) as usize)
+            .min(per_band[band] - 1);
         seen[offsets[band] + cell] = true;
     }
     seen.iter().filter(|s| **s).count() as f64 / total as f64
@@ -211,7 +214,11 @@ mod tests {
                 let tilt = axis_tilt_deg.to_radians();
                 let x = h * a.cos();
                 let y = h * a.sin();
-                [x, y * tilt.cos() - v * tilt.sin(), y * tilt.sin() + v * tilt.cos() + 5.0]
+                [
+                    x,
+                    y * tilt.cos() - v * tilt.sin(),
+                    y * tilt.sin() + v * tilt.cos() + 5.0,
+                ]
             })
             .collect()
     }
@@ -224,15 +231,23 @@ mod tests {
             other => panic!("{other:?}"),
         }
         let msg = err.to_string();
-        assert!(msg.contains("planar rotation") && msg.contains("≈ +Z"), "{msg}");
+        assert!(
+            msg.contains("planar rotation") && msg.contains("≈ +Z"),
+            "{msg}"
+        );
         assert!(msg.contains("tip the sensor"), "{msg}");
     }
 
     #[test]
     fn a_still_sensor_and_a_line_are_refused() {
         let still = vec![[10.0, 20.0, 30.0]; 100];
-        assert!(matches!(Coverage::of(&still).check(), Err(CoverageError::Still { .. })));
-        let line: Vec<[f64; 3]> = (0..100).map(|i| [i as f64, 0.01 * (i % 3) as f64, 0.0]).collect();
+        assert!(matches!(
+            Coverage::of(&still).check(),
+            Err(CoverageError::Still { .. })
+        ));
+        let line: Vec<[f64; 3]> = (0..100)
+            .map(|i| [i as f64, 0.01 * (i % 3) as f64, 0.0])
+            .collect();
         assert!(matches!(
             Coverage::of(&line).check(),
             Err(CoverageError::OneDirection { .. })

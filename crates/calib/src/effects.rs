@@ -276,7 +276,11 @@ impl Effect {
             Effect::TimeLag { lag_s } => frames::scale(ctx.field_rate_ut_per_s, -lag_s),
             Effect::RateCoupling { lag_axis_s } => {
                 let r = ctx.field_rate_ut_per_s;
-                [-lag_axis_s[0] * r[0], -lag_axis_s[1] * r[1], -lag_axis_s[2] * r[2]]
+                [
+                    -lag_axis_s[0] * r[0],
+                    -lag_axis_s[1] * r[1],
+                    -lag_axis_s[2] * r[2],
+                ]
             }
             Effect::FieldDrift {
                 rate_ut_per_s,
@@ -341,15 +345,25 @@ impl Effect {
     /// fitting) and how many of the array's entries are used.
     pub fn params(&self) -> ([f64; 3], usize) {
         match *self {
-            Effect::TemperatureBias { coef_ut_per_c: p, .. }
+            Effect::TemperatureBias {
+                coef_ut_per_c: p, ..
+            }
             | Effect::TemperatureScale { coef_per_c: p, .. }
-            | Effect::CurrentBias { coef_ut_per_a: p, .. }
+            | Effect::CurrentBias {
+                coef_ut_per_a: p, ..
+            }
             | Effect::RateCoupling { lag_axis_s: p }
-            | Effect::FieldDrift { rate_ut_per_s: p, .. }
+            | Effect::FieldDrift {
+                rate_ut_per_s: p, ..
+            }
             | Effect::Nonlinearity { cubic_per_ut2: p }
             | Effect::BiasStep { step_ut: p, .. }
-            | Effect::BiasDrift { rate_ut_per_s: p, .. }
-            | Effect::Disturbance { field_ned_ut: p, .. } => (p, 3),
+            | Effect::BiasDrift {
+                rate_ut_per_s: p, ..
+            }
+            | Effect::Disturbance {
+                field_ned_ut: p, ..
+            } => (p, 3),
             Effect::TimeLag { lag_s } => ([lag_s, 0.0, 0.0], 1),
             Effect::FieldDirectionError {
                 declination_error_deg,
@@ -362,15 +376,25 @@ impl Effect {
     pub fn with_params(&self, p: [f64; 3]) -> Effect {
         let mut e = *self;
         match &mut e {
-            Effect::TemperatureBias { coef_ut_per_c: q, .. }
+            Effect::TemperatureBias {
+                coef_ut_per_c: q, ..
+            }
             | Effect::TemperatureScale { coef_per_c: q, .. }
-            | Effect::CurrentBias { coef_ut_per_a: q, .. }
+            | Effect::CurrentBias {
+                coef_ut_per_a: q, ..
+            }
             | Effect::RateCoupling { lag_axis_s: q }
-            | Effect::FieldDrift { rate_ut_per_s: q, .. }
+            | Effect::FieldDrift {
+                rate_ut_per_s: q, ..
+            }
             | Effect::Nonlinearity { cubic_per_ut2: q }
             | Effect::BiasStep { step_ut: q, .. }
-            | Effect::BiasDrift { rate_ut_per_s: q, .. }
-            | Effect::Disturbance { field_ned_ut: q, .. } => *q = p,
+            | Effect::BiasDrift {
+                rate_ut_per_s: q, ..
+            }
+            | Effect::Disturbance {
+                field_ned_ut: q, ..
+            } => *q = p,
             Effect::TimeLag { lag_s } => *lag_s = p[0],
             Effect::FieldDirectionError {
                 declination_error_deg,
@@ -410,22 +434,50 @@ mod tests {
     #[test]
     fn linear_effects_are_linear_in_their_params() {
         let world = WorldContext {
-            sensor_to_ned: frames::quat_to_matrix([0.9, 0.1, -0.3, 0.2].map(|x| x / 0.9899494936611666)),
+            sensor_to_ned: frames::quat_to_matrix(
+                [0.9, 0.1, -0.3, 0.2].map(|x| x / 0.9899494936611666),
+            ),
             field_ned_ut: [20.0, 1.0, 45.0],
         };
         let currents = [0.7];
         let c = ctx(&currents, Some(world));
         let effects = [
-            Effect::TemperatureBias { coef_ut_per_c: [0.0; 3], t_ref_c: 25.0 },
-            Effect::TemperatureScale { coef_per_c: [0.0; 3], t_ref_c: 25.0 },
-            Effect::CurrentBias { channel: 0, coef_ut_per_a: [0.0; 3] },
+            Effect::TemperatureBias {
+                coef_ut_per_c: [0.0; 3],
+                t_ref_c: 25.0,
+            },
+            Effect::TemperatureScale {
+                coef_per_c: [0.0; 3],
+                t_ref_c: 25.0,
+            },
+            Effect::CurrentBias {
+                channel: 0,
+                coef_ut_per_a: [0.0; 3],
+            },
             Effect::TimeLag { lag_s: 0.0 },
-            Effect::RateCoupling { lag_axis_s: [0.0; 3] },
-            Effect::FieldDrift { rate_ut_per_s: [0.0; 3], t_ref_s: 2.0 },
-            Effect::Nonlinearity { cubic_per_ut2: [0.0; 3] },
-            Effect::BiasStep { t_s: 5.0, step_ut: [0.0; 3] },
-            Effect::BiasDrift { rate_ut_per_s: [0.0; 3], t_ref_s: 0.0 },
-            Effect::Disturbance { t0_s: 9.0, t1_s: 11.0, field_ned_ut: [0.0; 3] },
+            Effect::RateCoupling {
+                lag_axis_s: [0.0; 3],
+            },
+            Effect::FieldDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s: 2.0,
+            },
+            Effect::Nonlinearity {
+                cubic_per_ut2: [0.0; 3],
+            },
+            Effect::BiasStep {
+                t_s: 5.0,
+                step_ut: [0.0; 3],
+            },
+            Effect::BiasDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s: 0.0,
+            },
+            Effect::Disturbance {
+                t0_s: 9.0,
+                t1_s: 11.0,
+                field_ned_ut: [0.0; 3],
+            },
         ];
         for e in effects {
             assert!(e.is_linear());
@@ -466,9 +518,15 @@ mod tests {
 
     #[test]
     fn world_effects_need_an_attitude_and_channels_propagate_nan() {
-        let drift = Effect::FieldDrift { rate_ut_per_s: [1.0; 3], t_ref_s: 0.0 };
+        let drift = Effect::FieldDrift {
+            rate_ut_per_s: [1.0; 3],
+            t_ref_s: 0.0,
+        };
         assert_eq!(drift.perturbation_ut(&ctx(&[], None)), [0.0; 3]);
-        let current = Effect::CurrentBias { channel: 0, coef_ut_per_a: [1.0; 3] };
+        let current = Effect::CurrentBias {
+            channel: 0,
+            coef_ut_per_a: [1.0; 3],
+        };
         assert!(current.perturbation_ut(&ctx(&[], None))[0].is_nan());
     }
 }

@@ -30,7 +30,11 @@ pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// Cross product `a × b`.
 pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// Euclidean norm.
@@ -57,9 +61,21 @@ pub fn scale(v: [f64; 3], s: f64) -> [f64; 3] {
 pub fn quat_to_matrix(q: [f64; 4]) -> Mat3 {
     let [w, x, y, z] = q;
     [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ]
 }
 
@@ -80,7 +96,11 @@ pub fn field_angles(field_ned_ut: [f64; 3]) -> (f64, f64, f64) {
 }
 
 /// The NED field vector of a declination, inclination (degrees) and magnitude (µT).
-pub fn field_from_angles(declination_deg: f64, inclination_deg: f64, magnitude_ut: f64) -> [f64; 3] {
+pub fn field_from_angles(
+    declination_deg: f64,
+    inclination_deg: f64,
+    magnitude_ut: f64,
+) -> [f64; 3] {
     let (sd, cd) = (
         libm::sin(declination_deg.to_radians()),
         libm::cos(declination_deg.to_radians()),
@@ -89,7 +109,11 @@ pub fn field_from_angles(declination_deg: f64, inclination_deg: f64, magnitude_u
         libm::sin(inclination_deg.to_radians()),
         libm::cos(inclination_deg.to_radians()),
     );
-    [magnitude_ut * ci * cd, magnitude_ut * ci * sd, magnitude_ut * si]
+    [
+        magnitude_ut * ci * cd,
+        magnitude_ut * ci * sd,
+        magnitude_ut * si,
+    ]
 }
 
 #[cfg(test)]
@@ -107,7 +131,10 @@ mod tests {
         let r = quat_to_matrix(q);
         assert!(close(mat_vec(&r, [1.0, 0.0, 0.0]), [0.0, 1.0, 0.0]));
         // A field pointing north is seen on the sensor's −Y axis after that yaw.
-        assert!(close(expected_sensor_field(q, [1.0, 0.0, 0.0]), [0.0, -1.0, 0.0]));
+        assert!(close(
+            expected_sensor_field(q, [1.0, 0.0, 0.0]),
+            [0.0, -1.0, 0.0]
+        ));
     }
 
     #[test]

@@ -25,7 +25,7 @@ pub mod scalar;
 #[cfg(feature = "std")]
 pub mod vector;
 
+pub use effects::{Context, Effect, EffectId, Frame, WorldContext};
 #[cfg(feature = "std")]
 pub use error::FitError;
-pub use effects::{Context, Effect, EffectId, Frame, WorldContext};
 pub use model::{Inputs, Model};

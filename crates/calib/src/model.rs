@@ -143,7 +143,11 @@ mod tests {
         assert_eq!(four_decimals(b[2]), 34.9998, "z: {}", b[2]);
         let rounding_bound = 0.5e-4 * (raw.iter().map(|v: &f64| v.abs()).sum::<f64>() + 1.0);
         for k in 0..3 {
-            assert!((b[k] - table[k]).abs() <= rounding_bound, "axis {k}: {}", b[k]);
+            assert!(
+                (b[k] - table[k]).abs() <= rounding_bound,
+                "axis {k}: {}",
+                b[k]
+            );
         }
         assert!((frames::norm(b) - 35.0000).abs() <= rounding_bound);
     }
@@ -152,16 +156,31 @@ mod tests {
     fn apply_inverts_the_forward_model_with_corrections() {
         let mut model = Model::linear(PAPER_A, PAPER_B_UT);
         let effects = [
-            Effect::TemperatureBias { coef_ut_per_c: [0.3, -0.1, 0.05], t_ref_c: 20.0 },
-            Effect::TemperatureScale { coef_per_c: [1e-3, -2e-3, 5e-4], t_ref_c: 25.0 },
-            Effect::Nonlinearity { cubic_per_ut2: [2e-7, -1e-7, 3e-7] },
-            Effect::CurrentBias { channel: 1, coef_ut_per_a: [1.5, 0.0, -0.7] },
+            Effect::TemperatureBias {
+                coef_ut_per_c: [0.3, -0.1, 0.05],
+                t_ref_c: 20.0,
+            },
+            Effect::TemperatureScale {
+                coef_per_c: [1e-3, -2e-3, 5e-4],
+                t_ref_c: 25.0,
+            },
+            Effect::Nonlinearity {
+                cubic_per_ut2: [2e-7, -1e-7, 3e-7],
+            },
+            Effect::CurrentBias {
+                channel: 1,
+                coef_ut_per_a: [1.5, 0.0, -0.7],
+            },
         ];
         for e in effects {
             model.add_correction(e).unwrap();
         }
         let currents = [0.0, 0.8];
-        let inputs = Inputs { t_s: 3.0, temp_c: 31.0, currents_a: &currents };
+        let inputs = Inputs {
+            t_s: 3.0,
+            temp_c: 31.0,
+            currents_a: &currents,
+        };
         let truth = [12.0, -30.0, 41.0];
         // Forward: the raw reading a sensor with these errors gives for the true field.
         let ctx = Context::body(inputs.t_s, inputs.temp_c, &currents, truth);
@@ -185,11 +204,17 @@ mod tests {
         );
         for _ in 0..MAX_CORRECTIONS {
             model
-                .add_correction(Effect::BiasDrift { rate_ut_per_s: [0.0; 3], t_ref_s: 0.0 })
+                .add_correction(Effect::BiasDrift {
+                    rate_ut_per_s: [0.0; 3],
+                    t_ref_s: 0.0,
+                })
                 .unwrap();
         }
         assert_eq!(
-            model.add_correction(Effect::BiasDrift { rate_ut_per_s: [0.0; 3], t_ref_s: 0.0 }),
+            model.add_correction(Effect::BiasDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s: 0.0
+            }),
             Err(ModelError::Full)
         );
         assert!(model.corrections().all(|e| e.id() == EffectId::BiasDrift));

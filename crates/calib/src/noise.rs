@@ -79,9 +79,8 @@ pub fn estimate(raw_ut: &[[f64; 3]]) -> NoiseFloor {
         Some((start, end, s)) => (s, NoiseSource::Still { start, end }),
         None => (diff_sigma, NoiseSource::Differences { order }),
     };
-    let lsb: [Option<f64>; 3] = std::array::from_fn(|k| {
-        grid_step(&columns[k][..columns[k].len().min(LSB_PROBE)])
-    });
+    let lsb: [Option<f64>; 3] =
+        std::array::from_fn(|k| grid_step(&columns[k][..columns[k].len().min(LSB_PROBE)]));
     let lsb_ut = if lsb.iter().all(Option::is_some) {
         Some(lsb.map(|x| x.unwrap_or_default()))
     } else {
@@ -130,7 +129,10 @@ fn difference_sigma(x: &[f64], order: usize) -> f64 {
 
 /// The longest run of windows whose spread (no motion removed) is no more than the difference-based noise allows,
 /// if long enough.
-fn still_segment(columns: &[Vec<f64>; 3], diff_sigma: [f64; 3]) -> Option<(usize, usize, [f64; 3])> {
+fn still_segment(
+    columns: &[Vec<f64>; 3],
+    diff_sigma: [f64; 3],
+) -> Option<(usize, usize, [f64; 3])> {
     let n = columns[0].len();
     let windows = n / STILL_WINDOW;
     let still = |w: usize| {
@@ -196,7 +198,11 @@ fn grid_step(x: &[f64]) -> Option<f64> {
         return None;
     }
     // Refine: the mean of the single-step gaps.
-    let singles: Vec<f64> = gaps.iter().copied().filter(|g| (g - step).abs() < tol).collect();
+    let singles: Vec<f64> = gaps
+        .iter()
+        .copied()
+        .filter(|g| (g - step).abs() < tol)
+        .collect();
     Some(singles.iter().sum::<f64>() / singles.len() as f64)
 }
 
@@ -231,7 +237,10 @@ mod tests {
         for (rate, sigma) in [(20.0, 0.05), (100.0, 0.3), (50.0, 0.1)] {
             let f = estimate(&rotating(20_000, rate, sigma, None, 7));
             for s in f.sigma_ut {
-                assert!((s / sigma - 1.0).abs() < 0.05, "{rate} Hz, σ {sigma}: got {s}");
+                assert!(
+                    (s / sigma - 1.0).abs() < 0.05,
+                    "{rate} Hz, σ {sigma}: got {s}"
+                );
             }
             assert!(f.lsb_ut.is_none());
         }

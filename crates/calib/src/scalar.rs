@@ -62,6 +62,18 @@ impl ScalarFit {
         Model::linear(self.a, self.b_ut)
     }
 
+    /// The raw ellipsoid's semi-axes, largest first, µT: the field magnitude over the eigenvalues of `A`.
+    pub fn radii_ut(&self) -> [f64; 3] {
+        let a = Matrix3::from_fn(|j, k| self.a[j][k]);
+        let mut r: Vec<f64> = SymmetricEigen::new(a)
+            .eigenvalues
+            .iter()
+            .map(|l| self.field_ut / l)
+            .collect();
+        r.sort_by(|x, y| y.total_cmp(x));
+        [r[0], r[1], r[2]]
+    }
+
     /// The ellipsoid's centre in raw units, `−A⁻¹·b` (the hard-iron offset as most tools quote it), µT.
     pub fn centre_ut(&self) -> [f64; 3] {
         centre(&self.a, self.b_ut)
@@ -89,7 +101,10 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions) -> Result<ScalarFit, FitEr
         coverage.check()?;
     }
     let n = raw_ut.len();
-    let mean = raw_ut.iter().fold(Vector3::zeros(), |s, m| s + Vector3::from(*m)) / n as f64;
+    let mean = raw_ut
+        .iter()
+        .fold(Vector3::zeros(), |s, m| s + Vector3::from(*m))
+        / n as f64;
     let centred: Vec<Vector3<f64>> = raw_ut.iter().map(|m| Vector3::from(*m) - mean).collect();
 
     let (shape, centre_c) = algebraic(&centred)?;
@@ -133,10 +148,9 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions) -> Result<ScalarFit, FitEr
     let (a, b_c) = unpack(&p);
     let b = b_c - a * mean; // back from centred readings
     let dof = (n - P) as f64;
-    let cov = jtj
-        .try_inverse()
-        .ok_or(FitError::Singular("the magnitude residual's normal matrix has no inverse"))?
-        * (rss / dof);
+    let cov = jtj.try_inverse().ok_or(FitError::Singular(
+        "the magnitude residual's normal matrix has no inverse",
+    ))? * (rss / dof);
     // Standard errors: A from the first six parameters; b = b_c − A·mean needs the full propagation.
     let mut jac_b = SMatrix::<f64, 3, P>::zeros();
     for j in 0..3 {
@@ -225,7 +239,8 @@ fn normal_equations(
 /// The algebraic ellipsoid fit on centred readings: returns the symmetric shape `S` with `|S·(m − c)| = 1` on the
 /// ellipsoid, and the centre `c`.
 fn algebraic(centred: &[Vector3<f64>]) -> Result<(Matrix3<f64>, Vector3<f64>), FitError> {
-    let scale = (centred.iter().map(|m| m.norm_squared()).sum::<f64>() / centred.len() as f64).sqrt();
+    let scale =
+        (centred.iter().map(|m| m.norm_squared()).sum::<f64>() / centred.len() as f64).sqrt();
     let mut dtd = SMatrix::<f64, 10, 10>::zeros();
     for m in centred {
         let u = m / scale;
@@ -277,7 +292,13 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal, UnitSphere};
 
-    fn ellipsoid(a_true: Matrix3<f64>, b_true: Vector3<f64>, sigma: f64, n: usize, seed: u64) -> Vec<[f64; 3]> {
+    fn ellipsoid(
+        a_true: Matrix3<f64>,
+        b_true: Vector3<f64>,
+        sigma: f64,
+        n: usize,
+        seed: u64,
+    ) -> Vec<[f64; 3]> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, sigma).unwrap();
         let inv = a_true.try_inverse().unwrap();
@@ -295,7 +316,14 @@ mod tests {
         let a_true = Matrix3::new(1.1, 0.05, -0.02, 0.05, 0.9, 0.03, -0.02, 0.03, 1.15);
         let b_true = Vector3::new(-30.0, 12.0, 44.0);
         let raw = ellipsoid(a_true, b_true, 0.0, 400, 4);
-        let fit = fit(&raw, &ScalarOptions { field_ut: Some(50.0), ..Default::default() }).unwrap();
+        let fit = fit(
+            &raw,
+            &ScalarOptions {
+                field_ut: Some(50.0),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         for j in 0..3 {
             assert!((fit.b_ut[j] - b_true[j]).abs() < 1e-6, "{:?}", fit.b_ut);
             for k in 0..3 {
@@ -313,6 +341,10 @@ mod tests {
         // Raw radii 50/1.2, 50, 50/0.8: their geometric mean.
         let want = 50.0 / (1.2f64 * 0.8).cbrt();
         assert!((fit.field_ut - want).abs() < 1e-6, "{}", fit.field_ut);
+        let radii = fit.radii_ut();
+        for (r, w) in radii.iter().zip([50.0 / 0.8, 50.0, 50.0 / 1.2]) {
+            assert!((r - w).abs() < 1e-6, "{radii:?}");
+        }
         assert!(!fit.field_given);
     }
 
@@ -321,11 +353,21 @@ mod tests {
         let raw: Vec<[f64; 3]> = (0..400)
             .map(|i| {
                 let (u, v) = ((i % 20) as f64 * 0.3 - 3.0, (i / 20) as f64 * 0.314);
-                [10.0 * u.cosh() * v.cos(), 10.0 * u.cosh() * v.sin(), 10.0 * u.sinh()]
+                [
+                    10.0 * u.cosh() * v.cos(),
+                    10.0 * u.cosh() * v.sin(),
+                    10.0 * u.sinh(),
+                ]
             })
             .collect();
         assert!(matches!(
-            fit(&raw, &ScalarOptions { field_ut: Some(50.0), skip_coverage_check: true }),
+            fit(
+                &raw,
+                &ScalarOptions {
+                    field_ut: Some(50.0),
+                    skip_coverage_check: true
+                }
+            ),
             Err(FitError::NotAnEllipsoid(_))
         ));
     }

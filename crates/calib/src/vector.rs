@@ -73,8 +73,16 @@ impl VectorFit {
 
 /// Fits `A` and `b` to raw readings and the expected field in sensor axes (both µT). Samples whose expected field
 /// has a NaN are skipped and counted.
-pub fn fit(raw_ut: &[[f64; 3]], expected_ut: &[[f64; 3]], opts: &VectorOptions) -> Result<VectorFit, FitError> {
-    assert_eq!(raw_ut.len(), expected_ut.len(), "one expected field per reading");
+pub fn fit(
+    raw_ut: &[[f64; 3]],
+    expected_ut: &[[f64; 3]],
+    opts: &VectorOptions,
+) -> Result<VectorFit, FitError> {
+    assert_eq!(
+        raw_ut.len(),
+        expected_ut.len(),
+        "one expected field per reading"
+    );
     let valid = |i: &usize| expected_ut[*i].iter().all(|v| v.is_finite());
     let pairs = || (0..raw_ut.len()).filter(valid);
 
@@ -87,7 +95,10 @@ pub fn fit(raw_ut: &[[f64; 3]], expected_ut: &[[f64; 3]], opts: &VectorOptions) 
     }
     const NEEDED: usize = 8;
     if n < NEEDED {
-        return Err(FitError::TooFewSamples { needed: NEEDED, got: n });
+        return Err(FitError::TooFewSamples {
+            needed: NEEDED,
+            got: n,
+        });
     }
     let nf = n as f64;
     let (m_mean, r_mean) = (m_sum / nf, r_sum / nf);
@@ -105,9 +116,9 @@ pub fn fit(raw_ut: &[[f64; 3]], expected_ut: &[[f64; 3]], opts: &VectorOptions) 
         coverage.check()?;
     }
     let s_corr = s_mm - Matrix3::from_diagonal(&Vector3::from(opts.raw_noise_var_ut2)) * nf;
-    let s_inv = s_corr
-        .try_inverse()
-        .ok_or(FitError::Singular("the readings' covariance has no inverse"))?;
+    let s_inv = s_corr.try_inverse().ok_or(FitError::Singular(
+        "the readings' covariance has no inverse",
+    ))?;
     let a = s_rm * s_inv;
     let b = r_mean - a * m_mean;
 
@@ -200,7 +211,11 @@ mod tests {
         let fit = fit(&raw, &expected, &VectorOptions::default()).unwrap();
         assert_eq!((fit.n, fit.skipped), (300, 100));
         for j in 0..3 {
-            assert!((fit.residual_rms_ut[j] - 0.1).abs() < 0.02, "{:?}", fit.residual_rms_ut);
+            assert!(
+                (fit.residual_rms_ut[j] - 0.1).abs() < 0.02,
+                "{:?}",
+                fit.residual_rms_ut
+            );
         }
     }
 

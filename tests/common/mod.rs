@@ -1,0 +1,50 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code, reason = "each test binary uses a different subset")]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A recording from a physical sensor in the shared data folder (`../shared/data/real/` from the repository).
+pub fn real(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/real")
+        .join(rel)
+}
+
+/// Runs `magcal-fit` with these arguments.
+pub fn magcal_fit(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
+        .args(args)
+        .output()
+        .expect("magcal-fit runs")
+}
+
+/// Runs `magcal-fit REC --report TMP` and returns the report as JSON (panics with stderr if it fails).
+pub fn fit_report(rec: &Path, extra: &[&str]) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report.json");
+    let mut args = vec![rec.to_str().unwrap(), "--report", report.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let out = magcal_fit(&args);
+    assert!(
+        out.status.success(),
+        "magcal-fit {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+}
+
+/// A JSON array of numbers as a Vec.
+pub fn floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+/// A JSON 3×3 matrix.
+pub fn matrix(v: &serde_json::Value) -> [[f64; 3]; 3] {
+    let rows: Vec<Vec<f64>> = v.as_array().unwrap().iter().map(floats).collect();
+    std::array::from_fn(|j| std::array::from_fn(|k| rows[j][k]))
+}

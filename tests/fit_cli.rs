@@ -1,0 +1,168 @@
+//! magcal-fit as a user meets it: clear errors on bad input, parameters written atomically and never clobbered by a
+//! failed run, the report contract, exports.
+
+mod common;
+
+use std::path::Path;
+
+use common::{fit_report, floats, magcal_fit};
+
+fn simulate(dir: &Path, name: &str, args: &[&str]) -> std::path::PathBuf {
+    let path = dir.join(name);
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
+        .args(args)
+        .arg("--out")
+        .arg(&path)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    path
+}
+
+#[test]
+fn broken_recordings_exit_non_zero_naming_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("nan_mag.csv", "t,mx,my,mz\n0,1,2,3\n0.1,nan,2,3\n", ":3:2"),
+        ("text.csv", "t,mx,my,mz\n0,1,2,3\n0.1,1,x2,3\n", ":3:3"),
+        (
+            "short.csv",
+            "# magcal-recording v1\nt,mx,my,mz\n0,1,2\n",
+            ":3",
+        ),
+        ("backwards.csv", "t,mx,my,mz\n1,1,2,3\n0.5,1,2,3\n", ":3:1"),
+    ];
+    for (name, text, position) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let out = magcal_fit(&[path.to_str().unwrap()]);
+        assert!(!out.status.success(), "{name} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(&format!("{name}{position}")), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let out = magcal_fit(&["/no/such/recording.csv"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/recording.csv"));
+}
+
+#[test]
+fn a_failed_fit_never_clobbers_a_good_parameters_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulate(dir.path(), "good.csv", &["--duration", "40", "--seed", "4"]);
+    let planar = simulate(
+        dir.path(),
+        "planar.csv",
+        &["--routine", "turntable", "--duration", "20"],
+    );
+    let broken = dir.path().join("broken.csv");
+    std::fs::write(&broken, "t,mx,my,mz\n0,1,2,3\n0,1,2\n").unwrap();
+    let params = dir.path().join("params.toml");
+    let out = magcal_fit(&[good.to_str().unwrap(), "--out", params.to_str().unwrap()]);
+    assert!(out.status.success());
+    let before = std::fs::read(&params).unwrap();
+    for bad in [&planar, &broken] {
+        let out = magcal_fit(&[bad.to_str().unwrap(), "--out", params.to_str().unwrap()]);
+        assert!(!out.status.success());
+        assert_eq!(
+            std::fs::read(&params).unwrap(),
+            before,
+            "{} clobbered the parameters",
+            bad.display()
+        );
+    }
+    // Only the parameters file itself in the directory besides the recordings: no temporaries left behind.
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    assert!(
+        names.iter().all(|n| !n.starts_with(".magcal-")),
+        "{names:?}"
+    );
+}
+
+#[test]
+fn the_report_keeps_its_contract_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(dir.path(), "r.csv", &["--duration", "40", "--seed", "5"]);
+    let r = fit_report(&rec, &[]);
+    assert_eq!(r["method"], "vector");
+    assert_eq!(r["calibration"]["A"].as_array().unwrap().len(), 3);
+    assert_eq!(floats(&r["calibration"]["b_ut"]).len(), 3);
+    assert!(r["residual"]["rms_ut"].as_f64().unwrap() > 0.0);
+    assert!(r["residual"]["noise_floor_ut"].as_f64().unwrap() > 0.0);
+    assert_eq!(r["base"]["A"].as_array().unwrap().len(), 3);
+    assert!(r["base"]["rms_ut"].as_f64().is_some());
+    let scalar = fit_report(&rec, &["--method", "scalar"]);
+    assert_eq!(scalar["method"], "scalar");
+    assert!(
+        scalar["notes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("rotation not observable"))
+    );
+}
+
+#[test]
+fn the_world_magnetic_model_supplies_the_field_from_location_and_date() {
+    let dir = tempfile::tempdir().unwrap();
+    // A sensor in Berlin (WMM2020 for 2021-05-10: 18.63 N, 1.44 E, 46.20 D µT): simulate in that field, fit with
+    // the field from the WMM; the fit is then at the noise floor.
+    let rec = simulate(
+        dir.path(),
+        "berlin.csv",
+        &["--duration", "40", "--field-ned", "18.63,1.44,46.20"],
+    );
+    let r = fit_report(
+        &rec,
+        &["--location", "52.51,13.32,50", "--date", "2021-05-10"],
+    );
+    assert!(
+        r["field"]["source"]
+            .as_str()
+            .unwrap()
+            .contains("World Magnetic Model")
+    );
+    let f = floats(&r["field"]["ned_ut"]);
+    for (got, want) in f.iter().zip([18.63, 1.44, 46.20]) {
+        assert!((got - want).abs() < 0.01, "{f:?}");
+    }
+    let excess = r["residual"]["rms_ut"].as_f64().unwrap()
+        / r["residual"]["noise_floor_ut"].as_f64().unwrap();
+    assert!(excess < 1.05, "residual {excess}× the noise floor");
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--location", "52.5,13.3,50"]);
+    assert!(
+        !out.status.success(),
+        "--location without --date must be refused"
+    );
+}
+
+#[test]
+fn exports_go_to_stdout_with_the_summary_on_stderr() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(dir.path(), "r.csv", &["--duration", "40", "--seed", "6"]);
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--export", "ardupilot"]);
+    assert!(out.status.success());
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        stdout.lines().filter(|l| l.starts_with("COMPASS_")).count() == 9,
+        "{stdout}"
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("residual RMS"));
+    let path = dir.path().join("cal.params");
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--export",
+        "px4",
+        "--export-out",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    assert!(
+        std::fs::read_to_string(&path)
+            .unwrap()
+            .contains("CAL_MAG0_XOFF")
+    );
+}
