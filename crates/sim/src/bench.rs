@@ -298,7 +298,7 @@ fn unit(q: [f64; 4]) -> UnitQuaternion<f64> {
 /// The bench: a [`BenchConfig`] brought to life, with a [`Hand`] and a noise source.
 pub struct Bench {
     config: BenchConfig,
-    forward: Box<dyn Fn([f64; 3]) -> [f64; 3]>,
+    forward: Box<dyn Fn([f64; 3]) -> [f64; 3] + Send>,
     noise_rng: ChaCha8Rng,
     hand: Hand,
 }

@@ -1,0 +1,407 @@
+//! A simulated serial board: firmware in the style of PJRC's MotionCal and Adafruit's calibration sketches, written
+//! from their protocol (not their code).
+//!
+//! It streams `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines (accelerometer in 1/8192 g, gyro in 1/16 °/s, magnetometer in
+//! 0.1 µT) computed from a [`Bench`] whose hand tumbles the board, mixes in garbage lines if asked (line noise, half
+//! lines, other chatter), takes MotionCal's 68-byte calibration packet (signature 117, 84; CRC-16/MODBUS over all 68
+//! bytes must be zero), and prints what it holds as `Cal1:`/`Cal2:` echoes: right after taking a packet and every so
+//! many lines. It can echo faithfully, with a wrong value (a bad store), or not at all, and it can be unplugged after
+//! a number of lines (it returns, and dropping its port closes the line).
+//!
+//! It works on any byte port; tests give it the master side of a pseudo-terminal, and the tools open the slave side
+//! as they would open `/dev/ttyACM0`.
+
+use std::fmt::Write as _;
+use std::io::{ErrorKind, Read, Write};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use magcal_sim::SimError;
+use magcal_sim::bench::{Bench, BenchConfig};
+
+/// Length of a MotionCal calibration packet, bytes.
+const PACKET_BYTES: usize = 68;
+/// The two bytes a packet starts with.
+const PACKET_SIGNATURE: [u8; 2] = [117, 84];
+
+/// How the firmware prints its calibration back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EchoMode {
+    /// As it holds it: `Cal1:` with 3 decimals, `Cal2:` with 4, as Adafruit's sketches print.
+    Faithful,
+    /// With the hard-iron y offset 1 µT off what was received (a corrupted store).
+    CorruptHardIron,
+    /// Never (firmware that takes packets but prints nothing back).
+    Never,
+}
+
+/// What the firmware does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FirmwareConfig {
+    /// The bench the board sits on (its hand tumbles it at 1 rad/s).
+    pub bench: BenchConfig,
+    /// Samples per second of bench time, Hz (one `Raw:` line per sample).
+    pub sample_rate_hz: f64,
+    /// Lines per second of wall time (the port is a pseudo-terminal, so faster than the baud rate is fine).
+    pub lines_per_wall_s: f64,
+    /// After every this many `Raw:` lines, one garbage line.
+    pub garbage_every: Option<u64>,
+    /// Unplug after this many `Raw:` lines; `None`: run until told to stop or the other side is gone.
+    pub raw_lines: Option<u64>,
+    /// How calibrations are echoed.
+    pub echo: EchoMode,
+    /// `Raw:` lines between two periodic echoes.
+    pub echo_every: u64,
+}
+
+impl FirmwareConfig {
+    /// Streams at 100 Hz of bench time, 2000 lines per wall second, echoing faithfully every 100 lines, no garbage,
+    /// until stopped.
+    pub fn new(bench: BenchConfig) -> FirmwareConfig {
+        FirmwareConfig {
+            bench,
+            sample_rate_hz: 100.0,
+            lines_per_wall_s: 2000.0,
+            garbage_every: None,
+            raw_lines: None,
+            echo: EchoMode::Faithful,
+            echo_every: 100,
+        }
+    }
+}
+
+/// What the firmware did, for a test to compare with what the tool saw.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FirmwareReport {
+    /// `Raw:` lines sent.
+    pub raw_lines: u64,
+    /// Garbage lines sent.
+    pub garbage_lines: u64,
+    /// Packets taken (CRC good).
+    pub packets_accepted: u32,
+    /// Packets refused (CRC bad).
+    pub packets_rejected: u32,
+    /// The calibration held at the end, as the 16 floats of the packet (accelerometer, gyro, hard iron, field,
+    /// soft-iron diagonal, soft-iron off-diagonal).
+    pub calibration: [f32; 16],
+    /// Why it stopped: unplugged after its lines, told to stop, or the other side went away.
+    pub stopped: String,
+}
+
+/// The firmware; see the [module docs](self).
+pub struct MotionCalFirmware<P> {
+    port: P,
+    config: FirmwareConfig,
+    bench: Bench,
+    rx: Vec<u8>,
+    report: FirmwareReport,
+    alive: bool,
+}
+
+/// CRC-16/MODBUS: reflected polynomial 0xA001, initial value 0xFFFF.
+fn crc16_modbus(bytes: &[u8]) -> u16 {
+    let mut crc: u16 = 0xFFFF;
+    for &b in bytes {
+        crc ^= u16::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xA001
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    crc
+}
+
+/// The calibration a board holds before it is sent one: zero offsets, field 50 µT, identity soft iron.
+const DEFAULT_CALIBRATION: [f32; 16] = [
+    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 50.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0,
+];
+
+impl<P: Read + Write> MotionCalFirmware<P> {
+    /// Firmware on `port` (which should not block on reads: a non-blocking pseudo-terminal master).
+    pub fn new(port: P, config: FirmwareConfig) -> Result<MotionCalFirmware<P>, SimError> {
+        let mut bench = Bench::new(config.bench.clone())?;
+        bench.hand_mut().tumble(0.0, 1.0);
+        Ok(MotionCalFirmware {
+            port,
+            config,
+            bench,
+            rx: Vec::new(),
+            report: FirmwareReport {
+                calibration: DEFAULT_CALIBRATION,
+                ..FirmwareReport::default()
+            },
+            alive: true,
+        })
+    }
+
+    /// Runs until unplugged (after [`FirmwareConfig::raw_lines`]), until `stop()` says so, or until the other side
+    /// is gone; returns what it did. The port is dropped on return: that is the unplug.
+    pub fn run(mut self, stop: impl Fn() -> bool) -> FirmwareReport {
+        let start = Instant::now();
+        let mut i: u64 = 0;
+        self.report.stopped = loop {
+            if !self.alive {
+                break "the other side went away".to_owned();
+            }
+            if stop() {
+                break "told to stop".to_owned();
+            }
+            if self.config.raw_lines.is_some_and(|n| i >= n) {
+                break format!("unplugged after {i} Raw: lines");
+            }
+            let due = Duration::from_secs_f64(i as f64 / self.config.lines_per_wall_s);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                thread::sleep(wait);
+            }
+            self.receive();
+            let line = self.raw_line(i as f64 / self.config.sample_rate_hz);
+            self.send(line.as_bytes());
+            self.report.raw_lines += 1;
+            i += 1;
+            if let Some(every) = self.config.garbage_every
+                && i.is_multiple_of(every)
+            {
+                let garbage = GARBAGE[(i / every) as usize % GARBAGE.len()];
+                self.send(garbage);
+                self.report.garbage_lines += 1;
+            }
+            if i.is_multiple_of(self.config.echo_every.max(1)) {
+                self.echo();
+            }
+        };
+        self.report
+    }
+
+    /// The `Raw:` line of the bench at `t_s`.
+    fn raw_line(&mut self, t_s: f64) -> String {
+        let s = self.bench.sample(t_s);
+        let r = magcal_calib::frames::quat_to_matrix(s.quat);
+        // Specific force of a board at rest: 1 g up, i.e. −D in NED, seen in the board's axes.
+        let accel_g = magcal_calib::frames::mat_t_vec(&r, [0.0, 0.0, -1.0]);
+        let mut line = String::from("Raw:");
+        let values = accel_g
+            .iter()
+            .map(|g| g * 8192.0)
+            .chain(s.omega_rad_s.iter().map(|w| w.to_degrees() * 16.0))
+            .chain(s.raw_ut.iter().map(|m| m * 10.0));
+        for (k, v) in values.enumerate() {
+            let sep = if k == 0 { "" } else { "," };
+            let _ = write!(line, "{sep}{}", v.round() as i64);
+        }
+        line.push_str("\r\n");
+        line
+    }
+
+    /// Prints the calibration held.
+    fn echo(&mut self) {
+        let mut c = self.report.calibration;
+        match self.config.echo {
+            EchoMode::Never => return,
+            EchoMode::CorruptHardIron => c[7] += 1.0,
+            EchoMode::Faithful => {}
+        }
+        let cal1: Vec<String> = c[..10].iter().map(|v| format!("{v:.3}")).collect();
+        let [xx, yy, zz, xy, xz, yz] = [c[10], c[11], c[12], c[13], c[14], c[15]];
+        let cal2: Vec<String> = [xx, xy, xz, xy, yy, yz, xz, yz, zz]
+            .iter()
+            .map(|v| format!("{v:.4}"))
+            .collect();
+        let text = format!("Cal1:{}\r\nCal2:{}\r\n", cal1.join(","), cal2.join(","));
+        self.send(text.as_bytes());
+    }
+
+    /// Takes what arrived: finds the signature, takes 68 bytes if their CRC is good, else looks further.
+    fn receive(&mut self) {
+        let mut buf = [0u8; 256];
+        loop {
+            match self.port.read(&mut buf) {
+                Ok(0) => {
+                    self.alive = false;
+                    break;
+                }
+                Ok(n) => self.rx.extend_from_slice(&buf[..n]),
+                Err(e)
+                    if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted =>
+                {
+                    break;
+                }
+                Err(_) => {
+                    self.alive = false;
+                    break;
+                }
+            }
+        }
+        let mut took = false;
+        while let Some(at) = self.rx.windows(2).position(|w| w == PACKET_SIGNATURE) {
+            if self.rx.len() < at + PACKET_BYTES {
+                self.rx.drain(..at);
+                break;
+            }
+            let packet: Vec<u8> = self.rx[at..at + PACKET_BYTES].to_vec();
+            if crc16_modbus(&packet) == 0 {
+                for (k, chunk) in packet[2..66].chunks_exact(4).enumerate() {
+                    self.report.calibration[k] =
+                        f32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]);
+                }
+                self.report.packets_accepted += 1;
+                self.rx.drain(..at + PACKET_BYTES);
+                took = true;
+            } else {
+                self.report.packets_rejected += 1;
+                self.rx.drain(..at + 1);
+            }
+        }
+        if took {
+            self.echo();
+        }
+    }
+
+    /// Writes all of `bytes`, waiting while the port's buffer is full.
+    fn send(&mut self, bytes: &[u8]) {
+        let mut rest = bytes;
+        while self.alive && !rest.is_empty() {
+            match self.port.write(rest) {
+                Ok(0) => self.alive = false,
+                Ok(n) => rest = &rest[n..],
+                Err(e)
+                    if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted =>
+                {
+                    thread::sleep(Duration::from_micros(200));
+                    self.receive();
+                }
+                Err(_) => self.alive = false,
+            }
+        }
+    }
+}
+
+/// Garbage lines, one of each kind a line stream meets: line noise, a half line, other chatter, a garbled number.
+const GARBAGE: [&[u8]; 4] = [
+    b"\x00\xfe\x13\x7f\r\n",
+    b"Raw:12,-40\r\n",
+    b"Uni:0.012,-0.980,0.051\r\n",
+    b"Raw:1,2,8190,0,0,0,123,4x5,-300\r\n",
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Cursor;
+
+    /// A port that reads from a script and records writes.
+    struct Loopback {
+        input: Cursor<Vec<u8>>,
+        output: Vec<u8>,
+    }
+
+    impl Read for Loopback {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = self.input.read(buf)?;
+            if n == 0 {
+                return Err(ErrorKind::WouldBlock.into());
+            }
+            Ok(n)
+        }
+    }
+
+    impl Write for Loopback {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.output.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    fn packet(values: [f32; 16]) -> Vec<u8> {
+        let mut p = PACKET_SIGNATURE.to_vec();
+        for v in values {
+            p.extend_from_slice(&v.to_le_bytes());
+        }
+        let crc = crc16_modbus(&p);
+        p.extend_from_slice(&crc.to_le_bytes());
+        p
+    }
+
+    #[test]
+    fn the_crc_is_modbus() {
+        // The standard check value of CRC-16/MODBUS.
+        assert_eq!(crc16_modbus(b"123456789"), 0x4B37);
+        let p = packet(DEFAULT_CALIBRATION);
+        assert_eq!(crc16_modbus(&p), 0);
+    }
+
+    fn run(input: Vec<u8>, config: FirmwareConfig) -> (FirmwareReport, String) {
+        let mut port = Loopback {
+            input: Cursor::new(input),
+            output: Vec::new(),
+        };
+        let report = MotionCalFirmware::new(&mut port, config)
+            .unwrap()
+            .run(|| false);
+        (report, String::from_utf8_lossy(&port.output).into_owned())
+    }
+
+    #[test]
+    fn streams_raw_lines_with_garbage_and_takes_a_good_packet() {
+        let mut values = DEFAULT_CALIBRATION;
+        values[6..10].copy_from_slice(&[1.5, -2.25, 30.0, 48.0]);
+        let mut bad = packet(values);
+        bad[20] ^= 1;
+        let mut input = b"noise".to_vec();
+        input.extend(bad);
+        input.extend(packet(values));
+        let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+        config.raw_lines = Some(40);
+        config.garbage_every = Some(10);
+        config.echo_every = 1000;
+        config.lines_per_wall_s = 1e6;
+        let (report, text) = run(input, config);
+        assert_eq!((report.raw_lines, report.garbage_lines), (40, 4));
+        assert_eq!((report.packets_accepted, report.packets_rejected), (1, 1));
+        assert_eq!(report.calibration, values);
+        assert!(report.stopped.contains("unplugged after 40"));
+        assert!(
+            text.contains(
+                "Cal1:0.000,0.000,0.000,0.000,0.000,0.000,1.500,-2.250,30.000,48.000\r\n"
+            )
+        );
+        assert!(
+            text.contains(
+                "Cal2:1.0000,0.0000,0.0000,0.0000,1.0000,0.0000,0.0000,0.0000,1.0000\r\n"
+            )
+        );
+        let raw: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("Raw:") && l.len() > 20)
+            .collect();
+        assert!(raw.len() >= 40);
+        // The magnetometer counts are the bench's field in 0.1 µT: an ideal sensor reads the world's magnitude.
+        let m: Vec<f64> = raw[0]
+            .split(',')
+            .skip(6)
+            .map(|v| v.parse::<f64>().unwrap() / 10.0)
+            .collect();
+        let norm = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        assert!(
+            (norm - (20f64 * 20.0 + 45.0 * 45.0).sqrt()).abs() < 0.2,
+            "{norm}"
+        );
+    }
+
+    #[test]
+    fn a_corrupting_firmware_echoes_a_wrong_hard_iron() {
+        let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+        config.raw_lines = Some(5);
+        config.echo_every = 5;
+        config.echo = EchoMode::CorruptHardIron;
+        config.lines_per_wall_s = 1e6;
+        let (_, text) = run(Vec::new(), config);
+        assert!(text.contains("Cal1:0.000,0.000,0.000,0.000,0.000,0.000,0.000,1.000,0.000,50.000"));
+    }
+}
