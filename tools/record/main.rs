@@ -1,2 +1,233 @@
-//! `magcal-record` (being written).
-fn main() {}
+//! `magcal-record`: record a magnetometer while it is turned through a routine, into a magcal-recording v1 file.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, bail};
+use clap::{Parser, ValueEnum};
+use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
+use magcal_app::record::sim::{FIELD_NED_UT, TruthFile};
+use magcal_app::record::{RecordOptions, RecordSummary, Routine, Stop, record, ui};
+use magcal_recording::{Date, Location};
+
+/// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
+///
+/// DEVICES (--device):
+///   sim[:CHIP]                          a simulated chip (the default: no hardware needed); a virtual hand
+///                                       performs the routine
+///   i2c:/dev/i2c-N:CHIP[@ADDR]          a chip on a Linux I2C bus, e.g. i2c:/dev/i2c-1:lis3mdl@0x1c
+///   serial:PATH[:BAUD][:motioncal|csv]  a board streaming MotionCal Raw: lines (default) or native CSV,
+///                                       e.g. serial:/dev/ttyACM0:115200
+///   CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma.
+///
+/// ROUTINES (--routine):
+///   free    turn the sensor freely through every orientation; a live map shows which directions of the field
+///           you have covered; recording stops at the target coverage (--coverage) or on Ctrl-C. Gives a scalar
+///           (ellipsoid) calibration.
+///   cube24  put the sensor in a non-magnetic cube jig and place it against a reference edge pointing north, in
+///           the 24 poses the prompts name (face down, where the edge points); a pose is taken when the jig is
+///           still for the dwell time (or when you press Enter). Each pose's attitude is recorded, which gives the
+///           vector calibration (every component, misalignment included). Give the local field with --field-ned
+///           or --location/--date.
+///
+/// WORKFLOW:
+///   magcal-record --device i2c:/dev/i2c-1:lis3mdl --routine cube24 --location 52.2,0.1,20 --date 2026-11-21 \
+///       --out rec.csv
+///   magcal-fit rec.csv --out params.toml --report report.json
+///   (or `magcal` for both in one command)
+///
+/// The file is written as you go (metadata first, rows at least every 0.5 s): if the recorder is killed, the file
+/// still parses and holds all but the last moment. A device that fails (a bus that stays down after retries, a
+/// board that is unplugged, outputs that stop changing) ends the recording with an error; the file keeps what was
+/// recorded.
+#[derive(Parser, Debug)]
+#[command(version, about, long_about, verbatim_doc_comment)]
+struct Args {
+    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv].
+    #[arg(long, default_value = "sim", value_name = "DEV")]
+    device: String,
+    /// The routine.
+    #[arg(long, value_enum)]
+    routine: RoutineArg,
+    /// The recording to write (created or overwritten).
+    #[arg(long, short, default_value = "recording.csv", value_name = "REC.csv")]
+    out: PathBuf,
+    /// World field N,E,D in µT, written to the recording for the fit.
+    #[arg(long, value_name = "N,E,D", value_parser = parse3, allow_hyphen_values = true, conflicts_with = "location")]
+    field_ned: Option<[f64; 3]>,
+    /// Where you are, for the World Magnetic Model: latitude, longitude (degrees), altitude (m). Needs --date.
+    #[arg(long, value_name = "LAT,LON,ALT", value_parser = parse3, allow_hyphen_values = true, requires = "date")]
+    location: Option<[f64; 3]>,
+    /// The date, for the World Magnetic Model, YYYY-MM-DD.
+    #[arg(long, value_name = "YYYY-MM-DD", requires = "location")]
+    date: Option<Date>,
+    /// Unattended: never wait for Enter (poses are taken on stillness only). Implied for sim devices, whose
+    /// virtual hand performs the routine.
+    #[arg(long)]
+    auto: bool,
+    /// free: stop at this fraction of the sphere of field directions.
+    #[arg(long, default_value_t = 0.9, value_name = "FRACTION")]
+    coverage: f64,
+    /// Stop after this many seconds whatever happens.
+    #[arg(long, default_value_t = 600.0, value_name = "S")]
+    max_duration: f64,
+    /// cube24: how long each pose is held still and recorded, s.
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    dwell: f64,
+    /// cube24: largest spread (standard deviation per axis over the dwell) that counts as still, µT.
+    #[arg(long, default_value_t = 0.5, value_name = "UT")]
+    still_ut: f64,
+    /// Output data rate to ask the chip for, Hz (the nearest it supports is used).
+    #[arg(long, default_value_t = 100.0, value_name = "HZ")]
+    rate: f64,
+    /// Full-scale range to ask the chip for, ± µT (the smallest that holds it).
+    #[arg(long, value_name = "UT")]
+    range_ut: Option<f64>,
+    /// sim: seed of the simulated sensor (its errors) and of the noise.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    sim_seed: u64,
+    /// sim: inject a fault (repeatable): nack@T:COUNT, drop@T, ignore-writes@T, stuck@T, magnet@T:DURATION:X,Y,Z
+    /// (T in s of device time, field in µT).
+    #[arg(long, value_name = "FAULT")]
+    sim_fault: Vec<Fault>,
+    /// sim: run at the pace of the wall clock (to watch it) instead of as fast as possible.
+    #[arg(long)]
+    realtime: bool,
+    /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against.
+    #[arg(long, value_name = "TRUTH.toml")]
+    truth: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum RoutineArg {
+    /// Free rotation until the coverage target.
+    Free,
+    /// The 24 poses of a cube jig.
+    Cube24,
+}
+
+fn parse3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    v.try_into()
+        .map_err(|_| format!("expected three comma-separated numbers, got {s:?}"))
+}
+
+fn main() -> ExitCode {
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("magcal-record: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    let spec: DeviceSpec = args.device.parse()?;
+    let routine = match args.routine {
+        RoutineArg::Free => Routine::Free,
+        RoutineArg::Cube24 => Routine::Cube24,
+    };
+    if !(args.coverage > 0.0 && args.coverage <= 1.0) {
+        bail!(
+            "--coverage must be a fraction in (0, 1], got {}",
+            args.coverage
+        );
+    }
+    if !spec.is_sim() && (args.truth.is_some() || !args.sim_fault.is_empty() || args.realtime) {
+        bail!("--truth, --sim-fault and --realtime are for sim devices, not {spec}");
+    }
+    let mut opts = RecordOptions::new(routine, args.out.clone());
+    opts.auto = args.auto || spec.is_sim();
+    opts.target_coverage = args.coverage;
+    opts.max_duration_s = args.max_duration;
+    opts.dwell_s = args.dwell;
+    opts.still_ut = args.still_ut;
+    opts.meta.field_ned_ut = args.field_ned;
+    if let (Some([lat_deg, lon_deg, alt_m]), Some(date)) = (args.location, args.date) {
+        opts.meta.location = Some(Location {
+            lat_deg,
+            lon_deg,
+            alt_m,
+        });
+        opts.meta.date = Some(date);
+    }
+    opts.meta
+        .other
+        .push(("device".to_owned(), spec.to_string()));
+    if let DeviceSpec::Sim { chip } = spec {
+        if opts.meta.field_ned_ut.is_none() && opts.meta.location.is_none() {
+            opts.meta.field_ned_ut = Some(FIELD_NED_UT);
+        }
+        opts.meta.other.push((
+            "simulated".to_owned(),
+            format!("magcal-record {spec}, seed {}", args.sim_seed),
+        ));
+        if let Some(path) = &args.truth {
+            TruthFile::of(chip, args.sim_seed)
+                .write(path)
+                .with_context(|| format!("writing the truth {}", path.display()))?;
+        }
+    } else if opts.meta.field_ned_ut.is_none() && opts.meta.location.is_none() {
+        eprintln!(
+            "note: no --field-ned or --location/--date: the fit will need the local field (magcal-fit --field-ned \
+             or --location/--date){}",
+            if routine == Routine::Cube24 {
+                " for the vector method"
+            } else {
+                " for an absolute scale"
+            }
+        );
+    }
+    let open = OpenOptions {
+        rate_hz: args.rate,
+        range_ut: args.range_ut,
+        sim_seed: args.sim_seed,
+        sim_faults: args.sim_fault.clone(),
+        sim_paced: args.realtime,
+    };
+    let mut source = device::open(&spec, &open)?;
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let flag = interrupt.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
+    println!("recording {spec} to {}", args.out.display());
+    let summary = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
+    print_summary(&summary);
+    Ok(())
+}
+
+fn print_summary(s: &RecordSummary) {
+    let why = match s.stop {
+        Stop::Coverage => "coverage target reached",
+        Stop::AllPoses => "all 24 poses taken",
+        Stop::Interrupted => "interrupted",
+        Stop::MaxDuration => "longest duration reached",
+    };
+    println!(
+        "recorded {} samples in {:.1} s to {} ({why}); coverage {:.0} % of the sphere{}",
+        s.samples,
+        s.duration_s,
+        s.path.display(),
+        100.0 * s.coverage,
+        if s.poses > 0 {
+            format!(", {} poses", s.poses)
+        } else {
+            String::new()
+        }
+    );
+    if s.saturated > 0 {
+        println!("saturated samples (not recorded): {}", s.saturated);
+    }
+    if let Some(g) = &s.garbage {
+        println!("garbage lines skipped: {} ({g})", g.total());
+    }
+    println!("next: magcal-fit {}", s.path.display());
+}

@@ -1,13 +1,17 @@
 //! What the magcal command-line tools share: the reference field (with the World Magnetic Model), fitting a recording,
-//! the human summary, the JSON report, the parameters file, exports to other tools, and the seed-paper experiment.
+//! the human summary, the JSON report, the parameters file, exports to other tools, the seed-paper experiment, and
+//! the bench side: devices (simulated, Linux I2C, serial), the recorder and writing a calibration back to a device.
 //!
 //! The tools in `tools/` are thin: they parse arguments and call in here.
 
 pub mod calibrate;
+pub mod device;
 pub mod export;
 pub mod field;
 pub mod files;
 pub mod params;
+pub mod record;
 pub mod report;
 pub mod seed;
 pub mod summary;
+pub mod writeback;

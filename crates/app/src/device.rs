@@ -1,0 +1,309 @@
+//! The devices the tools talk to, as the command line names them:
+//!
+//! - `sim[:CHIP]`: a register-level twin of CHIP (default `lis3mdl`) on a simulated bench; the default, so a newcomer
+//!   needs no hardware.
+//! - `i2c:/dev/i2c-N:CHIP[@ADDR]`: a chip on a Linux I2C bus (linux-embedded-hal), at ADDR (`0x1e` or `30`) or the
+//!   chip's default address.
+//! - `serial:PATH[:BAUD][:motioncal|csv]`: a board streaming MotionCal `Raw:` lines or native CSV.
+
+use std::fmt;
+use std::str::FromStr;
+
+use magcal_driver::serial::DeviceSpec as SerialSpec;
+use magcal_driver::{AnyMagnetometer, ChipKind};
+pub use magcal_mockhw::Fault;
+
+use crate::record::clock::WallClock;
+use crate::record::source::{ChipSource, LineSource, Source, SourceError};
+
+/// Chip of `sim` without one.
+pub const DEFAULT_SIM_CHIP: ChipKind = ChipKind::Lis3mdl;
+
+/// The device syntax, for `--help` texts.
+pub const DEVICE_HELP: &str = "sim[:CHIP] (a simulated chip, the default) | i2c:/dev/i2c-N:CHIP[@ADDR] (Linux I2C) | \
+serial:PATH[:BAUD][:motioncal|csv] (a streaming board); CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma";
+
+/// A parsed device string.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DeviceSpec {
+    /// A simulated chip.
+    Sim {
+        /// Which chip.
+        chip: ChipKind,
+    },
+    /// A chip on a Linux I2C bus.
+    I2c {
+        /// The bus device, e.g. `/dev/i2c-1`.
+        path: String,
+        /// Which chip.
+        chip: ChipKind,
+        /// Its 7-bit address, if not the chip's default.
+        address: Option<u8>,
+    },
+    /// A board on a serial port.
+    Serial(SerialSpec),
+}
+
+impl DeviceSpec {
+    /// The chip, for I2C and simulated devices.
+    pub fn chip(&self) -> Option<ChipKind> {
+        match self {
+            DeviceSpec::Sim { chip } | DeviceSpec::I2c { chip, .. } => Some(*chip),
+            DeviceSpec::Serial(_) => None,
+        }
+    }
+
+    /// Whether this is a simulated device.
+    pub fn is_sim(&self) -> bool {
+        matches!(self, DeviceSpec::Sim { .. })
+    }
+}
+
+impl Default for DeviceSpec {
+    fn default() -> DeviceSpec {
+        DeviceSpec::Sim {
+            chip: DEFAULT_SIM_CHIP,
+        }
+    }
+}
+
+/// A device string that does not parse; the message says what is wrong and gives the syntax.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("bad device {text:?}: {why}; expected {DEVICE_HELP}")]
+pub struct DeviceSpecError {
+    /// The string given.
+    pub text: String,
+    /// What is wrong with it.
+    pub why: String,
+}
+
+fn chip(text: &str, name: &str) -> Result<ChipKind, DeviceSpecError> {
+    name.parse().map_err(|e| DeviceSpecError {
+        text: text.to_owned(),
+        why: format!("{name:?}: {e}"),
+    })
+}
+
+fn address(text: &str, a: &str) -> Result<u8, DeviceSpecError> {
+    let parsed = match a.strip_prefix("0x").or_else(|| a.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16).ok(),
+        None => a.parse().ok(),
+    };
+    parsed
+        .filter(|v| (0x08..=0x77).contains(v))
+        .ok_or_else(|| DeviceSpecError {
+            text: text.to_owned(),
+            why: format!("I2C address {a:?} is not a 7-bit address in 0x08–0x77"),
+        })
+}
+
+impl FromStr for DeviceSpec {
+    type Err = DeviceSpecError;
+
+    fn from_str(s: &str) -> Result<DeviceSpec, DeviceSpecError> {
+        let bad = |why: &str| DeviceSpecError {
+            text: s.to_owned(),
+            why: why.to_owned(),
+        };
+        let (kind, rest) = match s.split_once(':') {
+            Some((k, r)) => (k, Some(r)),
+            None => (s, None),
+        };
+        match (kind, rest) {
+            ("sim", None) => Ok(DeviceSpec::default()),
+            ("sim", Some(c)) => Ok(DeviceSpec::Sim { chip: chip(s, c)? }),
+            ("i2c", Some(rest)) => {
+                let (path, target) = rest.rsplit_once(':').ok_or_else(|| {
+                    bad("an I2C device needs a bus and a chip, as in i2c:/dev/i2c-1:lis3mdl")
+                })?;
+                if path.is_empty() {
+                    return Err(bad("no I2C bus path"));
+                }
+                let (name, addr) = match target.split_once('@') {
+                    Some((n, a)) => (n, Some(address(s, a)?)),
+                    None => (target, None),
+                };
+                Ok(DeviceSpec::I2c {
+                    path: path.to_owned(),
+                    chip: chip(s, name)?,
+                    address: addr,
+                })
+            }
+            ("serial", Some(rest)) => rest
+                .parse()
+                .map(DeviceSpec::Serial)
+                .map_err(|e| bad(&e.to_string())),
+            ("i2c" | "serial", None) => Err(bad("missing the part after the colon")),
+            _ => Err(bad("unknown kind of device")),
+        }
+    }
+}
+
+impl fmt::Display for DeviceSpec {
+    /// The form [`FromStr`] reads.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DeviceSpec::Sim { chip } => write!(f, "sim:{chip}"),
+            DeviceSpec::I2c {
+                path,
+                chip,
+                address: Some(a),
+            } => write!(f, "i2c:{path}:{chip}@{a:#04x}"),
+            DeviceSpec::I2c { path, chip, .. } => write!(f, "i2c:{path}:{chip}"),
+            DeviceSpec::Serial(s) => write!(f, "serial:{s}"),
+        }
+    }
+}
+
+/// How to open a device for recording.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpenOptions {
+    /// Output data rate to ask the chip for, Hz (the nearest it has is used).
+    pub rate_hz: f64,
+    /// Full-scale range to ask for, ± µT (the smallest that holds it); the driver's default if `None`.
+    pub range_ut: Option<f64>,
+    /// `sim`: the seed of the simulated sensor and bench.
+    pub sim_seed: u64,
+    /// `sim`: faults to inject.
+    pub sim_faults: Vec<Fault>,
+    /// `sim`: keep virtual time to the wall clock instead of running as fast as possible.
+    pub sim_paced: bool,
+}
+
+impl Default for OpenOptions {
+    /// 100 Hz, the driver's range, seed 1, no faults, as fast as possible.
+    fn default() -> OpenOptions {
+        OpenOptions {
+            rate_hz: 100.0,
+            range_ut: None,
+            sim_seed: 1,
+            sim_faults: Vec::new(),
+            sim_paced: false,
+        }
+    }
+}
+
+/// Opens a device for recording: a simulated chip, a chip on a Linux I2C bus (initialised for continuous
+/// measurement), or a serial stream.
+pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, SourceError> {
+    let device = spec.to_string();
+    match spec {
+        DeviceSpec::Sim { chip } => Ok(Box::new(crate::record::sim::open(
+            *chip,
+            opts.sim_seed,
+            &opts.sim_faults,
+            opts.sim_paced,
+            opts.rate_hz,
+            opts.range_ut,
+        )?)),
+        DeviceSpec::I2c {
+            path,
+            chip,
+            address,
+        } => {
+            let bus = magcal_driver::linux::I2cdev::new(path).map_err(|e| SourceError::Open {
+                device: device.clone(),
+                error: e.to_string(),
+            })?;
+            let mag = AnyMagnetometer::with_address(
+                *chip,
+                bus,
+                address.unwrap_or(chip.default_address()),
+            );
+            Ok(Box::new(ChipSource::start(
+                device,
+                mag,
+                WallClock::new(),
+                opts.rate_hz,
+                opts.range_ut,
+            )?))
+        }
+        DeviceSpec::Serial(s) => {
+            let source = s.open().map_err(|e| SourceError::Open {
+                device: device.clone(),
+                error: e.to_string(),
+            })?;
+            Ok(Box::new(LineSource::new(device, source)))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use magcal_driver::serial::Protocol;
+
+    fn p(s: &str) -> Result<DeviceSpec, DeviceSpecError> {
+        s.parse()
+    }
+
+    #[test]
+    fn every_kind_parses_and_prints_back() {
+        assert_eq!(
+            p("sim"),
+            Ok(DeviceSpec::Sim {
+                chip: ChipKind::Lis3mdl
+            })
+        );
+        assert_eq!(
+            p("sim:HMC5883L"),
+            Ok(DeviceSpec::Sim {
+                chip: ChipKind::Hmc5883l
+            })
+        );
+        assert_eq!(
+            p("i2c:/dev/i2c-1:lis2mdl"),
+            Ok(DeviceSpec::I2c {
+                path: "/dev/i2c-1".into(),
+                chip: ChipKind::Lis2mdl,
+                address: None
+            })
+        );
+        assert_eq!(
+            p("i2c:/dev/i2c-1:lis3mdl@0x1e"),
+            Ok(DeviceSpec::I2c {
+                path: "/dev/i2c-1".into(),
+                chip: ChipKind::Lis3mdl,
+                address: Some(0x1E)
+            })
+        );
+        assert_eq!(
+            p("i2c:/dev/i2c-7:qmc5883l@13").unwrap().to_string(),
+            "i2c:/dev/i2c-7:qmc5883l@0x0d"
+        );
+        let DeviceSpec::Serial(s) = p("serial:/dev/ttyACM0:230400:csv").unwrap() else {
+            panic!("not serial");
+        };
+        assert_eq!(
+            (s.path.as_str(), s.baud, s.protocol),
+            ("/dev/ttyACM0", 230_400, Protocol::Csv)
+        );
+        for text in [
+            "sim:mmc5983ma",
+            "i2c:/dev/i2c-1:hmc5883l",
+            "serial:/dev/ttyUSB0:115200:motioncal",
+        ] {
+            assert_eq!(p(text).unwrap().to_string(), text);
+        }
+    }
+
+    #[test]
+    fn refusals_say_what_is_wrong_and_give_the_syntax() {
+        for (text, why) in [
+            ("sim:lis3", "unknown chip"),
+            ("i2c:/dev/i2c-1", "needs a bus and a chip"),
+            ("i2c:/dev/i2c-1:lis3mdl@0x90", "not a 7-bit address"),
+            ("i2c:/dev/i2c-1:lis3mdl@zz", "not a 7-bit address"),
+            ("i2c::lis3mdl", "no I2C bus path"),
+            ("serial:/dev/ttyUSB0:0", "baud"),
+            ("spi:/dev/spidev0.0", "unknown kind"),
+            ("serial", "missing"),
+        ] {
+            let e = p(text).unwrap_err().to_string();
+            assert!(
+                e.contains(why) && e.contains("i2c:/dev/i2c-N:CHIP[@ADDR]"),
+                "{text}: {e}"
+            );
+        }
+    }
+}

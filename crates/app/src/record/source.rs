@@ -1,0 +1,365 @@
+//! Where samples come from: a chip driver polled over I2C (real or simulated), or a serial line stream.
+
+use std::fmt::Debug;
+
+use magcal_driver::serial::{GarbageCounts, Protocol, SerialSource, StreamStop};
+use magcal_driver::{Error as ChipError, Magnetometer};
+
+use magcal_mockhw::SharedBench;
+
+use super::clock::Clock;
+
+/// How many times a failed bus transfer is tried again before the recording stops.
+pub const RETRIES: u32 = 3;
+/// Wait before the first retry, s; it doubles for each further one.
+pub const FIRST_BACKOFF_S: f64 = 0.005;
+/// How often a chip's temperature is read, s (it changes slowly; some chips stop measuring to read it).
+pub const TEMPERATURE_PERIOD_S: f64 = 1.0;
+/// A chip with no new sample for this many sample periods (and at least 1 s) is reported as not measuring.
+const SILENT_PERIODS: f64 = 20.0;
+
+/// One sample from a device.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reading {
+    /// Time on the device's clock, s.
+    pub t_s: f64,
+    /// Field, sensor axes, µT.
+    pub mag_ut: [f64; 3],
+    /// Temperature, °C, where the device gives one.
+    pub temp_c: Option<f64>,
+}
+
+/// Why a source gave no sample.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SourceError {
+    /// The device could not be opened.
+    #[error("{device}: cannot open: {error}")]
+    Open {
+        /// The device string.
+        device: String,
+        /// What the system said.
+        error: String,
+    },
+    /// The bus kept failing.
+    #[error(
+        "{device}: bus error after {samples} samples, {attempts} attempts (retried with back-off): {error}"
+    )]
+    Bus {
+        /// The device string.
+        device: String,
+        /// Samples read before.
+        samples: u64,
+        /// Attempts made for this sample.
+        attempts: u32,
+        /// What the last attempt said.
+        error: String,
+    },
+    /// The chip answered but produced no sample for too long.
+    #[error(
+        "{device}: no new sample for {waited_s:.2} s after {samples} samples (is it measuring?)"
+    )]
+    Silent {
+        /// The device string.
+        device: String,
+        /// Samples read before.
+        samples: u64,
+        /// How long was waited, s.
+        waited_s: f64,
+    },
+    /// The chip said something a working chip does not (wrong id, timeout, bad configuration).
+    #[error("{device}: {error}")]
+    Chip {
+        /// The device string.
+        device: String,
+        /// What the driver said.
+        error: String,
+    },
+    /// A serial device disconnected.
+    #[error("{device}: disconnected after {samples} samples: {reason}")]
+    Disconnected {
+        /// The device string.
+        device: String,
+        /// Samples read before.
+        samples: u64,
+        /// What the port said.
+        reason: String,
+    },
+}
+
+/// Something that gives samples.
+pub trait Source {
+    /// The device string, for messages (`sim:lis3mdl`, `i2c:/dev/i2c-1:lis3mdl@0x1c`, `serial:/dev/ttyACM0:…`).
+    fn device(&self) -> &str;
+    /// The sensor's name for the recording's metadata.
+    fn sensor(&self) -> String;
+    /// The nominal sample rate, Hz, if known.
+    fn rate_hz(&self) -> Option<f64>;
+    /// Whether readings carry a temperature.
+    fn has_temperature(&self) -> bool;
+    /// The next sample, waiting for it on the device's clock. A saturated sample is not a field value: it is
+    /// counted ([`Source::saturated`]) and skipped.
+    fn next_reading(&mut self) -> Result<Reading, SourceError>;
+    /// The time on the device's clock, s.
+    fn now_s(&self) -> f64;
+    /// Samples refused as saturated so far.
+    fn saturated(&self) -> u64;
+    /// Garbage lines skipped so far, for line streams.
+    fn garbage(&self) -> Option<GarbageCounts>;
+    /// The simulated bench, for `sim` devices: its virtual hand performs the routine.
+    fn bench(&self) -> Option<&SharedBench>;
+}
+
+/// A chip driver polled for data-ready on a clock, with retries, temperature and saturation counting.
+pub struct ChipSource<M, C> {
+    device: String,
+    mag: M,
+    clock: C,
+    rate_hz: f64,
+    has_temperature: bool,
+    samples: u64,
+    saturated: u64,
+    temp_c: Option<f64>,
+    temp_read_s: f64,
+    bench: Option<SharedBench>,
+}
+
+impl<M, C, E> ChipSource<M, C>
+where
+    M: Magnetometer<Error = ChipError<E>>,
+    E: Debug,
+    C: Clock,
+{
+    /// Initialises the chip (identify, reset, continuous mode), sets the rate nearest `rate_hz` and the range (the
+    /// smallest that holds ±`range_ut`; the driver's default if `None`).
+    pub fn start(
+        device: String,
+        mut mag: M,
+        clock: C,
+        rate_hz: f64,
+        range_ut: Option<f64>,
+    ) -> Result<ChipSource<M, C>, SourceError> {
+        let chip = |e: ChipError<E>| SourceError::Chip {
+            device: device.clone(),
+            error: format!("cannot start the chip: {e}"),
+        };
+        mag.init().map_err(chip)?;
+        let rate = f64::from(mag.set_rate_hz(rate_hz as f32).map_err(chip)?);
+        if let Some(r) = range_ut {
+            mag.set_range_ut(r as f32).map_err(chip)?;
+        }
+        let has_temperature = mag.info().has_temperature;
+        Ok(ChipSource {
+            device,
+            mag,
+            clock,
+            rate_hz: rate,
+            has_temperature,
+            samples: 0,
+            saturated: 0,
+            temp_c: None,
+            temp_read_s: f64::NEG_INFINITY,
+            bench: None,
+        })
+    }
+
+    /// The same source, telling the recorder about the simulated bench behind it.
+    pub fn with_bench(mut self, bench: SharedBench) -> ChipSource<M, C> {
+        self.bench = Some(bench);
+        self
+    }
+
+    /// Runs `op` on the chip, trying again after a bus error up to [`RETRIES`] times with doubling back-off.
+    fn retried<T>(
+        &mut self,
+        mut op: impl FnMut(&mut M) -> Result<T, ChipError<E>>,
+    ) -> Result<T, ChipError<E>> {
+        let mut backoff_s = FIRST_BACKOFF_S;
+        let mut attempt = 0;
+        loop {
+            match op(&mut self.mag) {
+                Err(ChipError::I2c(_)) if attempt < RETRIES => {
+                    attempt += 1;
+                    self.clock.sleep_s(backoff_s);
+                    backoff_s *= 2.0;
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn bus_error(&self, e: &ChipError<E>) -> SourceError {
+        match e {
+            ChipError::I2c(_) => SourceError::Bus {
+                device: self.device.clone(),
+                samples: self.samples,
+                attempts: RETRIES + 1,
+                error: e.to_string(),
+            },
+            _ => SourceError::Chip {
+                device: self.device.clone(),
+                error: format!("after {} samples: {e}", self.samples),
+            },
+        }
+    }
+}
+
+impl<M, C, E> Source for ChipSource<M, C>
+where
+    M: Magnetometer<Error = ChipError<E>>,
+    E: Debug,
+    C: Clock,
+{
+    fn device(&self) -> &str {
+        &self.device
+    }
+
+    fn sensor(&self) -> String {
+        self.mag.info().kind.to_string()
+    }
+
+    fn rate_hz(&self) -> Option<f64> {
+        Some(self.rate_hz)
+    }
+
+    fn has_temperature(&self) -> bool {
+        self.has_temperature
+    }
+
+    fn next_reading(&mut self) -> Result<Reading, SourceError> {
+        let period_s = 1.0 / self.rate_hz;
+        let poll_s = period_s / 4.0;
+        let give_up_s = (SILENT_PERIODS * period_s).max(1.0);
+        let start_s = self.clock.now_s();
+        loop {
+            match self.retried(|m| m.read_ut()) {
+                Ok(m) => {
+                    let t_s = self.clock.now_s();
+                    if self.has_temperature && t_s - self.temp_read_s >= TEMPERATURE_PERIOD_S {
+                        self.temp_c = self
+                            .retried(|m| m.temperature_c())
+                            .map_err(|e| self.bus_error(&e))?
+                            .map(f64::from);
+                        self.temp_read_s = t_s;
+                    }
+                    self.samples += 1;
+                    return Ok(Reading {
+                        t_s,
+                        mag_ut: m.map(f64::from),
+                        temp_c: self.temp_c,
+                    });
+                }
+                Err(ChipError::NotReady) => {}
+                Err(ChipError::Saturated) => self.saturated += 1,
+                Err(e) => return Err(self.bus_error(&e)),
+            }
+            let waited_s = self.clock.now_s() - start_s;
+            if waited_s > give_up_s {
+                return Err(SourceError::Silent {
+                    device: self.device.clone(),
+                    samples: self.samples,
+                    waited_s,
+                });
+            }
+            self.clock.sleep_s(poll_s);
+        }
+    }
+
+    fn now_s(&self) -> f64 {
+        self.clock.now_s()
+    }
+
+    fn saturated(&self) -> u64 {
+        self.saturated
+    }
+
+    fn garbage(&self) -> Option<GarbageCounts> {
+        None
+    }
+
+    fn bench(&self) -> Option<&SharedBench> {
+        self.bench.as_ref()
+    }
+}
+
+/// Samples from a serial line stream (MotionCal `Raw:` lines or native CSV).
+pub struct LineSource {
+    device: String,
+    source: SerialSource,
+    samples: u64,
+    last_t_s: f64,
+}
+
+impl LineSource {
+    /// Reads from an open serial source.
+    pub fn new(device: String, source: SerialSource) -> LineSource {
+        LineSource {
+            device,
+            source,
+            samples: 0,
+            last_t_s: 0.0,
+        }
+    }
+}
+
+impl Source for LineSource {
+    fn device(&self) -> &str {
+        &self.device
+    }
+
+    fn sensor(&self) -> String {
+        format!("serial ({} stream)", self.source.protocol())
+    }
+
+    fn rate_hz(&self) -> Option<f64> {
+        None
+    }
+
+    /// Native CSV streams may carry `temp`; MotionCal lines never do.
+    fn has_temperature(&self) -> bool {
+        self.source.protocol() == Protocol::Csv
+    }
+
+    /// The next sample; an idle line is waited on (the firmware may be paused), a disconnect ends the stream.
+    /// Device times (CSV `t`) are used when present, reception times otherwise.
+    fn next_reading(&mut self) -> Result<Reading, SourceError> {
+        loop {
+            match self.source.read_sample() {
+                Ok(r) => {
+                    self.samples += 1;
+                    // Time never runs backwards in a recording, whatever the device's clock did.
+                    let t_s = r.sample.t_s.unwrap_or(r.host_s).max(self.last_t_s);
+                    self.last_t_s = t_s;
+                    return Ok(Reading {
+                        t_s,
+                        mag_ut: r.sample.mag_ut,
+                        temp_c: r.sample.temp_c.filter(|t| t.is_finite()),
+                    });
+                }
+                Err(StreamStop::Idle { .. }) => {}
+                Err(StreamStop::Disconnected { reason }) => {
+                    return Err(SourceError::Disconnected {
+                        device: self.device.clone(),
+                        samples: self.samples,
+                        reason,
+                    });
+                }
+            }
+        }
+    }
+
+    fn now_s(&self) -> f64 {
+        self.last_t_s
+    }
+
+    fn saturated(&self) -> u64 {
+        0
+    }
+
+    fn garbage(&self) -> Option<GarbageCounts> {
+        Some(self.source.counts().garbage)
+    }
+
+    fn bench(&self) -> Option<&SharedBench> {
+        None
+    }
+}

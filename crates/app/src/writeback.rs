@@ -1,0 +1,208 @@
+//! Writing a fitted calibration back to the device (`magcal-fit --write-to DEV`), verified by reading it back.
+//!
+//! - `serial:…`: MotionCal's calibration packet (hard-iron offset `V = −A⁻¹·b`, soft-iron matrix `S`, the field
+//!   magnitude), confirmed by the firmware's `Cal1:`/`Cal2:` echo. `S` is the symmetric positive-definite polar
+//!   factor of `A` (for a symmetric `A`, `A` itself), so the firmware's `S·(raw − V)` has the magnitude of magcal's
+//!   `A·raw + b`; the rotation a vector fit also holds cannot be sent, and is reported.
+//! - `i2c:…:lis2mdl` and `sim:lis2mdl`: the LIS2MDL's hard-iron offset registers, which the chip subtracts from
+//!   every sample, get `V` in the chip's raw axes; they are read back and compared. The chip clears them at reset and
+//!   power-up, so firmware must write them at start-up.
+//! - Other chips hold no calibration: that is an error that says so.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+use std::time::Duration;
+
+use embedded_hal::i2c::I2c;
+use magcal_driver::serial::{CalibrationPacket, WriteError, split_affine};
+use magcal_driver::{ChipKind, Error as ChipError, HardIronOffset, Lis2mdl, Magnetometer};
+use magcal_mockhw::{SimChip, VirtualClock};
+use magcal_sim::bench::Bench;
+
+use crate::device::DeviceSpec;
+use crate::record::sim::bench_config;
+
+/// How long the firmware gets to echo a calibration (Adafruit's sketches echo about once a second).
+pub const ECHO_TIMEOUT: Duration = Duration::from_secs(5);
+/// A read-back offset may differ from the one written by half the register's resolution (0.15 µT), plus rounding.
+const OFFSET_TOLERANCE_UT: f64 = 0.075 + 1e-4;
+
+/// Why a write-back failed.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteBackError {
+    /// The chip has no place to hold a calibration.
+    #[error(
+        "{device}: the {chip} has no offset registers to hold a calibration (of the supported chips only the LIS2MDL \
+         has); apply the parameters file in your firmware instead"
+    )]
+    NoOffsetRegisters {
+        /// The device string.
+        device: String,
+        /// The chip.
+        chip: ChipKind,
+    },
+    /// The calibration cannot be expressed in the device's form.
+    #[error("{device}: this calibration cannot be sent: {why}")]
+    Unsendable {
+        /// The device string.
+        device: String,
+        /// Why.
+        why: String,
+    },
+    /// The device could not be reached.
+    #[error("{device}: {error}")]
+    Device {
+        /// The device string.
+        device: String,
+        /// What went wrong.
+        error: String,
+    },
+    /// The device did not confirm what was written.
+    #[error("{device}: verification failed: {detail}")]
+    Verification {
+        /// The device string.
+        device: String,
+        /// What differs.
+        detail: String,
+    },
+}
+
+/// Writes the calibration `B = A·raw + b` (µT) to the device and verifies it. `field_ut` is the field magnitude the
+/// calibration maps onto (MotionCal's packet carries it). Returns lines saying what was done.
+pub fn write_back(
+    spec: &DeviceSpec,
+    a: &[[f64; 3]; 3],
+    b_ut: &[f64; 3],
+    field_ut: f64,
+) -> Result<Vec<String>, WriteBackError> {
+    let device = spec.to_string();
+    let unsendable = |why: String| WriteBackError::Unsendable {
+        device: device.clone(),
+        why,
+    };
+    let model = split_affine(a, b_ut).map_err(|e| unsendable(e.to_string()))?;
+    let offset_ut = model.hard_iron_ut;
+    match spec {
+        DeviceSpec::Serial(s) => {
+            let packet = CalibrationPacket::magnetic(offset_ut, field_ut, model.soft_iron)
+                .map_err(|e| unsendable(e.to_string()))?;
+            let mut port = s.open().map_err(|e| WriteBackError::Device {
+                device: device.clone(),
+                error: e.to_string(),
+            })?;
+            let verified = port
+                .write_calibration(&packet, ECHO_TIMEOUT)
+                .map_err(|e| match e {
+                    WriteError::Verification(v) => WriteBackError::Verification {
+                        device: device.clone(),
+                        detail: v.to_string(),
+                    },
+                    other => WriteBackError::Device {
+                        device: device.clone(),
+                        error: other.to_string(),
+                    },
+                })?;
+            let mut lines = vec![format!(
+                "{device}: sent the MotionCal packet (offset [{:.3}, {:.3}, {:.3}] µT, field {field_ut:.3} µT); \
+                 the firmware's echo confirmed it after {:.2} s",
+                offset_ut[0], offset_ut[1], offset_ut[2], verified.elapsed_s
+            )];
+            if model.dropped_rotation_deg > 0.01 || model.dropped_reflection {
+                lines.push(format!(
+                    "  the firmware holds a symmetric matrix: the {:.2}° rotation in A (sensor misalignment against \
+                     the reference){} was not sent",
+                    model.dropped_rotation_deg,
+                    if model.dropped_reflection { " and an axis reflection" } else { "" }
+                ));
+            }
+            Ok(lines)
+        }
+        DeviceSpec::I2c {
+            path,
+            chip: ChipKind::Lis2mdl,
+            address,
+        } => {
+            let bus =
+                magcal_driver::linux::I2cdev::new(path).map_err(|e| WriteBackError::Device {
+                    device: device.clone(),
+                    error: format!("cannot open the bus: {e}"),
+                })?;
+            let address = address.unwrap_or(ChipKind::Lis2mdl.default_address());
+            let held = write_lis2mdl_offset(bus, address, &device, offset_ut)?;
+            Ok(offset_lines(&device, held))
+        }
+        DeviceSpec::Sim {
+            chip: ChipKind::Lis2mdl,
+        } => {
+            let bench = Bench::new(bench_config(ChipKind::Lis2mdl, 1)).map_err(|e| {
+                WriteBackError::Device {
+                    device: device.clone(),
+                    error: e.to_string(),
+                }
+            })?;
+            let twin = SimChip::new(
+                ChipKind::Lis2mdl,
+                Rc::new(RefCell::new(bench)),
+                VirtualClock::new(),
+            );
+            let held = write_lis2mdl_offset(
+                twin,
+                ChipKind::Lis2mdl.default_address(),
+                &device,
+                offset_ut,
+            )?;
+            Ok(offset_lines(&device, held))
+        }
+        DeviceSpec::I2c { chip, .. } | DeviceSpec::Sim { chip } => {
+            Err(WriteBackError::NoOffsetRegisters {
+                device,
+                chip: *chip,
+            })
+        }
+    }
+}
+
+fn offset_lines(device: &str, held: [f64; 3]) -> Vec<String> {
+    vec![
+        format!(
+            "{device}: wrote the hard-iron offset [{:.2}, {:.2}, {:.2}] µT to the offset registers; read back the same",
+            held[0], held[1], held[2]
+        ),
+        "  the chip now subtracts it from every sample: readings from it need only A (b = 0). It clears the \
+         registers at reset and power-up, so firmware must write them at start-up."
+            .to_owned(),
+    ]
+}
+
+/// Writes `offset_ut` (raw axes, µT) to a LIS2MDL's offset registers at `address` and reads them back; returns what
+/// the chip holds, or a verification error if that is not what was written (to within the registers' 0.15 µT).
+pub fn write_lis2mdl_offset<I: I2c>(
+    i2c: I,
+    address: u8,
+    device: &str,
+    offset_ut: [f64; 3],
+) -> Result<[f64; 3], WriteBackError> {
+    let failed = |what: &str, e: ChipError<I::Error>| WriteBackError::Device {
+        device: device.to_owned(),
+        error: format!("{what}: {e}"),
+    };
+    let mut chip = Lis2mdl::with_address(i2c, address);
+    chip.identify()
+        .map_err(|e| failed("identifying the LIS2MDL", e))?;
+    chip.write_offset_ut(offset_ut.map(|v| v as f32))
+        .map_err(|e| failed("writing the offset registers", e))?;
+    let held = chip
+        .read_offset_ut()
+        .map_err(|e| failed("reading the offset registers back", e))?
+        .map(f64::from);
+    if (0..3).any(|k| (held[k] - offset_ut[k]).abs() > OFFSET_TOLERANCE_UT) {
+        return Err(WriteBackError::Verification {
+            device: device.to_owned(),
+            detail: format!(
+                "wrote the offset [{:.3}, {:.3}, {:.3}] µT, the chip holds [{:.3}, {:.3}, {:.3}] µT",
+                offset_ut[0], offset_ut[1], offset_ut[2], held[0], held[1], held[2]
+            ),
+        });
+    }
+    Ok(held)
+}

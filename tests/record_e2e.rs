@@ -1,0 +1,171 @@
+//! Acceptance, end to end and unattended: `magcal-record --device sim:CHIP --routine cube24|free` (the virtual hand
+//! performs the routine) then `magcal-fit` recovers the simulated sensor's true A and b within their reported
+//! uncertainties, for every chip.
+//!
+//! Bound: every parameter within 4 standard errors. A fit's 12 errors over their standard errors are close to N(0, 1)
+//! when the uncertainties are honest (tests/uncertainty.rs); each test here checks 60 of them (5 chips × 12), and at
+//! 4σ the chance that an honest set has one outside is 60 × 6.3e-5 ≈ 0.4 % (at 3σ it would be 15 %). A wrong axis,
+//! sign, scale or time base in the recorder, the drivers or the twins gives errors of hundreds of σ. The spread of
+//! the ratios is checked too (RMS 0.5–1.6), so that standard errors inflated to hide a bias would fail.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::Instant;
+
+use magcal_app::record::sim::TruthFile;
+use nalgebra::Matrix3;
+
+const CHIPS: [&str; 5] = ["lis3mdl", "lis2mdl", "qmc5883l", "hmc5883l", "mmc5983ma"];
+const MAX_Z: f64 = 4.0;
+
+fn run(exe: &str, args: &[&str]) -> Output {
+    let out = Command::new(exe)
+        .args(args)
+        .output()
+        .expect("the tool runs");
+    assert!(
+        out.status.success(),
+        "{exe} {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Records `sim:CHIP` with `routine`, fits it; returns the report's calibration and the truth.
+fn record_and_fit(
+    dir: &Path,
+    chip: &str,
+    seed: u64,
+    routine: &str,
+) -> (serde_json::Value, TruthFile) {
+    let rec = dir.join(format!("{chip}-{routine}.csv"));
+    let truth = dir.join(format!("{chip}-{routine}-truth.toml"));
+    let report = dir.join(format!("{chip}-{routine}-report.json"));
+    let seed = seed.to_string();
+    let start = Instant::now();
+    run(
+        env!("CARGO_BIN_EXE_magcal-record"),
+        &[
+            "--device",
+            &format!("sim:{chip}"),
+            "--routine",
+            routine,
+            "--auto",
+            "--sim-seed",
+            &seed,
+            "--out",
+            rec.to_str().unwrap(),
+            "--truth",
+            truth.to_str().unwrap(),
+        ],
+    );
+    let recorded = start.elapsed();
+    run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[rec.to_str().unwrap(), "--report", report.to_str().unwrap()],
+    );
+    println!(
+        "{chip} {routine}: recorded in {:.2} s, recorded and fitted in {:.2} s (wall)",
+        recorded.as_secs_f64(),
+        start.elapsed().as_secs_f64()
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    (report, TruthFile::read(&truth).unwrap())
+}
+
+fn matrix(v: &serde_json::Value) -> Matrix3<f64> {
+    Matrix3::from_fn(|j, k| v[j][k].as_f64().unwrap())
+}
+
+fn vector(v: &serde_json::Value) -> [f64; 3] {
+    std::array::from_fn(|k| v[k].as_f64().unwrap())
+}
+
+/// (fitted − true) / SE for the 9 entries of A and the 3 of b.
+fn z_scores(cal: &serde_json::Value, a_true: &Matrix3<f64>, b_true: &[f64; 3]) -> Vec<f64> {
+    let (a, a_se) = (matrix(&cal["A"]), matrix(&cal["A_se"]));
+    let (b, b_se) = (vector(&cal["b_ut"]), vector(&cal["b_se_ut"]));
+    let mut z: Vec<f64> = (0..9)
+        .map(|i| (a[(i / 3, i % 3)] - a_true[(i / 3, i % 3)]) / a_se[(i / 3, i % 3)])
+        .collect();
+    z.extend((0..3).map(|k| (b[k] - b_true[k]) / b_se[k]));
+    z
+}
+
+fn check(all: &[(String, Vec<f64>)]) {
+    let pooled: Vec<f64> = all.iter().flat_map(|(_, z)| z.iter().copied()).collect();
+    let rms = (pooled.iter().map(|z| z * z).sum::<f64>() / pooled.len() as f64).sqrt();
+    for (chip, z) in all {
+        let max = z.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        println!("{chip}: max |error/SE| = {max:.2}; errors/SE = {z:.2?}");
+        assert!(
+            max <= MAX_Z,
+            "{chip}: a parameter is {max:.2} standard errors off: {z:.2?}"
+        );
+    }
+    println!(
+        "all: RMS error/SE = {rms:.2} over {} parameters",
+        pooled.len()
+    );
+    assert!(
+        (0.5..=1.6).contains(&rms),
+        "RMS error/SE {rms:.2}: the standard errors are not honest"
+    );
+}
+
+#[test]
+fn cube24_then_vector_fit_recovers_a_and_b_for_every_chip() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut all = Vec::new();
+    for (i, chip) in CHIPS.iter().enumerate() {
+        let (report, truth) = record_and_fit(dir.path(), chip, 10 + i as u64, "cube24");
+        assert_eq!(
+            report["method"], "vector",
+            "{chip}: the cube poses give the vector method"
+        );
+        assert_eq!(report["samples"]["missing_reference"], 0);
+        let a_true = Matrix3::from_fn(|j, k| truth.a[j][k]);
+        all.push((
+            chip.to_string(),
+            z_scores(&report["calibration"], &a_true, &truth.b_ut),
+        ));
+    }
+    check(&all);
+}
+
+#[test]
+fn free_rotation_then_scalar_fit_recovers_the_observable_part_for_every_chip() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut all = Vec::new();
+    for (i, chip) in CHIPS.iter().enumerate() {
+        let (report, truth) = record_and_fit(dir.path(), chip, 20 + i as u64, "free");
+        assert_eq!(
+            report["method"], "scalar",
+            "{chip}: free rotation has no attitude reference"
+        );
+        assert!(report["coverage"]["sphere_fraction"].as_f64().unwrap() >= 0.85);
+        // The scalar method sees |B| only: of the true A = R·S (R a rotation, S symmetric positive definite) it can
+        // find S, and b turned back by R; the hard-iron offset −A⁻¹·b is the same either way.
+        let a_true = Matrix3::from_fn(|j, k| truth.a[j][k]);
+        let svd = a_true.svd(true, true);
+        let (u, v_t) = (svd.u.unwrap(), svd.v_t.unwrap());
+        let r = u * v_t;
+        let s = v_t.transpose() * Matrix3::from_diagonal(&svd.singular_values) * v_t;
+        let b = r.transpose() * nalgebra::Vector3::from(truth.b_ut);
+        all.push((
+            chip.to_string(),
+            z_scores(&report["calibration"], &s, &[b.x, b.y, b.z]),
+        ));
+        let offset = vector(&report["calibration"]["offset_ut"]);
+        for k in 0..3 {
+            assert!(
+                (offset[k] - truth.offset_ut[k]).abs() < 0.05,
+                "{chip}: offset {offset:?} vs {:?}",
+                truth.offset_ut
+            );
+        }
+    }
+    check(&all);
+}
