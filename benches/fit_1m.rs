@@ -52,7 +52,7 @@ fn read_and_fit(path: &Path) -> f64 {
         field_ned_ut: rec.meta.field_ned_ut.expect("simulated with a field"),
         source: "metadata".into(),
     };
-    let cal = calibrate(&rec, Method::Vector, field).expect("fits");
+    let cal = calibrate(&rec, Method::Vector, field, false).expect("fits");
     cal.residual_rms_ut
 }
 

@@ -31,7 +31,7 @@ fn the_magnitude_residual_sits_at_the_noise_for_strong_distortions() {
             field_ut: frames::norm(s.field_ned_ut),
             source: "test".into(),
         };
-        let cal = calibrate(&run.recording, Method::Scalar, field).unwrap();
+        let cal = calibrate(&run.recording, Method::Scalar, field, false).unwrap();
         // The noise of |B| is the calibrated noise A·n projected on the field direction.
         let a = s.sensor.a;
         let radial2: f64 = run

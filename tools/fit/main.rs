@@ -7,12 +7,14 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export};
 use magcal_app::field::{FieldArgs, resolve};
 use magcal_app::files::write_atomic;
 use magcal_app::params::ParamsFile;
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
+use magcal_app::writeback::write_back_calibration;
 use magcal_recording::{Date, Location, Recording};
 
 /// Fit a magnetometer calibration B = A·raw + b to a recording (magcal-recording v1), print a summary, and write the
@@ -22,6 +24,11 @@ use magcal_recording::{Date, Location, Recording};
 /// seed paper fits every component; without one, the scalar (ellipsoid) method fits the magnitude only.
 ///
 /// Workflow: magcal-record (or magcal-sim) writes the recording, magcal-fit fits it.
+///
+/// With --write-to DEV the fitted parameters also go to the device, after the files are written, and are verified:
+/// serial:PATH[:BAUD][:motioncal|csv] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
+/// echo; i2c:/dev/i2c-N:lis2mdl[@ADDR] (or sim:lis2mdl) gets the hard-iron offset in its offset registers, read back.
+/// The other chips have no place for a calibration: that is an error, and the parameters file is the way.
 #[derive(Parser, Debug)]
 #[command(version, about, long_about)]
 struct Args {
@@ -54,6 +61,13 @@ struct Args {
     /// Where to write the export (default: stdout, with the summary moved to stderr).
     #[arg(long, value_name = "PATH", requires = "export")]
     export_out: Option<PathBuf>,
+    /// Write the calibration to this device and verify it: serial:PATH[:BAUD][:motioncal|csv] (MotionCal packet,
+    /// confirmed by the echo) or i2c:/dev/i2c-N:lis2mdl[@ADDR] / sim:lis2mdl (offset registers, read back).
+    #[arg(long, value_name = "DEV")]
+    write_to: Option<DeviceSpec>,
+    /// Skip the diagnosis (what physics the 12-parameter model leaves out).
+    #[arg(long)]
+    no_diagnose: bool,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -130,7 +144,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         MethodArg::Scalar => Method::Scalar,
     };
     let cal =
-        calibrate(&rec, method, field).with_context(|| format!("{name}: cannot calibrate"))?;
+        calibrate(&rec, method, field, !args.no_diagnose).with_context(|| format!("{name}: cannot calibrate"))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
 
     let text = summary(&cal, &name);
@@ -166,6 +180,15 @@ fn run(args: Args) -> anyhow::Result<()> {
             Some(path) => write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?,
             None => std::io::stdout().write_all(text.as_bytes())?,
+        }
+    }
+    if let Some(device) = &args.write_to {
+        for line in write_back_calibration(device, &cal)? {
+            if export_to_stdout {
+                eprintln!("{line}");
+            } else {
+                println!("{line}");
+            }
         }
     }
     Ok(())

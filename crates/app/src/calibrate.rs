@@ -1,6 +1,7 @@
 //! From a recording to a fitted calibration: pick the method, build the expected field, check, fit, measure.
 
 use magcal_calib::coverage::sphere_fraction;
+use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, rms3};
 use magcal_calib::scalar::{self, ScalarFit, ScalarOptions};
@@ -76,6 +77,8 @@ pub struct Calibration {
     pub samples: SampleCounts,
     /// Things the user should know (coverage warnings, what the method cannot see).
     pub notes: Vec<String>,
+    /// What the base model leaves out, when diagnosed.
+    pub diagnosis: Option<Diagnosis>,
 }
 
 impl Calibration {
@@ -87,12 +90,27 @@ impl Calibration {
         }
     }
 
-    /// The fitted model.
+    /// The final model: the diagnosis' extended model when there is one, the base fit otherwise.
     pub fn model(&self) -> Model {
+        match &self.diagnosis {
+            Some(d) => d.model,
+            None => self.base_model(),
+        }
+    }
+
+    /// The base (12-parameter or scalar) fit.
+    pub fn base_model(&self) -> Model {
         match &self.fit {
             Fit::Vector(v) => v.model(),
             Fit::Scalar(s) => s.model(),
         }
+    }
+
+    /// Residual RMS of the final model (µT): the diagnosis' extended fit, or the base fit.
+    pub fn final_rms_ut(&self) -> f64 {
+        self.diagnosis
+            .as_ref()
+            .map_or(self.residual_rms_ut, |d| d.extended.rms_ut)
     }
 
     /// Standard errors of `A` and `b`.
@@ -140,11 +158,12 @@ pub fn expected_field(
         .collect())
 }
 
-/// Calibrates a recording.
+/// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out.
 pub fn calibrate(
     rec: &Recording,
     method: Method,
     field: ReferenceField,
+    diagnose: bool,
 ) -> Result<Calibration, CalibrateError> {
     let has_reference = rec.ref_ut.is_some() || (rec.quat.is_some() && field.vector().is_some());
     let method = match method {
@@ -212,14 +231,56 @@ pub fn calibrate(
             missing_reference: rec.len() - used,
         },
         notes,
+        diagnosis: None,
     };
-    let model = cal.model();
+    let model = cal.base_model();
     cal.noise_floor_ut = cal.noise.calibrated_rms_ut(&model.a);
+    // Sphere coverage from at most ~100 000 readings: the fraction of 100 cells needs no more.
+    let stride = (rec.len() / 100_000).max(1);
     cal.sphere_coverage = sphere_fraction(
-        rec.mag_ut.iter().map(|m| model.apply(*m, &Inputs::NONE)),
+        rec.mag_ut
+            .iter()
+            .step_by(stride)
+            .map(|m| model.apply(*m, &Inputs::NONE)),
         100,
     );
+    if diagnose {
+        let input = diagnosis_input(rec, &cal)?;
+        cal.diagnosis = Some(diagnosis::diagnose(&input, &model)?);
+    }
     Ok(cal)
+}
+
+/// What the diagnosis needs from a recording and its base calibration.
+fn diagnosis_input<'a>(
+    rec: &'a Recording,
+    cal: &Calibration,
+) -> Result<DiagnosisInput<'a>, CalibrateError> {
+    let reference = match (&cal.fit, &rec.ref_ut, &rec.quat, cal.field.vector()) {
+        (Fit::Vector(_), Some(r), _, _) => Reference::Field { expected_ut: r },
+        (Fit::Vector(_), None, Some(q), Some(f)) => Reference::Attitude {
+            quat: q,
+            field_ned_ut: f,
+        },
+        (Fit::Vector(_), ..) => {
+            return Err(CalibrateError::NoReference("this recording has neither"));
+        }
+        (Fit::Scalar(s), ..) => Reference::Magnitude {
+            field_ut: s.field_ut,
+        },
+    };
+    Ok(DiagnosisInput {
+        raw_ut: &rec.mag_ut,
+        t_s: rec.t_s.as_deref(),
+        temp_c: rec.temp_c.as_deref(),
+        currents: rec
+            .currents
+            .iter()
+            .map(|c| (c.name.as_str(), c.values.as_slice()))
+            .collect(),
+        reference,
+        noise: cal.noise,
+    })
 }
 
 #[cfg(test)]
@@ -259,7 +320,7 @@ mod tests {
                 field_ned_ut: s.field_ned_ut,
                 source: "test".into(),
             };
-            let cal = calibrate(&run.recording, Method::Auto, field).unwrap();
+            let cal = calibrate(&run.recording, Method::Auto, field, true).unwrap();
             assert_eq!(cal.method(), want);
             // The residual sits at the noise floor (no effects injected).
             assert!(
@@ -278,7 +339,13 @@ mod tests {
     #[test]
     fn vector_without_a_world_field_says_what_is_missing() {
         let run = simulate(&scenario(AttitudeOutput::Quaternion)).unwrap();
-        let err = calibrate(&run.recording, Method::Vector, ReferenceField::Unknown).unwrap_err();
+        let err = calibrate(
+            &run.recording,
+            Method::Vector,
+            ReferenceField::Unknown,
+            false,
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("--field-ned"), "{err}");
     }
 }

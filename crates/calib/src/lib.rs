@@ -17,6 +17,8 @@ pub mod model;
 #[cfg(feature = "std")]
 pub mod coverage;
 #[cfg(feature = "std")]
+pub mod diagnosis;
+#[cfg(feature = "std")]
 mod error;
 #[cfg(feature = "std")]
 pub mod noise;

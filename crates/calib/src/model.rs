@@ -4,7 +4,7 @@ use crate::effects::{Context, Effect, Frame};
 use crate::frames::{self, Mat3};
 
 /// How many body-fixed corrections a model can carry.
-pub const MAX_CORRECTIONS: usize = 8;
+pub const MAX_CORRECTIONS: usize = 12;
 
 /// At most this many fixed-point iterations remove field-dependent corrections (each shrinks the error by the relative
 /// size of the correction, ≲10⁻² in practice, so a handful reach f64 precision).

@@ -17,6 +17,7 @@ pub mod chips;
 mod environment;
 mod scenario;
 mod sensor;
+pub mod study;
 mod trajectory;
 
 pub use chips::ChipModel;

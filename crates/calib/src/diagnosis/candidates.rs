@@ -1,0 +1,338 @@
+//! The candidate effects a recording can test, the reasons the others cannot be tested, and each candidate's
+//! regressors — taken from [`Effect::perturbation_ut`], the same definition the simulator injects.
+
+use crate::effects::{Context, Effect, EffectId};
+
+use super::samples::Samples;
+use super::scan::Scan;
+
+/// One effect to test, with its hyperparameters fixed and its columns in the design.
+#[derive(Clone, Debug)]
+pub(crate) struct Candidate {
+    /// The effect with zero parameters and its hyperparameters (reference temperature, step time, …) set.
+    pub template: Effect,
+    /// Number of fitted parameters.
+    pub n: usize,
+    /// First design column.
+    pub first: usize,
+    /// The current channel's name, for `current_bias`.
+    pub channel: Option<String>,
+    /// An effect this one generalises (its columns are replaced, not added to).
+    pub supersedes: Option<EffectId>,
+    /// Extra evidence demanded for a scanned hyperparameter, σ² units.
+    pub scan_penalty: f64,
+    /// Profile intervals of the scanned times (start, and end for a window), s.
+    pub scan: Option<ScanTimes>,
+}
+
+/// The profile intervals of a scanned hyperparameter, s.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct ScanTimes {
+    /// Interval of the step time or window start.
+    pub start_s: (f64, f64),
+    /// Interval of the window end.
+    pub end_s: Option<(f64, f64)>,
+    /// The typical time between samples, s.
+    pub sample_interval_s: f64,
+}
+
+impl Candidate {
+    pub fn id(&self) -> EffectId {
+        self.template.id()
+    }
+
+    pub fn columns(&self) -> std::ops::Range<usize> {
+        self.first..self.first + self.n
+    }
+
+    /// The regressors at one sample: column `k` is the perturbation per unit of parameter `k`, in calibrated axes.
+    pub fn regressors(&self, ctx: &Context<'_>) -> [[f64; 3]; 3] {
+        let mut out = [[0.0; 3]; 3];
+        if self.template.is_linear() {
+            for (k, col) in out.iter_mut().enumerate().take(self.n) {
+                let mut p = [0.0; 3];
+                p[k] = 1.0;
+                *col = self.template.with_params(p).perturbation_ut(ctx);
+            }
+        } else {
+            // Linearised at zero by central differences (the only non-linear effect is the field direction error,
+            // in degrees: second-order terms are ~1e-4 of the first for errors of a degree).
+            const STEP: f64 = 1e-2;
+            for (k, col) in out.iter_mut().enumerate().take(self.n) {
+                let mut p = [0.0; 3];
+                p[k] = STEP;
+                let plus = self.template.with_params(p).perturbation_ut(ctx);
+                p[k] = -STEP;
+                let minus = self.template.with_params(p).perturbation_ut(ctx);
+                *col = std::array::from_fn(|j| (plus[j] - minus[j]) / (2.0 * STEP));
+            }
+        }
+        out
+    }
+}
+
+/// An effect that cannot be tested on this recording, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Untestable {
+    /// The effect.
+    pub id: EffectId,
+    /// Why, in words.
+    pub why: String,
+}
+
+/// What the recording offers.
+pub(crate) struct Offer<'a> {
+    pub samples: &'a Samples,
+    pub vector: bool,
+    pub current_names: &'a [&'a str],
+    pub step: Option<Scan>,
+    pub window: Option<Scan>,
+}
+
+/// Evidence demanded for the step time scanned over every sample (about 2·ln of the number of effectively
+/// independent splits), σ² units; calibrated on null recordings.
+pub(crate) const STEP_SCAN_PENALTY: f64 = 14.0;
+/// Evidence demanded for the disturbance window scanned over pairs of boundaries.
+pub(crate) const WINDOW_SCAN_PENALTY: f64 = 24.0;
+
+/// The candidates and the untestable effects, with columns numbered from `first_column`.
+pub(crate) fn candidates(
+    offer: &Offer<'_>,
+    first_column: usize,
+) -> (Vec<Candidate>, Vec<Untestable>) {
+    let s = offer.samples;
+    let mut out: Vec<Candidate> = Vec::new();
+    let mut untestable = Vec::new();
+    let mut column = first_column;
+    let mut push = |template: Effect, channel: Option<String>, supersedes, scan_penalty, scan| {
+        let n = template.params().1;
+        out.push(Candidate {
+            template,
+            n,
+            first: column,
+            channel,
+            supersedes,
+            scan_penalty,
+            scan,
+        });
+        column += n;
+    };
+    let mut refuse = |id: EffectId, why: &str| {
+        untestable.push(Untestable {
+            id,
+            why: why.to_owned(),
+        })
+    };
+    // Every body-fixed effect must fit in one model: five besides the currents.
+    let max_currents = crate::model::MAX_CORRECTIONS - 5;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let t_ref_s = mean(&s.t);
+    let sample_interval_s = (s.t[s.len() - 1] - s.t[0]) / (s.len() - 1).max(1) as f64;
+    // A change at sample k happened between samples k − 1 and k: the midpoint is the unbiased estimate of its time
+    // (and gives the same regressor, which switches at sample k).
+    let between = |k: usize| match k {
+        0 => s.t[0] - sample_interval_s / 2.0,
+        k if k >= s.len() => s.t[s.len() - 1] + sample_interval_s / 2.0,
+        k => (s.t[k - 1] + s.t[k]) / 2.0,
+    };
+
+    const NO_TEMP: &str = "the recording has no temp column";
+    if s.has_temp {
+        let t_ref_c = mean(&s.temp);
+        push(
+            Effect::TemperatureBias {
+                coef_ut_per_c: [0.0; 3],
+                t_ref_c,
+            },
+            None,
+            None,
+            0.0,
+            None,
+        );
+        push(
+            Effect::TemperatureScale {
+                coef_per_c: [0.0; 3],
+                t_ref_c,
+            },
+            None,
+            None,
+            0.0,
+            None,
+        );
+    } else {
+        refuse(EffectId::TemperatureBias, NO_TEMP);
+        refuse(EffectId::TemperatureScale, NO_TEMP);
+    }
+    if offer.current_names.is_empty() {
+        refuse(
+            EffectId::CurrentBias,
+            "the recording has no current channel (i_<name> column)",
+        );
+    }
+    for name in offer.current_names.iter().skip(max_currents) {
+        refuse(
+            EffectId::CurrentBias,
+            &format!("{name}: only the first {max_currents} current channels are tested"),
+        );
+    }
+    for (channel, name) in offer.current_names.iter().enumerate().take(max_currents) {
+        push(
+            Effect::CurrentBias {
+                channel,
+                coef_ut_per_a: [0.0; 3],
+            },
+            Some((*name).to_owned()),
+            None,
+            0.0,
+            None,
+        );
+    }
+
+    let attitude = s.rot.is_some();
+    const NO_REFERENCE: &str = "the scalar method has no attitude reference: a timing error between sensor and reference needs one";
+    const NO_TIME: &str = "the recording has no t column";
+    match (offer.vector, s.has_time) {
+        (true, true) => {
+            push(Effect::TimeLag { lag_s: 0.0 }, None, None, 0.0, None);
+            push(
+                Effect::RateCoupling {
+                    lag_axis_s: [0.0; 3],
+                },
+                None,
+                Some(EffectId::TimeLag),
+                0.0,
+                None,
+            );
+        }
+        (false, _) => {
+            refuse(EffectId::TimeLag, NO_REFERENCE);
+            refuse(EffectId::RateCoupling, NO_REFERENCE);
+        }
+        (true, false) => {
+            refuse(EffectId::TimeLag, NO_TIME);
+            refuse(EffectId::RateCoupling, NO_TIME);
+        }
+    }
+
+    let world_why = if !offer.vector {
+        Some(
+            "a world-frame effect: the scalar method sees |B| only, with no attitude to tell world from sensor axes",
+        )
+    } else if !attitude {
+        Some(
+            "a world-frame effect: the recording gives the expected field in sensor axes (rx,ry,rz) but not the attitude",
+        )
+    } else {
+        None
+    };
+    match (world_why, s.has_time) {
+        (Some(why), _) => {
+            refuse(EffectId::FieldDrift, why);
+            refuse(EffectId::FieldDirectionError, why);
+            refuse(EffectId::Disturbance, why);
+        }
+        (None, has_time) => {
+            if has_time {
+                push(
+                    Effect::FieldDrift {
+                        rate_ut_per_s: [0.0; 3],
+                        t_ref_s,
+                    },
+                    None,
+                    None,
+                    0.0,
+                    None,
+                );
+            } else {
+                refuse(EffectId::FieldDrift, NO_TIME);
+            }
+            push(
+                Effect::FieldDirectionError {
+                    declination_error_deg: 0.0,
+                    inclination_error_deg: 0.0,
+                },
+                None,
+                None,
+                0.0,
+                None,
+            );
+            match (has_time, offer.window) {
+                (true, Some(w)) => {
+                    let t0_s = between(w.start);
+                    let t1_s = between(w.end);
+                    push(
+                        Effect::Disturbance {
+                            t0_s,
+                            t1_s,
+                            field_ned_ut: [0.0; 3],
+                        },
+                        None,
+                        None,
+                        WINDOW_SCAN_PENALTY,
+                        Some(ScanTimes {
+                            start_s: (between(w.start_interval.0), between(w.start_interval.1)),
+                            end_s: Some((between(w.end_interval.0), between(w.end_interval.1))),
+                            sample_interval_s,
+                        }),
+                    );
+                }
+                (true, None) => refuse(
+                    EffectId::Disturbance,
+                    "the recording is too short to look for a transient",
+                ),
+                (false, _) => refuse(EffectId::Disturbance, NO_TIME),
+            }
+        }
+    }
+
+    push(
+        Effect::Nonlinearity {
+            cubic_per_ut2: [0.0; 3],
+        },
+        None,
+        None,
+        0.0,
+        None,
+    );
+
+    if s.has_time {
+        if let Some(step) = offer.step {
+            push(
+                Effect::BiasStep {
+                    t_s: between(step.start),
+                    step_ut: [0.0; 3],
+                },
+                None,
+                None,
+                STEP_SCAN_PENALTY,
+                Some(ScanTimes {
+                    start_s: (
+                        between(step.start_interval.0),
+                        between(step.start_interval.1),
+                    ),
+                    end_s: None,
+                    sample_interval_s,
+                }),
+            );
+        } else {
+            refuse(
+                EffectId::BiasStep,
+                "the recording is too short to look for a step",
+            );
+        }
+        push(
+            Effect::BiasDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s,
+            },
+            None,
+            None,
+            0.0,
+            None,
+        );
+    } else {
+        refuse(EffectId::BiasStep, NO_TIME);
+        refuse(EffectId::BiasDrift, NO_TIME);
+    }
+    (out, untestable)
+}

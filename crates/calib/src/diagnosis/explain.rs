@@ -1,0 +1,153 @@
+//! Findings in words: one sentence per effect in physical terms, and the experiment that would separate two effects
+//! that explain the same residual.
+
+use crate::coverage::describe;
+use crate::effects::{Effect, EffectId};
+use crate::frames;
+
+/// A direction and size: "0.31 µT/°C along +X", or along a direction when no axis dominates.
+fn along(v: [f64; 3], unit: &str) -> String {
+    let m = frames::norm(v);
+    if m == 0.0 {
+        return format!("0 {unit}");
+    }
+    let d = describe(frames::scale(v, 1.0 / m))
+        .replace("sensor axis ≈ ", "")
+        .replace("sensor direction ", "");
+    format!("{m:.3} {unit} along {d}")
+}
+
+/// The sentence for a found effect, ending with the held-out residual before and after against the noise floor.
+pub(crate) fn explain(
+    e: &Effect,
+    channel: Option<&str>,
+    holdout: (f64, f64),
+    floor_ut: f64,
+    field_ut: f64,
+) -> String {
+    let what = match *e {
+        Effect::TemperatureBias { coef_ut_per_c, .. } => {
+            format!(
+                "offset follows temperature: {}",
+                along(coef_ut_per_c, "µT/°C")
+            )
+        }
+        Effect::TemperatureScale { coef_per_c: k, .. } => format!(
+            "scale factors change with temperature: {:+.0}, {:+.0}, {:+.0} ppm/°C on X, Y, Z",
+            k[0] * 1e6,
+            k[1] * 1e6,
+            k[2] * 1e6
+        ),
+        Effect::CurrentBias { coef_ut_per_a, .. } => format!(
+            "the current in {} adds a field of {} (a wire, motor or heater near the sensor)",
+            channel.unwrap_or("a current channel"),
+            along(coef_ut_per_a, "µT/A")
+        ),
+        Effect::TimeLag { lag_s } => format!(
+            "the magnetometer sample is {} by {:.1} ms relative to the attitude reference",
+            if lag_s >= 0.0 { "late" } else { "early" },
+            lag_s.abs() * 1e3
+        ),
+        Effect::RateCoupling { lag_axis_s: l } => format!(
+            "each axis follows the field's change with its own delay — {:.1}, {:.1}, {:.1} ms on X, Y, Z (filters or \
+             eddy currents, not one timing offset)",
+            l[0] * 1e3,
+            l[1] * 1e3,
+            l[2] * 1e3
+        ),
+        Effect::FieldDrift {
+            rate_ut_per_s: r, ..
+        } => format!(
+            "the world field drifts during the recording by {:.3} µT/min (N {:+.3}, E {:+.3}, D {:+.3} µT/min): \
+             geomagnetic variation or a moving magnetic object outside",
+            frames::norm(r) * 60.0,
+            r[0] * 60.0,
+            r[1] * 60.0,
+            r[2] * 60.0
+        ),
+        Effect::FieldDirectionError {
+            declination_error_deg: d,
+            inclination_error_deg: i,
+        } => format!(
+            "the true field points {d:+.3}° in declination and {i:+.3}° in inclination away from the assumed one \
+             (a wrong declination, a reference whose north is off, or a local anomaly)"
+        ),
+        Effect::Nonlinearity { cubic_per_ut2: k } => format!(
+            "the response is not linear in the field: a cubic term worth {:.3}, {:.3}, {:.3} µT at ±{field_ut:.0} µT \
+             on X, Y, Z",
+            k[0] * field_ut.powi(3),
+            k[1] * field_ut.powi(3),
+            k[2] * field_ut.powi(3)
+        ),
+        Effect::BiasStep { t_s, step_ut } => format!(
+            "the offset jumped by {} at t = {t_s:.2} s (the sensor was magnetised, or a set/reset event)",
+            along(step_ut, "µT")
+        ),
+        Effect::BiasDrift { rate_ut_per_s, .. } => {
+            format!(
+                "the offset drifts with time: {}",
+                along(frames::scale(rate_ut_per_s, 60.0), "µT/min")
+            )
+        }
+        Effect::Disturbance {
+            t0_s,
+            t1_s,
+            field_ned_ut: d,
+        } => format!(
+            "a transient external field of {:.3} µT, fixed in the world (N {:+.3}, E {:+.3}, D {:+.3} µT), from \
+             t = {t0_s:.2} s to {t1_s:.2} s: something magnetic near the bench",
+            frames::norm(d),
+            d[0],
+            d[1],
+            d[2]
+        ),
+    };
+    format!(
+        "{what}; after modelling, held-out residual {:.3} → {:.3} µT, noise floor {floor_ut:.3} µT",
+        holdout.0, holdout.1
+    )
+}
+
+/// Why two effects explain the same residual, and the experiment that would tell them apart.
+pub(crate) fn separate(a: EffectId, b: EffectId) -> (String, String) {
+    use EffectId::*;
+    let pair = |x: EffectId, y: EffectId| (a == x && b == y) || (a == y && b == x);
+    let (why, experiment) = if pair(TemperatureBias, BiasDrift) || pair(TemperatureScale, BiasDrift)
+    {
+        (
+            "the temperature changed almost in step with time, so a temperature effect and a drift over time fit \
+             the same residual",
+            "let the temperature change without a trend in time: warm the sensor and let it cool again while \
+             recording, or hold it at one temperature for as long",
+        )
+    } else if pair(TimeLag, RateCoupling) {
+        (
+            "one delay on all axes and a delay per axis fit the same residual",
+            "rotate quickly about each sensor axis in turn: one timing offset delays all axes alike, per-axis \
+             couplings do not",
+        )
+    } else if pair(FieldDrift, BiasDrift) || pair(FieldDrift, TemperatureBias) {
+        (
+            "the attitude changed too little during the drift to tell a world-fixed change from a sensor-fixed one",
+            "turn the sensor through many orientations while the drift goes on (a world-fixed drift rotates with \
+             the attitude, a sensor-fixed one does not), or return to one reference pose at the start and the end",
+        )
+    } else if pair(TemperatureBias, TemperatureScale) {
+        (
+            "an offset and a scale change with temperature fit the same residual",
+            "vary the temperature while the sensor points in several directions: a scale change grows with the \
+             field along each axis, an offset does not",
+        )
+    } else if pair(BiasStep, Disturbance) || pair(BiasStep, BiasDrift) {
+        (
+            "a lasting jump and a transient or gradual change fit the same residual",
+            "record longer after the event, turning the sensor: a step stays and turns with the sensor",
+        )
+    } else {
+        (
+            "both fit the same residual about equally well",
+            "record again varying the channel one effect depends on while holding the other's steady",
+        )
+    };
+    (format!("{} and {}: {why}", a, b), experiment.to_owned())
+}

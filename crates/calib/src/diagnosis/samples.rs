@@ -1,0 +1,160 @@
+//! The samples the diagnosis works on: the rows where every channel it uses is present, with the field, its rate
+//! and the attitude worked out once.
+
+use crate::effects::{Context, WorldContext};
+use crate::frames::{self, Mat3};
+use crate::model::{Inputs, Model};
+
+use super::{DiagnosisInput, Reference};
+
+/// Per-sample data, for the rows the diagnosis uses.
+pub(crate) struct Samples {
+    /// Raw reading, µT.
+    pub raw: Vec<[f64; 3]>,
+    /// The field in calibrated sensor axes: the reference (vector) or the base-calibrated reading (scalar).
+    pub field: Vec<[f64; 3]>,
+    /// Its rate of change, µT/s (zero without time or reference).
+    pub rate: Vec<[f64; 3]>,
+    /// Sensor → NED, when the attitude is known.
+    pub rot: Option<Vec<Mat3>>,
+    /// The assumed world field, when the attitude is known.
+    pub field_ned_ut: Option<[f64; 3]>,
+    /// Time, s (zero without a time column).
+    pub t: Vec<f64>,
+    pub has_time: bool,
+    /// Temperature, °C (NaN without one).
+    pub temp: Vec<f64>,
+    pub has_temp: bool,
+    /// Currents, row-major with `n_currents` per sample.
+    pub currents: Vec<f64>,
+    pub n_currents: usize,
+    /// Rows of the recording left out (a channel missing).
+    pub left_out: usize,
+}
+
+impl Samples {
+    pub fn len(&self) -> usize {
+        self.raw.len()
+    }
+
+    /// The effect context of sample `i`.
+    pub fn context(&self, i: usize) -> Context<'_> {
+        Context {
+            t_s: self.t[i],
+            temp_c: self.temp[i],
+            currents_a: &self.currents[i * self.n_currents..(i + 1) * self.n_currents],
+            field_ut: self.field[i],
+            field_rate_ut_per_s: self.rate[i],
+            world: match (&self.rot, self.field_ned_ut) {
+                (Some(r), Some(f)) => Some(WorldContext {
+                    sensor_to_ned: r[i],
+                    field_ned_ut: f,
+                }),
+                _ => None,
+            },
+        }
+    }
+
+    /// Gathers the usable rows. `base` calibrates readings for the scalar method's field estimate.
+    pub fn gather(input: &DiagnosisInput<'_>, base: &Model) -> Samples {
+        let n = input.raw_ut.len();
+        let expected: Option<Vec<[f64; 3]>> = match &input.reference {
+            Reference::Attitude { quat, field_ned_ut } => Some(
+                quat.iter()
+                    .map(|q| frames::expected_sensor_field(*q, *field_ned_ut))
+                    .collect(),
+            ),
+            Reference::Field { expected_ut } => Some(expected_ut.to_vec()),
+            Reference::Magnitude { .. } => None,
+        };
+        let finite3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
+        let usable = |i: usize| {
+            finite3(&input.raw_ut[i])
+                && expected.as_ref().is_none_or(|e| finite3(&e[i]))
+                && input.t_s.is_none_or(|t| t[i].is_finite())
+                && input.temp_c.is_none_or(|t| t[i].is_finite())
+                && input.currents.iter().all(|(_, c)| c[i].is_finite())
+        };
+        let index: Vec<usize> = (0..n).filter(|&i| usable(i)).collect();
+        let raw: Vec<[f64; 3]> = index.iter().map(|&i| input.raw_ut[i]).collect();
+        let field: Vec<[f64; 3]> = match &expected {
+            Some(e) => index.iter().map(|&i| e[i]).collect(),
+            None => raw.iter().map(|m| base.apply(*m, &Inputs::NONE)).collect(),
+        };
+        let t: Vec<f64> = match input.t_s {
+            Some(t) => index.iter().map(|&i| t[i]).collect(),
+            None => vec![0.0; index.len()],
+        };
+        let rate = match (&expected, input.t_s) {
+            (Some(_), Some(_)) => field_rate(&field, &t, &index),
+            _ => vec![[0.0; 3]; index.len()],
+        };
+        let (rot, field_ned_ut) = match &input.reference {
+            Reference::Attitude { quat, field_ned_ut } => (
+                Some(
+                    index
+                        .iter()
+                        .map(|&i| frames::quat_to_matrix(quat[i]))
+                        .collect(),
+                ),
+                Some(*field_ned_ut),
+            ),
+            _ => (None, None),
+        };
+        let n_currents = input.currents.len();
+        let mut currents = Vec::with_capacity(index.len() * n_currents);
+        for &i in &index {
+            currents.extend(input.currents.iter().map(|(_, c)| c[i]));
+        }
+        Samples {
+            left_out: n - index.len(),
+            temp: match input.temp_c {
+                Some(tc) => index.iter().map(|&i| tc[i]).collect(),
+                None => vec![f64::NAN; index.len()],
+            },
+            has_temp: input.temp_c.is_some(),
+            has_time: input.t_s.is_some(),
+            raw,
+            field,
+            rate,
+            rot,
+            field_ned_ut,
+            t,
+            currents,
+            n_currents,
+        }
+    }
+}
+
+/// Central differences of the field over time; one-sided at the ends and at gaps (consecutive usable rows that are
+/// not consecutive in the recording, or more than five typical steps apart), zero where neither side is usable.
+fn field_rate(field: &[[f64; 3]], t: &[f64], index: &[usize]) -> Vec<[f64; 3]> {
+    let n = field.len();
+    let mut steps: Vec<f64> = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
+    let typical = if steps.is_empty() {
+        f64::INFINITY
+    } else {
+        let mid = steps.len() / 2;
+        *steps.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    let linked = |a: usize, b: usize| {
+        index[b] == index[a] + 1 && t[b] - t[a] > 0.0 && t[b] - t[a] <= 5.0 * typical
+    };
+    (0..n)
+        .map(|i| {
+            let prev = i > 0 && linked(i - 1, i);
+            let next = i + 1 < n && linked(i, i + 1);
+            let (a, b) = match (prev, next) {
+                (true, true) => (i - 1, i + 1),
+                (true, false) => (i - 1, i),
+                (false, true) => (i, i + 1),
+                (false, false) => return [0.0; 3],
+            };
+            frames::scale(frames::sub(field[b], field[a]), 1.0 / (t[b] - t[a]))
+        })
+        .collect()
+}

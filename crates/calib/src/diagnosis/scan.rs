@@ -1,0 +1,255 @@
+//! Scans for the effects with a time hyperparameter: where a bias step happened, and when a transient disturbance
+//! started and ended. Each scan maximises a likelihood-ratio statistic (in units of the noise variance, so a
+//! difference of 1 is one σ of evidence) over every split, from prefix sums in O(N), and reports the profile interval
+//! (the times whose statistic is within 1 of the best) as the hyperparameter's uncertainty.
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::frames::{self, Mat3};
+
+/// A scanned hyperparameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Scan {
+    /// Sample index where the step starts (or the window starts).
+    pub start: usize,
+    /// One past the window's last sample (the step: the end of the recording).
+    pub end: usize,
+    /// The best statistic, σ² units.
+    pub stat: f64,
+    /// Profile interval of the start, sample indices.
+    pub start_interval: (usize, usize),
+    /// Profile interval of the end, sample indices.
+    pub end_interval: (usize, usize),
+}
+
+/// Fewest samples on either side of a split.
+const MIN_SIDE: usize = 10;
+
+/// The most likely bias step in a vector residual `e` (body axes). A step `s` at `k` makes the residual's mean
+/// differ by `s` after `k`; with the offset `b` absorbing the overall mean, the statistic is
+/// `k(N−k)/N·|mean_after − mean_before|² / σ²`.
+pub(crate) fn step_vector(e: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
+    let n = e.len();
+    if n < 2 * MIN_SIDE {
+        return None;
+    }
+    let total = e.iter().fold([0.0; 3], |s, v| frames::add(s, *v));
+    let mut prefix = [0.0; 3];
+    let mut stats = vec![f64::NEG_INFINITY; n];
+    for k in 1..n {
+        prefix = frames::add(prefix, e[k - 1]);
+        if k < MIN_SIDE || n - k < MIN_SIDE {
+            continue;
+        }
+        let (kf, nf) = (k as f64, n as f64);
+        let before = frames::scale(prefix, 1.0 / kf);
+        let after = frames::scale(frames::sub(total, prefix), 1.0 / (nf - kf));
+        let d = frames::sub(after, before);
+        stats[k] = kf * (nf - kf) / nf * frames::dot(d, d) / sigma2;
+    }
+    best_split(&stats, n)
+}
+
+/// The most likely bias step in a scalar (magnitude) residual `rho` with field directions `u`: the step shows as
+/// `u·s`, and the offset `b` absorbs `u·b'` throughout.
+pub(crate) fn step_scalar(rho: &[f64], u: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
+    let n = rho.len();
+    if n < 2 * MIN_SIDE {
+        return None;
+    }
+    let (mut m_all, mut v_all) = (Matrix3::zeros(), Vector3::zeros());
+    for (r, d) in rho.iter().zip(u) {
+        let d = Vector3::from(*d);
+        m_all += d * d.transpose();
+        v_all += d * *r;
+    }
+    let m_inv = m_all.try_inverse()?;
+    let (mut m_tail, mut v_tail) = (m_all, v_all);
+    let mut stats = vec![f64::NEG_INFINITY; n];
+    for k in 1..n {
+        let d = Vector3::from(u[k - 1]);
+        m_tail -= d * d.transpose();
+        v_tail -= d * rho[k - 1];
+        if k < MIN_SIDE || n - k < MIN_SIDE {
+            continue;
+        }
+        // Partitioned regression: the step's part after removing what the offset explains.
+        let s = m_tail - m_tail * m_inv * m_tail;
+        let r = v_tail - m_tail * m_inv * v_all;
+        if let Some(s_inv) = s.try_inverse() {
+            stats[k] = r.dot(&(s_inv * r)) / sigma2;
+        }
+    }
+    best_split(&stats, n)
+}
+
+fn best_split(stats: &[f64], n: usize) -> Option<Scan> {
+    let (k, &stat) = stats.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
+    if !stat.is_finite() {
+        return None;
+    }
+    let interval = profile(stats, k, stat);
+    Some(Scan {
+        start: k,
+        end: n,
+        stat,
+        start_interval: interval,
+        end_interval: (n, n),
+    })
+}
+
+/// The contiguous run of indices around `best` whose statistic is within 1 of the maximum.
+fn profile(stats: &[f64], best: usize, max: f64) -> (usize, usize) {
+    let within = |i: usize| stats[i] >= max - 1.0;
+    let mut lo = best;
+    while lo > 0 && within(lo - 1) {
+        lo -= 1;
+    }
+    let mut hi = best;
+    while hi + 1 < stats.len() && within(hi + 1) {
+        hi += 1;
+    }
+    (lo, hi)
+}
+
+/// Candidate boundaries on the coarse grid of the window scan.
+const WINDOW_GRID: usize = 400;
+/// A disturbance covers at most this fraction of the recording (a longer one is a field error, not a transient).
+const WINDOW_MAX_FRACTION: f64 = 0.8;
+
+/// The most likely window of a world-fixed disturbance in a vector residual `e`, seen through the attitude `rot`:
+/// in NED the disturbance is a constant `d` inside the window, so the statistic is `|Σ_window R·e|² / (L·σ²)`.
+/// Coarse grid first, then each boundary refined at sample resolution.
+pub(crate) fn window(e: &[[f64; 3]], rot: &[Mat3], sigma2: f64) -> Option<Scan> {
+    let n = e.len();
+    if n < 4 * MIN_SIDE {
+        return None;
+    }
+    let mut prefix = vec![[0.0; 3]; n + 1];
+    for i in 0..n {
+        prefix[i + 1] = frames::add(prefix[i], frames::mat_vec(&rot[i], e[i]));
+    }
+    let max_len = (WINDOW_MAX_FRACTION * n as f64) as usize;
+    let stat = |a: usize, b: usize| {
+        if b <= a + MIN_SIDE || b - a > max_len {
+            return f64::NEG_INFINITY;
+        }
+        let s = frames::sub(prefix[b], prefix[a]);
+        frames::dot(s, s) / ((b - a) as f64 * sigma2)
+    };
+    let g = WINDOW_GRID.min(n);
+    let grid: Vec<usize> = (0..=g).map(|i| i * n / g).collect();
+    let mut best = (0, 0, f64::NEG_INFINITY);
+    for (ia, &a) in grid.iter().enumerate() {
+        for &b in &grid[ia + 1..] {
+            let s = stat(a, b);
+            if s > best.2 {
+                best = (a, b, s);
+            }
+        }
+    }
+    if !best.2.is_finite() {
+        return None;
+    }
+    let step = n.div_ceil(g);
+    // Refine the start with the end fixed, then the end with the start fixed.
+    let (mut a, mut b) = (best.0, best.1);
+    let starts: Vec<f64> = (0..n)
+        .map(|x| {
+            if x + step >= a && x <= a + step {
+                stat(x, b)
+            } else {
+                f64::NEG_INFINITY
+            }
+        })
+        .collect();
+    a = argmax(&starts);
+    let ends: Vec<f64> = (0..=n)
+        .map(|x| {
+            if x + step >= b && x <= b + step {
+                stat(a, x)
+            } else {
+                f64::NEG_INFINITY
+            }
+        })
+        .collect();
+    b = argmax(&ends);
+    let best_stat = stat(a, b);
+    let starts: Vec<f64> = (0..n).map(|x| stat(x, b)).collect();
+    let ends: Vec<f64> = (0..=n).map(|x| stat(a, x)).collect();
+    Some(Scan {
+        start: a,
+        end: b,
+        stat: best_stat,
+        start_interval: profile(&starts, a, best_stat),
+        end_interval: profile(&ends, b, best_stat),
+    })
+}
+
+fn argmax(v: &[f64]) -> usize {
+    v.iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(i: usize) -> f64 {
+        // Deterministic, zero-mean, unit-variance-ish pseudo noise.
+        let x = ((i as f64 * 12.9898).sin() * 43758.5453).fract();
+        (x - 0.5) * 3.46
+    }
+
+    #[test]
+    fn finds_a_step_in_a_vector_residual() {
+        let e: Vec<[f64; 3]> = (0..2000)
+            .map(|i| {
+                [
+                    noise(i) * 0.1 + if i >= 1234 { 0.05 } else { 0.0 },
+                    noise(i + 7) * 0.1,
+                    noise(i + 13) * 0.1,
+                ]
+            })
+            .collect();
+        let s = step_vector(&e, 0.01).unwrap();
+        assert!((s.start as i64 - 1234).abs() < 60, "{s:?}");
+        assert!(s.start_interval.0 <= s.start && s.start <= s.start_interval.1);
+    }
+
+    #[test]
+    fn finds_a_world_fixed_window_through_a_rotating_attitude() {
+        let n = 3000;
+        let rot: Vec<Mat3> = (0..n)
+            .map(|i| {
+                let a = i as f64 * 0.01;
+                [
+                    [a.cos(), -a.sin(), 0.0],
+                    [a.sin(), a.cos(), 0.0],
+                    [0.0, 0.0, 1.0],
+                ]
+            })
+            .collect();
+        let d = [0.08, 0.0, 0.0];
+        let e: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let dist = if (1000..1600).contains(&i) {
+                    frames::mat_t_vec(&rot[i], d)
+                } else {
+                    [0.0; 3]
+                };
+                frames::add(
+                    dist,
+                    [noise(i) * 0.1, noise(i + 3) * 0.1, noise(i + 5) * 0.1],
+                )
+            })
+            .collect();
+        let s = window(&e, &rot, 0.01).unwrap();
+        assert!(
+            (s.start as i64 - 1000).abs() < 40 && (s.end as i64 - 1600).abs() < 40,
+            "{s:?}"
+        );
+    }
+}

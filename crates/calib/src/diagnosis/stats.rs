@@ -1,0 +1,264 @@
+//! Normal equations accumulated per contiguous time block: every least-squares question the diagnosis asks (a fit
+//! with any subset of columns, its residual, its held-out residual on a block, how much of a column the base model
+//! absorbs) is answered from these sums without another pass over the samples.
+
+use nalgebra::{DMatrix, DVector};
+
+/// `XᵀX`, `Xᵀy` and `yᵀy` of the rows of one block.
+#[derive(Clone, Debug)]
+pub(crate) struct BlockStats {
+    pub xtx: DMatrix<f64>,
+    pub xty: DVector<f64>,
+    pub yty: f64,
+    /// Rows accumulated.
+    pub rows: usize,
+    /// Samples accumulated (a vector sample gives three rows).
+    pub samples: usize,
+}
+
+impl BlockStats {
+    pub fn new(columns: usize) -> BlockStats {
+        BlockStats {
+            xtx: DMatrix::zeros(columns, columns),
+            xty: DVector::zeros(columns),
+            yty: 0.0,
+            rows: 0,
+            samples: 0,
+        }
+    }
+
+    /// Adds one row given as (column, value) pairs.
+    pub fn add_row(&mut self, entries: &[(usize, f64)], y: f64) {
+        for (a, &(i, xi)) in entries.iter().enumerate() {
+            self.xty[i] += xi * y;
+            for &(j, xj) in &entries[a..] {
+                self.xtx[(i, j)] += xi * xj;
+            }
+        }
+        self.yty += y * y;
+        self.rows += 1;
+    }
+
+    /// Mirrors the accumulated upper triangle into the lower one.
+    pub fn symmetrise(&mut self) {
+        let n = self.xtx.nrows();
+        for i in 0..n {
+            for j in 0..i {
+                self.xtx[(i, j)] = self.xtx[(j, i)];
+            }
+        }
+    }
+
+    pub fn add(&mut self, other: &BlockStats) {
+        self.xtx += &other.xtx;
+        self.xty += &other.xty;
+        self.yty += other.yty;
+        self.rows += other.rows;
+        self.samples += other.samples;
+    }
+}
+
+/// A least-squares solution on a subset of columns.
+#[derive(Clone, Debug)]
+pub(crate) struct Solution {
+    /// The columns, in order.
+    pub columns: Vec<usize>,
+    /// Coefficients, one per column.
+    pub beta: DVector<f64>,
+    /// `(X_SᵀX_S)⁻¹` (for standard errors).
+    pub inverse: DMatrix<f64>,
+    /// Residual sum of squares on the fitted rows.
+    pub rss: f64,
+}
+
+/// The blocks of a problem and the correction to apply to the normal matrix when fitting (errors in variables).
+#[derive(Clone, Debug)]
+pub(crate) struct Problem {
+    pub blocks: Vec<BlockStats>,
+    pub total: BlockStats,
+    /// Per block, a diagonal correction subtracted from `XᵀX` when fitting (not when evaluating residuals).
+    pub correction: Vec<DVector<f64>>,
+}
+
+impl Problem {
+    pub fn new(mut blocks: Vec<BlockStats>, correction: Vec<DVector<f64>>) -> Problem {
+        for b in &mut blocks {
+            b.symmetrise();
+        }
+        let mut total = BlockStats::new(blocks[0].xty.len());
+        for b in &blocks {
+            total.add(b);
+        }
+        Problem {
+            blocks,
+            total,
+            correction,
+        }
+    }
+
+    /// Least squares on `columns` over every block except `held_out`; with `corrected`, the errors-in-variables
+    /// correction is subtracted from the normal matrix (for parameter estimates; tests compare plain least squares).
+    /// Columns without support in the fitted blocks (zero throughout them, e.g. a transient inside the held-out
+    /// block) are left out of that fit, their coefficient zero.
+    pub fn solve(
+        &self,
+        columns: &[usize],
+        held_out: Option<usize>,
+        corrected: bool,
+    ) -> Option<Solution> {
+        let fitted = || {
+            self.blocks
+                .iter()
+                .enumerate()
+                .filter(move |(b, _)| Some(*b) != held_out)
+        };
+        let supported: Vec<usize> = columns
+            .iter()
+            .copied()
+            .filter(|&i| fitted().map(|(_, block)| block.xtx[(i, i)]).sum::<f64>() > 1e-300)
+            .collect();
+        let k = supported.len();
+        let mut xtx = DMatrix::zeros(k, k);
+        let mut xty = DVector::zeros(k);
+        let mut yty = 0.0;
+        for (b, block) in fitted() {
+            for (r, &i) in supported.iter().enumerate() {
+                xty[r] += block.xty[i];
+                for (s, &j) in supported.iter().enumerate() {
+                    xtx[(r, s)] += block.xtx[(i, j)];
+                }
+                if corrected {
+                    xtx[(r, r)] -= self.correction[b][i];
+                }
+            }
+            yty += block.yty;
+        }
+        let inverse = xtx
+            .clone()
+            .cholesky()
+            .map(|c| c.inverse())
+            .or_else(|| xtx.clone().try_inverse())?;
+        let beta = &inverse * &xty;
+        // RSS of the fitted rows with these coefficients (the uncorrected quadratic form: actual residuals).
+        let mut rss = yty - 2.0 * beta.dot(&xty);
+        for (_, block) in fitted() {
+            for (r, &i) in supported.iter().enumerate() {
+                for (s, &j) in supported.iter().enumerate() {
+                    rss += beta[r] * block.xtx[(i, j)] * beta[s];
+                }
+            }
+        }
+        Some(Solution {
+            columns: supported,
+            beta,
+            inverse,
+            rss: rss.max(0.0),
+        })
+    }
+
+    /// Residual sum of squares of block `b` under a solution.
+    pub fn block_rss(&self, b: usize, sol: &Solution) -> f64 {
+        let block = &self.blocks[b];
+        let k = sol.columns.len();
+        let mut quad = 0.0;
+        let mut lin = 0.0;
+        for r in 0..k {
+            let i = sol.columns[r];
+            lin += sol.beta[r] * block.xty[i];
+            for s in 0..k {
+                quad += sol.beta[r] * block.xtx[(i, sol.columns[s])] * sol.beta[s];
+            }
+        }
+        (block.yty - 2.0 * lin + quad).max(0.0)
+    }
+
+    /// Blocked cross-validation: the held-out residual sum of squares, summed over the blocks, each predicted by a
+    /// fit on the others.
+    pub fn cv_rss(&self, columns: &[usize]) -> Option<f64> {
+        (0..self.blocks.len())
+            .map(|b| {
+                self.solve(columns, Some(b), true)
+                    .map(|s| self.block_rss(b, &s))
+            })
+            .sum()
+    }
+
+    /// Of the columns `cand`, the largest fraction of any combination that is NOT explained by the columns `base`:
+    /// 0 means the base absorbs the candidate entirely.
+    pub fn unabsorbed_fraction(&self, base: &[usize], cand: &[usize]) -> f64 {
+        let x = &self.total.xtx;
+        let pick = |rows: &[usize], cols: &[usize]| {
+            DMatrix::from_fn(rows.len(), cols.len(), |r, s| x[(rows[r], cols[s])])
+        };
+        let gg = pick(cand, cand);
+        let bb = pick(base, base);
+        let bg = pick(base, cand);
+        let Some(bb_inv) = bb.clone().cholesky().map(|c| c.inverse()) else {
+            return 0.0;
+        };
+        let residual = &gg - bg.transpose() * bb_inv * &bg;
+        // Generalised eigenproblem residual·v = λ·gg·v, via gg^(-1/2).
+        let Some(chol) = gg.clone().cholesky() else {
+            return 0.0;
+        };
+        let l_inv = chol
+            .l()
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::zeros(cand.len(), cand.len()));
+        let m = &l_inv * residual * l_inv.transpose();
+        let sym = (&m + m.transpose()) / 2.0;
+        sym.symmetric_eigenvalues()
+            .iter()
+            .copied()
+            .fold(0.0, f64::max)
+            .clamp(0.0, 1.0)
+    }
+
+    /// How the base columns take up a candidate: the coefficients of regressing the candidate's columns on the base.
+    pub fn absorption_coefficients(&self, base: &[usize], cand: &[usize]) -> Option<DMatrix<f64>> {
+        let x = &self.total.xtx;
+        let bb = DMatrix::from_fn(base.len(), base.len(), |r, s| x[(base[r], base[s])]);
+        let bg = DMatrix::from_fn(base.len(), cand.len(), |r, s| x[(base[r], cand[s])]);
+        Some(bb.cholesky()?.solve(&bg))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line_problem() -> Problem {
+        // y = 2 + 3x over x = 0..40, four blocks of ten, plus a useless constant-ish column that duplicates column 0.
+        let mut blocks = vec![BlockStats::new(3); 4];
+        for i in 0..40 {
+            let x = i as f64;
+            let noise = if i % 2 == 0 { 0.1 } else { -0.1 };
+            blocks[i / 10].add_row(&[(0, 1.0), (1, x), (2, 2.0)], 2.0 + 3.0 * x + noise);
+            blocks[i / 10].samples += 1;
+        }
+        Problem::new(blocks, vec![DVector::zeros(3); 4])
+    }
+
+    #[test]
+    fn solves_predicts_and_cross_validates() {
+        let p = line_problem();
+        let s = p.solve(&[0, 1], None, false).unwrap();
+        assert!((s.beta[0] - 2.0).abs() < 0.05 && (s.beta[1] - 3.0).abs() < 0.01);
+        assert!((s.rss - 40.0 * 0.01).abs() < 0.01, "{}", s.rss);
+        let total: f64 = (0..4).map(|b| p.block_rss(b, &s)).sum();
+        assert!((total - s.rss).abs() < 1e-6);
+        let cv = p.cv_rss(&[0, 1]).unwrap();
+        assert!(cv > s.rss && cv < 2.0 * s.rss, "{cv}");
+        let intercept_only = p.cv_rss(&[0]).unwrap();
+        assert!(intercept_only > 100.0 * cv);
+    }
+
+    #[test]
+    fn a_duplicate_column_is_fully_absorbed() {
+        let p = line_problem();
+        assert!(p.unabsorbed_fraction(&[0, 1], &[2]) < 1e-9);
+        assert!(p.unabsorbed_fraction(&[0], &[1]) > 0.2);
+        let coef = p.absorption_coefficients(&[0, 1], &[2]).unwrap();
+        assert!((coef[(0, 0)] - 2.0).abs() < 1e-9 && coef[(1, 0)].abs() < 1e-9);
+    }
+}
