@@ -232,40 +232,67 @@ fn follows(res: &[Vec<f64>], channels: &[(&str, Vec<f64>)]) -> (Option<String>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    fn noisy(n: usize, seed: u64) -> Vec<Vec<f64>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut g = move || -> f64 { StandardNormal.sample(&mut rng) };
+        (0..n)
+            .map(|_| vec![0.1 * g(), 0.1 * g(), 0.1 * g()])
+            .collect()
+    }
 
     #[test]
-    fn finds_the_axis_the_span_and_the_channel() {
+    fn finds_the_axis_and_the_span_of_a_burst() {
         let n = 3000;
         let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.01).collect();
-        let temp: Vec<f64> = (0..n).map(|i| 20.0 + (i as f64 * 0.003).sin()).collect();
-        let wiggle = |i: usize| ((i as f64 * 7.31).sin() * 1e4).fract() - 0.5;
-        let res: Vec<Vec<f64>> = (0..n)
-            .map(|i| {
-                let burst = if (1000..1500).contains(&i) { 0.5 } else { 0.0 };
-                vec![
-                    0.3 * wiggle(i) + 0.2 * (temp[i] - 20.0) + burst,
-                    0.3 * wiggle(i + 1),
-                    0.3 * wiggle(i + 2),
-                ]
-            })
-            .collect();
-        let floor = [0.087; 3];
-        let dirs = vec![[1.0, 0.0, 0.0]; n];
+        let mut res = noisy(n, 4);
+        for r in &mut res[1000..1500] {
+            r[0] += 0.5;
+        }
         let loc = locate(
             &res,
-            &floor,
+            &[0.1; 3],
             Some(&t),
-            &dirs,
-            &[("temp", temp.clone()), ("t", t.clone())],
+            &vec![[1.0, 0.0, 0.0]; n],
+            &[("t", t.clone())],
         );
         assert_eq!(loc.axes, vec!["x"]);
+        assert_eq!(loc.segments.len(), 1, "{:?}", loc.segments);
+        let s = loc.segments[0];
         assert!(
-            loc.segments
-                .iter()
-                .any(|s| (s.t0_s - 10.0).abs() < 0.5 && (s.t1_s - 15.0).abs() < 0.5),
-            "{:?}",
-            loc.segments
+            (s.t0_s - 10.0).abs() < 0.3 && (s.t1_s - 15.0).abs() < 0.3,
+            "{s:?}"
         );
+    }
+
+    #[test]
+    fn finds_the_channel_and_the_orientation() {
+        let n = 3000;
+        let temp: Vec<f64> = (0..n).map(|i| 20.0 + (i as f64 * 0.003).sin()).collect();
+        let mut res = noisy(n, 5);
+        // Along +Y the residual follows the temperature; the field points along +Y in the first third.
+        let dirs: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                if i < n / 3 {
+                    [0.0, 1.0, 0.0]
+                } else {
+                    [0.0, 0.0, -1.0]
+                }
+            })
+            .collect();
+        for i in 0..n / 3 {
+            res[i][1] += 0.3 * (temp[i] - 20.0);
+        }
+        let loc = locate(&res, &[0.1; 3], None, &dirs, &[("temp", temp.clone())]);
         assert_eq!(loc.channel.as_deref(), Some("temp"));
+        assert_eq!(loc.orientation.map(|o| o.direction), Some("+Y"));
+        let clean = locate(&noisy(n, 6), &[0.1; 3], None, &dirs, &[("temp", temp)]);
+        assert!(
+            clean.axes.is_empty() && clean.channel.is_none() && clean.orientation.is_none(),
+            "{clean:?}"
+        );
     }
 }

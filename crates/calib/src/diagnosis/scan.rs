@@ -196,24 +196,23 @@ fn argmax(v: &[f64]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
 
-    fn noise(i: usize) -> f64 {
-        // Deterministic, zero-mean, unit-variance-ish pseudo noise.
-        let x = ((i as f64 * 12.9898).sin() * 43758.5453).fract();
-        (x - 0.5) * 3.46
+    /// `n` triples of Gaussian noise of standard deviation 0.1.
+    fn noise(n: usize, seed: u64) -> Vec<[f64; 3]> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut g = move || -> f64 { StandardNormal.sample(&mut rng) };
+        (0..n).map(|_| [0.1 * g(), 0.1 * g(), 0.1 * g()]).collect()
     }
 
     #[test]
     fn finds_a_step_in_a_vector_residual() {
-        let e: Vec<[f64; 3]> = (0..2000)
-            .map(|i| {
-                [
-                    noise(i) * 0.1 + if i >= 1234 { 0.05 } else { 0.0 },
-                    noise(i + 7) * 0.1,
-                    noise(i + 13) * 0.1,
-                ]
-            })
-            .collect();
+        let mut e = noise(2000, 1);
+        for v in &mut e[1234..] {
+            v[0] += 0.05;
+        }
         let s = step_vector(&e, 0.01).unwrap();
         assert!((s.start as i64 - 1234).abs() < 60, "{s:?}");
         assert!(s.start_interval.0 <= s.start && s.start <= s.start_interval.1);
@@ -232,20 +231,10 @@ mod tests {
                 ]
             })
             .collect();
-        let d = [0.08, 0.0, 0.0];
-        let e: Vec<[f64; 3]> = (0..n)
-            .map(|i| {
-                let dist = if (1000..1600).contains(&i) {
-                    frames::mat_t_vec(&rot[i], d)
-                } else {
-                    [0.0; 3]
-                };
-                frames::add(
-                    dist,
-                    [noise(i) * 0.1, noise(i + 3) * 0.1, noise(i + 5) * 0.1],
-                )
-            })
-            .collect();
+        let mut e = noise(n, 2);
+        for i in 1000..1600 {
+            e[i] = frames::add(e[i], frames::mat_t_vec(&rot[i], [0.08, 0.0, 0.0]));
+        }
         let s = window(&e, &rot, 0.01).unwrap();
         assert!(
             (s.start as i64 - 1000).abs() < 40 && (s.end as i64 - 1600).abs() < 40,
