@@ -12,6 +12,7 @@ use magcal_app::export::{ExportFormat, export};
 use magcal_app::field::{FieldArgs, resolve};
 use magcal_app::files::write_atomic;
 use magcal_app::params::ParamsFile;
+use magcal_app::plots::write_plots;
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::writeback::write_back_calibration;
@@ -68,6 +69,10 @@ struct Args {
     /// Skip the diagnosis (what physics the 12-parameter model leaves out).
     #[arg(long)]
     no_diagnose: bool,
+    /// Write SVG plots of the diagnosis here: residual against time before and after, against the blamed channel,
+    /// and over the sphere of field directions.
+    #[arg(long, value_name = "DIR", conflicts_with = "no_diagnose")]
+    plots: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -143,8 +148,8 @@ fn run(args: Args) -> anyhow::Result<()> {
         MethodArg::Vector => Method::Vector,
         MethodArg::Scalar => Method::Scalar,
     };
-    let cal =
-        calibrate(&rec, method, field, !args.no_diagnose).with_context(|| format!("{name}: cannot calibrate"))?;
+    let cal = calibrate(&rec, method, field, !args.no_diagnose)
+        .with_context(|| format!("{name}: cannot calibrate"))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
 
     let text = summary(&cal, &name);
@@ -158,6 +163,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         let report = Report::new(&cal, &name, &channels);
         write_atomic(path, report.to_json().as_bytes())
             .with_context(|| format!("writing the report {}", path.display()))?;
+    }
+    if let (Some(dir), Some(d)) = (&args.plots, &cal.diagnosis) {
+        for path in write_plots(dir, d)? {
+            eprintln!("wrote {}", path.display());
+        }
     }
     let model = cal.model();
     if let Some(path) = &args.out {

@@ -113,8 +113,11 @@ impl Calibration {
             .map_or(self.residual_rms_ut, |d| d.extended.rms_ut)
     }
 
-    /// Standard errors of `A` and `b`.
+    /// Standard errors of the final model's `A` and `b`.
     pub fn standard_errors(&self) -> ([[f64; 3]; 3], [f64; 3]) {
+        if let Some(se) = self.diagnosis.as_ref().and_then(|d| d.extended.se) {
+            return se;
+        }
         match &self.fit {
             Fit::Vector(v) => (v.a_se, v.b_se_ut),
             Fit::Scalar(s) => (s.a_se, s.b_se_ut),

@@ -6,10 +6,12 @@
 
 pub mod calibrate;
 pub mod device;
+pub mod effect_spec;
 pub mod export;
 pub mod field;
 pub mod files;
 pub mod params;
+pub mod plots;
 pub mod record;
 pub mod report;
 pub mod seed;

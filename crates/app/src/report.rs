@@ -3,8 +3,10 @@
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
 //! 12-parameter fit.
 
+use magcal_calib::diagnosis::{Diagnosis, ParamValue, Verdict};
 use magcal_calib::noise::NoiseSource;
 use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
 
 use crate::calibrate::{Calibration, Fit};
 use crate::params::Correction;
@@ -32,6 +34,195 @@ pub struct Report {
     pub field: FieldReport,
     /// Warnings and what the method cannot see.
     pub notes: Vec<String>,
+    /// What the base model leaves out (absent with `--no-diagnose`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diagnosis: Option<DiagnosisReport>,
+}
+
+/// The diagnosis, as other tools read it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisReport {
+    /// `consistent` or `mismatch`.
+    pub verdict: String,
+    /// Effects found and modelled, in the order chosen.
+    pub effects: Vec<EffectReport>,
+    /// Effects that explain the same residual.
+    pub ambiguous: Vec<AmbiguityReport>,
+    /// Effects this recording cannot test, with the reason (absorbed ones included).
+    pub untestable: Vec<UntestableReport>,
+    /// Where the base model's residual departs from the noise.
+    pub located: LocatedReport,
+    /// The noise floor the residuals are compared with, µT.
+    pub noise_floor_ut: f64,
+    /// Samples the diagnosis used.
+    pub samples_used: usize,
+    /// Rows left out for a missing channel.
+    pub samples_left_out: usize,
+}
+
+/// One effect found.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EffectReport {
+    /// The effect id (`time_lag`, …).
+    pub id: String,
+    /// Parameters by name, each with `<name>_se` beside it where estimated.
+    pub params: Map<String, Value>,
+    /// Residual RMS before adding it, µT.
+    pub rms_before_ut: f64,
+    /// Residual RMS after, µT.
+    pub rms_after_ut: f64,
+    /// Held-out RMS before, µT.
+    pub holdout_rms_before_ut: f64,
+    /// Held-out RMS after, µT.
+    pub holdout_rms_after_ut: f64,
+    /// Evidence (Wald statistic minus the complexity penalty).
+    pub evidence: f64,
+    /// The finding in words.
+    pub explanation: String,
+}
+
+/// Two effects that explain the same residual.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AmbiguityReport {
+    /// The effect modelled and the alternative.
+    pub ids: Vec<String>,
+    /// Why they cannot be told apart here.
+    pub why: String,
+    /// The experiment that would separate them.
+    pub experiment: String,
+}
+
+/// An effect that could not be tested.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UntestableReport {
+    /// The effect id.
+    pub id: String,
+    /// Why.
+    pub why: String,
+}
+
+/// Where the mismatch is.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LocatedReport {
+    /// Axes above the noise (`x`, `y`, `z`, or `|B|`).
+    pub axes: Vec<String>,
+    /// Residual RMS per axis, µT.
+    pub axis_rms_ut: Vec<f64>,
+    /// Time spans above the noise.
+    pub segments: Vec<SegmentReport>,
+    /// The channel the residual follows.
+    pub channel: Option<String>,
+    /// The share of the residual's variance it explains.
+    pub channel_share: f64,
+    /// The orientation where the residual is largest, if it stands out.
+    pub orientation: Option<OrientationReport>,
+}
+
+/// A time span.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SegmentReport {
+    /// Start, s.
+    pub t0_s: f64,
+    /// End, s.
+    pub t1_s: f64,
+    /// RMS inside, µT.
+    pub rms_ut: f64,
+}
+
+/// An orientation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OrientationReport {
+    /// The sensor axis the field points along.
+    pub direction: String,
+    /// Residual RMS there, µT.
+    pub rms_ut: f64,
+    /// Elsewhere, µT.
+    pub elsewhere_rms_ut: f64,
+}
+
+fn json_value(v: &ParamValue) -> Value {
+    match v {
+        ParamValue::Number(x) => serde_json::json!(x),
+        ParamValue::Vector(x) => serde_json::json!(x),
+        ParamValue::Text(t) => Value::String(t.clone()),
+    }
+}
+
+impl DiagnosisReport {
+    /// The report of a diagnosis.
+    pub fn new(d: &Diagnosis) -> DiagnosisReport {
+        DiagnosisReport {
+            verdict: match d.verdict {
+                Verdict::Consistent => "consistent",
+                Verdict::Mismatch => "mismatch",
+            }
+            .to_owned(),
+            effects: d
+                .effects
+                .iter()
+                .map(|e| {
+                    let mut params = Map::new();
+                    for p in &e.params {
+                        params.insert(p.name.to_owned(), json_value(&p.value));
+                        if let Some(se) = &p.se {
+                            params.insert(format!("{}_se", p.name), json_value(se));
+                        }
+                    }
+                    EffectReport {
+                        id: e.effect.id().as_str().to_owned(),
+                        params,
+                        rms_before_ut: e.rms_before_ut,
+                        rms_after_ut: e.rms_after_ut,
+                        holdout_rms_before_ut: e.holdout_rms_before_ut,
+                        holdout_rms_after_ut: e.holdout_rms_after_ut,
+                        evidence: e.evidence,
+                        explanation: e.explanation.clone(),
+                    }
+                })
+                .collect(),
+            ambiguous: d
+                .ambiguous
+                .iter()
+                .map(|a| AmbiguityReport {
+                    ids: a.ids.iter().map(|i| i.as_str().to_owned()).collect(),
+                    why: a.why.clone(),
+                    experiment: a.experiment.clone(),
+                })
+                .collect(),
+            untestable: d
+                .untestable
+                .iter()
+                .map(|u| UntestableReport {
+                    id: u.id.as_str().to_owned(),
+                    why: u.why.clone(),
+                })
+                .collect(),
+            located: LocatedReport {
+                axes: d.located.axes.iter().map(|a| (*a).to_owned()).collect(),
+                axis_rms_ut: d.located.axis_rms_ut.clone(),
+                segments: d
+                    .located
+                    .segments
+                    .iter()
+                    .map(|s| SegmentReport {
+                        t0_s: s.t0_s,
+                        t1_s: s.t1_s,
+                        rms_ut: s.rms_ut,
+                    })
+                    .collect(),
+                channel: d.located.channel.clone(),
+                channel_share: d.located.channel_share,
+                orientation: d.located.orientation.map(|o| OrientationReport {
+                    direction: o.direction.to_owned(),
+                    rms_ut: o.rms_ut,
+                    elsewhere_rms_ut: o.elsewhere_rms_ut,
+                }),
+            },
+            noise_floor_ut: d.noise_floor_ut,
+            samples_used: d.samples_used,
+            samples_left_out: d.samples_left_out,
+        }
+    }
 }
 
 /// `B = A·B̂ + b − Σ corrections`.
@@ -61,6 +252,9 @@ pub struct CalibrationReport {
 pub struct ResidualReport {
     /// RMS per axis (vector) or of |B| − F (scalar), µT.
     pub rms_ut: f64,
+    /// Held-out RMS (blocked cross-validation), µT, when diagnosed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout_rms_ut: Option<f64>,
     /// The noise floor in calibrated units, µT.
     pub noise_floor_ut: f64,
     /// RMS per calibrated axis (vector method), µT.
@@ -78,6 +272,9 @@ pub struct BaseReport {
     pub b_ut: [f64; 3],
     /// Its residual RMS, µT.
     pub rms_ut: f64,
+    /// Its held-out RMS, µT, when diagnosed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout_rms_ut: Option<f64>,
 }
 
 /// The raw noise floor.
@@ -128,6 +325,18 @@ pub struct FieldReport {
     pub source: String,
 }
 
+/// RMS per component of per-sample residuals.
+fn per_axis_rms(res: &[Vec<f64>]) -> [f64; 3] {
+    let n = res.len().max(1) as f64;
+    std::array::from_fn(|j| {
+        (res.iter()
+            .map(|r| r.get(j).map_or(0.0, |v| v * v))
+            .sum::<f64>()
+            / n)
+            .sqrt()
+    })
+}
+
 impl Report {
     /// The report of a calibration of `recording`.
     pub fn new(cal: &Calibration, recording: &str, channels: &[String]) -> Report {
@@ -163,15 +372,33 @@ impl Report {
                     Fit::Vector(_) => None,
                 },
             },
-            residual: ResidualReport {
-                rms_ut: cal.residual_rms_ut,
-                noise_floor_ut: cal.noise_floor_ut,
-                rms_axis_ut,
+            residual: match &cal.diagnosis {
+                Some(d) => ResidualReport {
+                    rms_ut: d.extended.rms_ut,
+                    holdout_rms_ut: Some(d.extended.holdout_rms_ut),
+                    noise_floor_ut: d.noise_floor_ut,
+                    rms_axis_ut: rms_axis_ut.map(|_| per_axis_rms(&d.residuals.extended)),
+                },
+                None => ResidualReport {
+                    rms_ut: cal.residual_rms_ut,
+                    holdout_rms_ut: None,
+                    noise_floor_ut: cal.noise_floor_ut,
+                    rms_axis_ut,
+                },
             },
-            base: BaseReport {
-                a: model.a,
-                b_ut: model.b_ut,
-                rms_ut: cal.residual_rms_ut,
+            base: match &cal.diagnosis {
+                Some(d) => BaseReport {
+                    a: d.base.a,
+                    b_ut: d.base.b_ut,
+                    rms_ut: d.base.rms_ut,
+                    holdout_rms_ut: Some(d.base.holdout_rms_ut),
+                },
+                None => BaseReport {
+                    a: model.a,
+                    b_ut: model.b_ut,
+                    rms_ut: cal.residual_rms_ut,
+                    holdout_rms_ut: None,
+                },
             },
             noise: NoiseReport {
                 sigma_ut: cal.noise.sigma_ut,
@@ -201,6 +428,7 @@ impl Report {
                 source: cal.field.source().to_owned(),
             },
             notes: cal.notes.clone(),
+            diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
         }
     }
 

@@ -2,6 +2,8 @@
 
 use std::fmt::Write;
 
+use magcal_calib::diagnosis::{Diagnosis, Verdict};
+
 use crate::calibrate::{Calibration, Method};
 
 /// The summary of a calibration of `recording`.
@@ -67,12 +69,14 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
         Method::Vector => "per axis",
         _ => "of |B|",
     };
+    let (rms, floor) = match &cal.diagnosis {
+        Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
+        None => (cal.residual_rms_ut, cal.noise_floor_ut),
+    };
     let _ = writeln!(
         out,
-        "  residual RMS {:.3} µT {what}, noise floor {:.3} µT (×{:.2})",
-        cal.residual_rms_ut,
-        cal.noise_floor_ut,
-        cal.residual_rms_ut / cal.noise_floor_ut
+        "  residual RMS {rms:.3} µT {what}, noise floor {floor:.3} µT (×{:.2})",
+        rms / floor
     );
     let cov = match &cal.fit {
         crate::calibrate::Fit::Vector(v) => v.coverage,
@@ -88,6 +92,87 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
     );
     for note in &cal.notes {
         let _ = writeln!(out, "  note: {note}");
+    }
+    if let Some(d) = &cal.diagnosis {
+        out += &diagnosis(d);
+    }
+    out
+}
+
+/// The diagnosis in a few lines.
+fn diagnosis(d: &Diagnosis) -> String {
+    let mut out = String::new();
+    let verdict = match d.verdict {
+        Verdict::Consistent => {
+            "consistent: the residual is noise; nothing this recording can show is left out"
+        }
+        Verdict::Mismatch if d.effects.is_empty() => {
+            "mismatch: the residual is above the noise, and no effect of the \
+             catalogue explains it"
+        }
+        Verdict::Mismatch => "mismatch",
+    };
+    let _ = writeln!(out, "diagnosis: {verdict}");
+    let l = &d.located;
+    if !l.axes.is_empty()
+        || !l.segments.is_empty()
+        || l.channel.is_some()
+        || l.orientation.is_some()
+    {
+        let mut parts = Vec::new();
+        if !l.axes.is_empty() {
+            parts.push(format!("axes {}", l.axes.join(", ")));
+        }
+        if !l.segments.is_empty() {
+            let spans: Vec<String> = l
+                .segments
+                .iter()
+                .map(|s| format!("{:.1}–{:.1} s", s.t0_s, s.t1_s))
+                .collect();
+            parts.push(format!("spans {}", spans.join(", ")));
+        }
+        if let Some(o) = l.orientation {
+            parts.push(format!(
+                "worst with the field along {} ({:.3} against {:.3} µT)",
+                o.direction, o.rms_ut, o.elsewhere_rms_ut
+            ));
+        }
+        if let Some(c) = &l.channel {
+            parts.push(format!(
+                "follows {c} ({:.0} % of the residual's variance)",
+                100.0 * l.channel_share
+            ));
+        }
+        let _ = writeln!(out, "  located: {}", parts.join("; "));
+    }
+    for e in &d.effects {
+        let _ = writeln!(out, "  found {}: {}", e.effect.id(), e.explanation);
+    }
+    for a in &d.ambiguous {
+        let _ = writeln!(
+            out,
+            "  ambiguous: {}; to separate them: {}",
+            a.why, a.experiment
+        );
+    }
+    if !d.effects.is_empty() {
+        let _ = writeln!(
+            out,
+            "  model: residual {:.3} → {:.3} µT, held-out {:.3} → {:.3} µT, noise floor {:.3} µT",
+            d.base.rms_ut,
+            d.extended.rms_ut,
+            d.base.holdout_rms_ut,
+            d.extended.holdout_rms_ut,
+            d.noise_floor_ut
+        );
+    }
+    let untestable: Vec<String> = d
+        .untestable
+        .iter()
+        .map(|u| format!("{} ({})", u.id, u.why))
+        .collect();
+    if !untestable.is_empty() {
+        let _ = writeln!(out, "  not tested: {}", untestable.join("; "));
     }
     out
 }

@@ -156,10 +156,29 @@ pub struct FitSummary {
     pub a: Mat3,
     /// `b`, µT.
     pub b_ut: [f64; 3],
+    /// Standard errors of `A` and `b` (vector method; the scalar method's come from its own fit).
+    pub se: Option<(Mat3, [f64; 3])>,
     /// Residual RMS (per axis, or of |B|), µT.
     pub rms_ut: f64,
     /// Held-out residual RMS, µT.
     pub holdout_rms_ut: f64,
+}
+
+/// Per-sample residuals before and after, for plots: one component per calibrated axis (vector) or one (|B|).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Residuals {
+    /// The recording rows used.
+    pub rows: Vec<usize>,
+    /// Time, s (zero without a time column).
+    pub t_s: Vec<f64>,
+    /// The field direction in sensor axes.
+    pub direction: Vec<[f64; 3]>,
+    /// Residual of the base fit, µT.
+    pub base: Vec<Vec<f64>>,
+    /// Residual of the extended fit, µT.
+    pub extended: Vec<Vec<f64>>,
+    /// The channels the residual was compared with (`temp`, `i_<name>`, `t`, `rotation_rate`), per sample.
+    pub channels: Vec<(String, Vec<f64>)>,
 }
 
 /// What the diagnosis found.
@@ -187,6 +206,8 @@ pub struct Diagnosis {
     pub samples_used: usize,
     /// See `samples_used`.
     pub samples_left_out: usize,
+    /// Per-sample residuals before and after.
+    pub residuals: Residuals,
 }
 
 /// Diagnoses a recording against its base fit `base` (the linear model from [`crate::vector`] or [`crate::scalar`]).
@@ -462,7 +483,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         });
     }
 
-    let directions = unit.clone();
+    let directions = unit;
     let mut channels: Vec<(&str, Vec<f64>)> = Vec::new();
     if samples.has_temp {
         channels.push(("temp", samples.temp.clone()));
@@ -496,6 +517,15 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         &directions,
         &channels,
     );
+    // The extended fit's residual per sample, from the effects' own definitions.
+    let extended: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            let ctx = samples.context(i);
+            let delta = effects.iter().fold([0.0; 3], |acc, f| frames::add(acc, f.effect.perturbation_ut(&ctx)));
+            let cal = frames::sub(frames::add(frames::mat_vec(&ext_a, samples.raw[i]), ext_b), delta);
+            if vector { frames::sub(cal, samples.field[i]).to_vec() } else { vec![frames::norm(cal) - field_ut] }
+        })
+        .collect();
     let unexplained = rms(sel.last.rss) > 1.2 * noise_floor_ut && !located.axes.is_empty();
     let verdict = if effects.is_empty() && !unexplained {
         Verdict::Consistent
@@ -511,12 +541,14 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         base: FitSummary {
             a: base_a,
             b_ut: base_b,
+            se: vector.then(|| linear_se(&sel.base, rows, raw_mean)),
             rms_ut: rms(sel.base.rss),
             holdout_rms_ut: rms(sel.base_cv),
         },
         extended: FitSummary {
             a: ext_a,
             b_ut: ext_b,
+            se: vector.then(|| linear_se(&sel.last, rows, raw_mean)),
             rms_ut: rms(sel.last.rss),
             holdout_rms_ut: rms(sel.last_cv),
         },
@@ -524,7 +556,38 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         noise_floor_ut,
         samples_used: n,
         samples_left_out: samples.left_out,
+        residuals: Residuals {
+            rows: samples.rows,
+            t_s: samples.t,
+            direction: directions,
+            base: residual,
+            extended,
+            channels: channels.into_iter().map(|(name, v)| (name.to_owned(), v)).collect(),
+        },
     })
+}
+
+/// Standard errors of `A` and `b` from a vector-method solution on centred readings: `b = b' − A·mean`, so
+/// `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the covariance of row `j`'s `(a_j, b'_j)`.
+fn linear_se(sol: &stats::Solution, rows: f64, raw_mean: [f64; 3]) -> (Mat3, [f64; 3]) {
+    let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0);
+    let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
+    let cov = |c: usize, d: usize| match (pos(c), pos(d)) {
+        (Some(p), Some(q)) => sol.inverse[(p, q)] * s2,
+        _ => 0.0,
+    };
+    let a_se: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| cov(4 * j + k, 4 * j + k).sqrt()));
+    let b_se = std::array::from_fn(|j| {
+        let g = [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0];
+        let mut v = 0.0;
+        for r in 0..4 {
+            for c in 0..4 {
+                v += g[r] * cov(4 * j + r, 4 * j + c) * g[c];
+            }
+        }
+        v.max(0.0).sqrt()
+    });
+    (a_se, b_se)
 }
 
 /// Index pairs of the scalar method's symmetric `A` parameters (as in [`crate::scalar`]).

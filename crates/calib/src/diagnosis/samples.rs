@@ -9,6 +9,8 @@ use super::{DiagnosisInput, Reference};
 
 /// Per-sample data, for the rows the diagnosis uses.
 pub(crate) struct Samples {
+    /// Row index in the recording.
+    pub rows: Vec<usize>,
     /// Raw reading, µT.
     pub raw: Vec<[f64; 3]>,
     /// The field in calibrated sensor axes: the reference (vector) or the base-calibrated reading (scalar).
@@ -114,6 +116,7 @@ impl Samples {
             },
             has_temp: input.temp_c.is_some(),
             has_time: input.t_s.is_some(),
+            rows: index,
             raw,
             field,
             rate,
