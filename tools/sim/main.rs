@@ -6,6 +6,8 @@ use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use magcal_app::effect_spec::{self, Defaults};
 use magcal_app::files::write_atomic;
+use magcal_calib::effects::EffectId;
+use magcal_sim::study;
 use magcal_sim::{
     AttitudeOutput, ChipModel, CurrentProfile, Scenario, SensorTruth, TemperatureProfile,
     Trajectory, simulate, stream_rng,
@@ -63,7 +65,11 @@ struct Args {
     /// "time_lag:lag_s=0.01" or "temperature_bias:coef_ut_per_c=0.05,0,0" (repeatable).
     #[arg(long, value_name = "SPEC")]
     effect: Vec<String>,
-    /// Write the truth (A, b, effects) to this TOML file.
+    /// Inject an effect of the catalogue in a random physical shape (drawn from --seed), scaled to SIZE µT RMS per
+    /// axis over the recording: ID:SIZE (repeatable).
+    #[arg(long, value_name = "ID:SIZE_UT")]
+    effect_rms: Vec<String>,
+    /// Write the truth (A, b, noise, effects as specs) to this TOML file.
     #[arg(long, value_name = "PATH")]
     truth: Option<PathBuf>,
 }
@@ -172,7 +178,7 @@ fn main() -> anyhow::Result<()> {
     let names: Vec<String> = s.currents.iter().map(|c| c.name.clone()).collect();
     let defaults = Defaults {
         t_ref_c: s.temperature.map_or(25.0, |t| t.start_c),
-        field_drift_t_ref_s: magcal_sim::study::duration_s(&s) / 2.0,
+        field_drift_t_ref_s: study::duration_s(&s) / 2.0,
         currents: &names,
     };
     s.effects = args
@@ -180,12 +186,19 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .map(|e| effect_spec::parse(e, &defaults))
         .collect::<Result<_, _>>()?;
+    for spec in &args.effect_rms {
+        let (id, size) = spec.split_once(':').with_context(|| format!("--effect-rms {spec:?}: expected ID:SIZE_UT"))?;
+        let id = EffectId::parse(id).with_context(|| format!("--effect-rms {spec:?}: unknown effect {id:?}"))?;
+        let size: f64 = size.parse().with_context(|| format!("--effect-rms {spec:?}: {size:?} is not a size in µT"))?;
+        let shape = study::random_effect(id, &s, args.seed);
+        s.effects.push(study::scale_to_rms(&s, &shape, size));
+    }
     let run = simulate(&s)?;
     run.recording
         .write(&args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;
     if let Some(path) = &args.truth {
-        let effects: Vec<String> = s.effects.iter().map(|e| format!("{e:?}")).collect();
+        let effects: Vec<String> = s.effects.iter().map(|e| effect_spec::format(e, &names)).collect();
         let text = format!(
             "# magcal-sim truth for {}\nseed = {}\nA = {:?}\nb_ut = {:?}\nnoise_ut = {:?}\neffects = {:?}\n",
             args.out.display(),

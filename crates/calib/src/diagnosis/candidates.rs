@@ -25,6 +25,38 @@ pub(crate) struct Candidate {
     pub scan: Option<ScanTimes>,
 }
 
+/// The typical time between samples, s.
+fn sample_interval_s(s: &Samples) -> f64 {
+    (s.t[s.len() - 1] - s.t[0]) / (s.len() - 1).max(1) as f64
+}
+
+/// The time of a change at sample `k`: it happened between samples `k − 1` and `k`, and the midpoint is the unbiased
+/// estimate (it gives the same regressor, which switches at sample `k`).
+pub(crate) fn between(s: &Samples, k: usize) -> f64 {
+    match k {
+        0 => s.t[0] - sample_interval_s(s) / 2.0,
+        k if k >= s.len() => s.t[s.len() - 1] + sample_interval_s(s) / 2.0,
+        k => (s.t[k - 1] + s.t[k]) / 2.0,
+    }
+}
+
+/// The profile intervals of a scan in seconds (the end's only for a window).
+pub(crate) fn scan_times(s: &Samples, scan: &Scan, window: bool) -> ScanTimes {
+    ScanTimes {
+        start_s: (
+            between(s, scan.start_interval.0),
+            between(s, scan.start_interval.1),
+        ),
+        end_s: window.then(|| {
+            (
+                between(s, scan.end_interval.0),
+                between(s, scan.end_interval.1),
+            )
+        }),
+        sample_interval_s: sample_interval_s(s),
+    }
+}
+
 /// The profile intervals of a scanned hyperparameter, s.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct ScanTimes {
@@ -127,14 +159,7 @@ pub(crate) fn candidates(
     let max_currents = crate::model::MAX_CORRECTIONS - 5;
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let t_ref_s = mean(&s.t);
-    let sample_interval_s = (s.t[s.len() - 1] - s.t[0]) / (s.len() - 1).max(1) as f64;
-    // A change at sample k happened between samples k − 1 and k: the midpoint is the unbiased estimate of its time
-    // (and gives the same regressor, which switches at sample k).
-    let between = |k: usize| match k {
-        0 => s.t[0] - sample_interval_s / 2.0,
-        k if k >= s.len() => s.t[s.len() - 1] + sample_interval_s / 2.0,
-        k => (s.t[k - 1] + s.t[k]) / 2.0,
-    };
+    let between = |k: usize| between(s, k);
 
     const NO_TEMP: &str = "the recording has no temp column";
     if s.has_temp {
@@ -269,11 +294,7 @@ pub(crate) fn candidates(
                         None,
                         None,
                         WINDOW_SCAN_PENALTY,
-                        Some(ScanTimes {
-                            start_s: (between(w.start_interval.0), between(w.start_interval.1)),
-                            end_s: Some((between(w.end_interval.0), between(w.end_interval.1))),
-                            sample_interval_s,
-                        }),
+                        Some(scan_times(s, &w, true)),
                     );
                 }
                 (true, None) => refuse(
@@ -305,14 +326,7 @@ pub(crate) fn candidates(
                 None,
                 None,
                 STEP_SCAN_PENALTY,
-                Some(ScanTimes {
-                    start_s: (
-                        between(step.start_interval.0),
-                        between(step.start_interval.1),
-                    ),
-                    end_s: None,
-                    sample_interval_s,
-                }),
+                Some(scan_times(s, &step, false)),
             );
         } else {
             refuse(

@@ -413,12 +413,14 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
 
     let mut model = Model::linear(ext_a, ext_b);
     let mut effects = Vec::new();
+    // The chosen effects with their fitted parameters (steps replaced later — a lag generalised to per-axis lags —
+    // are not in the final model).
+    let mut chosen: Vec<(&select::Step, Candidate, Effect, [f64; 3])> = Vec::new();
     for step in &sel.steps {
-        let cand = &cands[step.cand];
-        // Steps replaced later (a lag generalised to per-axis lags) are not in the final model.
         if sel.steps.iter().any(|s| s.replaced == Some(step.cand)) {
             continue;
         }
+        let cand = cands[step.cand].clone();
         let mut p = [0.0; 3];
         let mut se = [0.0; 3];
         for k in 0..cand.n {
@@ -427,6 +429,74 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             se[k] = s;
         }
         let effect = cand.template.with_params(p);
+        chosen.push((step, cand, effect, se));
+    }
+    // A scanned time was located on the base residual, which the base fit had partly bent to the effect; locate it
+    // again on the extended fit's residual with every other effect removed.
+    for k in 0..chosen.len() {
+        let scanned = matches!(
+            chosen[k].2,
+            Effect::BiasStep { .. } | Effect::Disturbance { .. }
+        );
+        if !scanned {
+            continue;
+        }
+        let partial: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let ctx = samples.context(i);
+                let others = chosen
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != k)
+                    .fold([0.0; 3], |acc, (_, c)| {
+                        frames::add(acc, c.2.perturbation_ut(&ctx))
+                    });
+                frames::sub(
+                    frames::add(frames::mat_vec(&ext_a, samples.raw[i]), ext_b),
+                    others,
+                )
+            })
+            .collect();
+        let rescan = match (chosen[k].2, vector) {
+            (Effect::BiasStep { .. }, true) => {
+                let e: Vec<[f64; 3]> = (0..n)
+                    .map(|i| frames::sub(partial[i], samples.field[i]))
+                    .collect();
+                scan::step_vector(&e, last.rss / rows)
+            }
+            (Effect::BiasStep { .. }, false) => {
+                let rho: Vec<f64> = partial
+                    .iter()
+                    .map(|c| frames::norm(*c) - field_ut)
+                    .collect();
+                scan::step_scalar(&rho, &unit, last.rss / rows)
+            }
+            (_, _) => samples.rot.as_ref().and_then(|rot| {
+                let e: Vec<[f64; 3]> = (0..n)
+                    .map(|i| frames::sub(partial[i], samples.field[i]))
+                    .collect();
+                scan::window(&e, rot, last.rss / rows)
+            }),
+        };
+        if let Some(w) = rescan {
+            let (_, cand, effect, _) = &mut chosen[k];
+            cand.scan = Some(candidates::scan_times(
+                &samples,
+                &w,
+                matches!(effect, Effect::Disturbance { .. }),
+            ));
+            match effect {
+                Effect::BiasStep { t_s, .. } => *t_s = candidates::between(&samples, w.start),
+                Effect::Disturbance { t0_s, t1_s, .. } => {
+                    *t0_s = candidates::between(&samples, w.start);
+                    *t1_s = candidates::between(&samples, w.end);
+                }
+                _ => {}
+            }
+        }
+    }
+    for (step, cand, effect, se) in &chosen {
+        let effect = *effect;
         if effect.id().frame() == Frame::Body {
             model
                 .add_correction(effect)
@@ -441,7 +511,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                 noise_floor_ut,
                 field_ut,
             ),
-            params: params_of(&effect, se, cand, last.rss / rows),
+            params: params_of(&effect, *se, cand, last.rss / rows),
             effect,
             channel: cand.channel.clone(),
             rms_before_ut: rms(step.rss.0),
@@ -521,9 +591,18 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     let extended: Vec<Vec<f64>> = (0..n)
         .map(|i| {
             let ctx = samples.context(i);
-            let delta = effects.iter().fold([0.0; 3], |acc, f| frames::add(acc, f.effect.perturbation_ut(&ctx)));
-            let cal = frames::sub(frames::add(frames::mat_vec(&ext_a, samples.raw[i]), ext_b), delta);
-            if vector { frames::sub(cal, samples.field[i]).to_vec() } else { vec![frames::norm(cal) - field_ut] }
+            let delta = effects.iter().fold([0.0; 3], |acc, f| {
+                frames::add(acc, f.effect.perturbation_ut(&ctx))
+            });
+            let cal = frames::sub(
+                frames::add(frames::mat_vec(&ext_a, samples.raw[i]), ext_b),
+                delta,
+            );
+            if vector {
+                frames::sub(cal, samples.field[i]).to_vec()
+            } else {
+                vec![frames::norm(cal) - field_ut]
+            }
         })
         .collect();
     let unexplained = rms(sel.last.rss) > 1.2 * noise_floor_ut && !located.axes.is_empty();
@@ -562,7 +641,10 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             direction: directions,
             base: residual,
             extended,
-            channels: channels.into_iter().map(|(name, v)| (name.to_owned(), v)).collect(),
+            channels: channels
+                .into_iter()
+                .map(|(name, v)| (name.to_owned(), v))
+                .collect(),
         },
     })
 }
@@ -576,7 +658,8 @@ fn linear_se(sol: &stats::Solution, rows: f64, raw_mean: [f64; 3]) -> (Mat3, [f6
         (Some(p), Some(q)) => sol.inverse[(p, q)] * s2,
         _ => 0.0,
     };
-    let a_se: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| cov(4 * j + k, 4 * j + k).sqrt()));
+    let a_se: Mat3 =
+        std::array::from_fn(|j| std::array::from_fn(|k| cov(4 * j + k, 4 * j + k).sqrt()));
     let b_se = std::array::from_fn(|j| {
         let g = [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0];
         let mut v = 0.0;

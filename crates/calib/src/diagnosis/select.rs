@@ -135,21 +135,23 @@ pub(crate) fn select(
         })
     };
     loop {
-        let trials: Vec<Trial> = eligible
+        let significant: Vec<Trial> = eligible
             .iter()
             .copied()
             .filter(|c| !chosen.contains(c))
             .filter_map(|c| try_add(&columns, &chosen, c))
-            .filter(|t| t.evidence > 0.0 && t.cv < current_cv)
+            .filter(|t| t.evidence > 0.0)
             .collect();
-        let Some(best) = trials
+        let Some(best) = significant
             .iter()
+            .filter(|t| t.cv < current_cv)
             .max_by(|a, b| a.evidence.total_cmp(&b.evidence))
         else {
             break;
         };
-        // Alternatives nearly as good that the chosen effect explains away are ambiguous with it.
-        for alt in trials.iter().filter(|t| t.cand != best.cand) {
+        // An alternative about as strong as the chosen one (or stronger, but not borne out on held-out data) that
+        // the chosen one explains away, or that fails cross-validation, explains the same residual: ambiguous.
+        for alt in significant.iter().filter(|t| t.cand != best.cand) {
             let close =
                 best.evidence - alt.evidence < AMBIGUITY_MARGIN + AMBIGUITY_SHARE * best.evidence;
             let nested = cands[alt.cand].supersedes == Some(cands[best.cand].id())
@@ -159,7 +161,7 @@ pub(crate) fn select(
                 with_best.push(best.cand);
                 let explained =
                     try_add(&best.columns, &with_best, alt.cand).is_none_or(|t| t.evidence <= 0.0);
-                if explained {
+                if explained || alt.cv >= current_cv {
                     ambiguous.push((best.cand, alt.cand));
                 }
             }
