@@ -8,8 +8,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
-use magcal_app::record::sim::{FIELD_NED_UT, TruthFile};
-use magcal_app::record::{RecordOptions, RecordSummary, Routine, Stop, record, ui};
+use magcal_app::record::sim::TruthFile;
+use magcal_app::record::{
+    RecordOptions, RecordSummary, Routine, Stop, device_metadata, record, ui,
+};
 use magcal_recording::{Date, Location};
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
@@ -158,17 +160,8 @@ fn run(args: Args) -> anyhow::Result<()> {
         });
         opts.meta.date = Some(date);
     }
-    opts.meta
-        .other
-        .push(("device".to_owned(), spec.to_string()));
+    opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     if let DeviceSpec::Sim { chip } = spec {
-        if opts.meta.field_ned_ut.is_none() && opts.meta.location.is_none() {
-            opts.meta.field_ned_ut = Some(FIELD_NED_UT);
-        }
-        opts.meta.other.push((
-            "simulated".to_owned(),
-            format!("magcal-record {spec}, seed {}", args.sim_seed),
-        ));
         if let Some(path) = &args.truth {
             TruthFile::of(chip, args.sim_seed)
                 .write(path)

@@ -19,6 +19,7 @@ use magcal_driver::{ChipKind, Error as ChipError, HardIronOffset, Lis2mdl, Magne
 use magcal_mockhw::{SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
+use crate::calibrate::{Calibration, Fit};
 use crate::device::DeviceSpec;
 use crate::record::sim::bench_config;
 
@@ -67,13 +68,37 @@ pub enum WriteBackError {
     },
 }
 
+/// Writes a fitted calibration's `A` and `b` to the device and verifies it; the field magnitude is the one the fit
+/// used (for a scalar fit without one, the fitted radius). Body-fixed corrections in the model stay in the
+/// parameters file: no device here can hold them, and a line says so.
+pub fn write_back_calibration(
+    spec: &DeviceSpec,
+    cal: &Calibration,
+) -> Result<Vec<String>, WriteBackError> {
+    let model = cal.model();
+    let field_ut = cal.field.magnitude().or(match &cal.fit {
+        Fit::Scalar(s) => Some(s.field_ut),
+        Fit::Vector(_) => None,
+    });
+    let mut lines = write_back(spec, &model.a, &model.b_ut, field_ut)?;
+    let corrections = model.corrections().count();
+    if corrections > 0 {
+        lines.push(format!(
+            "  the model's {corrections} body-fixed correction(s) cannot be held by the device: apply them from the \
+             parameters file"
+        ));
+    }
+    Ok(lines)
+}
+
 /// Writes the calibration `B = A·raw + b` (µT) to the device and verifies it. `field_ut` is the field magnitude the
-/// calibration maps onto (MotionCal's packet carries it). Returns lines saying what was done.
+/// calibration maps onto, which MotionCal's packet carries (needed for serial devices only). Returns lines saying
+/// what was done.
 pub fn write_back(
     spec: &DeviceSpec,
     a: &[[f64; 3]; 3],
     b_ut: &[f64; 3],
-    field_ut: f64,
+    field_ut: Option<f64>,
 ) -> Result<Vec<String>, WriteBackError> {
     let device = spec.to_string();
     let unsendable = |why: String| WriteBackError::Unsendable {
@@ -84,6 +109,13 @@ pub fn write_back(
     let offset_ut = model.hard_iron_ut;
     match spec {
         DeviceSpec::Serial(s) => {
+            let field_ut = field_ut.ok_or_else(|| {
+                unsendable(
+                    "MotionCal's packet carries the field magnitude, which this fit does not know (give \
+                     --field-ned, --location/--date or --field-ut)"
+                        .to_owned(),
+                )
+            })?;
             let packet = CalibrationPacket::magnetic(offset_ut, field_ut, model.soft_iron)
                 .map_err(|e| unsendable(e.to_string()))?;
             let mut port = s.open().map_err(|e| WriteBackError::Device {
@@ -129,7 +161,7 @@ pub fn write_back(
                 })?;
             let address = address.unwrap_or(ChipKind::Lis2mdl.default_address());
             let held = write_lis2mdl_offset(bus, address, &device, offset_ut)?;
-            Ok(offset_lines(&device, held))
+            Ok(offset_lines(&device, offset_ut, held))
         }
         DeviceSpec::Sim {
             chip: ChipKind::Lis2mdl,
@@ -151,7 +183,7 @@ pub fn write_back(
                 &device,
                 offset_ut,
             )?;
-            Ok(offset_lines(&device, held))
+            Ok(offset_lines(&device, offset_ut, held))
         }
         DeviceSpec::I2c { chip, .. } | DeviceSpec::Sim { chip } => {
             Err(WriteBackError::NoOffsetRegisters {
@@ -162,11 +194,12 @@ pub fn write_back(
     }
 }
 
-fn offset_lines(device: &str, held: [f64; 3]) -> Vec<String> {
+fn offset_lines(device: &str, offset_ut: [f64; 3], held: [f64; 3]) -> Vec<String> {
     vec![
         format!(
-            "{device}: wrote the hard-iron offset [{:.2}, {:.2}, {:.2}] µT to the offset registers; read back the same",
-            held[0], held[1], held[2]
+            "{device}: wrote the hard-iron offset [{:.3}, {:.3}, {:.3}] µT to the offset registers; they read back \
+             [{:.3}, {:.3}, {:.3}] µT (0.15 µT steps)",
+            offset_ut[0], offset_ut[1], offset_ut[2], held[0], held[1], held[2]
         ),
         "  the chip now subtracts it from every sample: readings from it need only A (b = 0). It clears the \
          registers at reset and power-up, so firmware must write them at start-up."

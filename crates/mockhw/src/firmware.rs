@@ -21,6 +21,8 @@ use magcal_sim::bench::{Bench, BenchConfig};
 
 /// Length of a MotionCal calibration packet, bytes.
 const PACKET_BYTES: usize = 68;
+/// How long the board stays connected after its last line before it is unplugged.
+const UNPLUG_SETTLE: Duration = Duration::from_millis(200);
 /// The two bytes a packet starts with.
 const PACKET_SIGNATURE: [u8; 2] = [117, 84];
 
@@ -150,6 +152,9 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 break "told to stop".to_owned();
             }
             if self.config.raw_lines.is_some_and(|n| i >= n) {
+                // The cable is pulled a moment after the last line went out: a pseudo-terminal's hang-up discards
+                // what the other side has not read yet, which would lose lines no real board loses.
+                thread::sleep(UNPLUG_SETTLE);
                 break format!("unplugged after {i} Raw: lines");
             }
             let due = Duration::from_secs_f64(i as f64 / self.config.lines_per_wall_s);

@@ -32,6 +32,8 @@ use magcal_driver::serial::GarbageCounts;
 use magcal_recording::{Layout, Metadata, RecordingWriter, Sample};
 use magcal_sim::{CubePose, cube24_poses};
 
+use crate::device::DeviceSpec;
+
 pub use coverage::CoverageMap;
 pub use source::{Reading, Source, SourceError};
 pub use still::StillWindow;
@@ -152,7 +154,11 @@ pub enum RecordError {
         source: std::io::Error,
     },
     /// The device failed; the file keeps what was recorded.
-    #[error("{error}; {} keeps the {kept} samples recorded before", path.display())]
+    #[error(
+        "{error}; {} keeps the {kept} samples recorded before{}",
+        path.display(),
+        garbage.as_deref().map(|g| format!("; garbage lines skipped: {} ({g})", g.total())).unwrap_or_default()
+    )]
     Device {
         /// What the device did.
         error: SourceError,
@@ -160,6 +166,8 @@ pub enum RecordError {
         path: PathBuf,
         /// Rows in the file.
         kept: u64,
+        /// Garbage lines skipped (line streams).
+        garbage: Option<Box<GarbageCounts>>,
     },
     /// The device's outputs stopped changing.
     #[error(
@@ -267,6 +275,22 @@ impl Out {
     }
 }
 
+/// The metadata a recording from `spec` starts with, added to `meta`: the device string; for `sim` devices the
+/// seed, and the simulated bench's world field unless `meta` states the field already.
+pub fn device_metadata(spec: &DeviceSpec, sim_seed: u64, mut meta: Metadata) -> Metadata {
+    meta.other.push(("device".to_owned(), spec.to_string()));
+    if spec.is_sim() {
+        if meta.field_ned_ut.is_none() && meta.location.is_none() {
+            meta.field_ned_ut = Some(sim::FIELD_NED_UT);
+        }
+        meta.other.push((
+            "simulated".to_owned(),
+            format!("magcal-record {spec}, seed {sim_seed}"),
+        ));
+    }
+    meta
+}
+
 /// The prompt for a cube pose.
 pub fn pose_prompt(k: usize, pose: &CubePose) -> String {
     let edge = if pose.face_down.ends_with('X') {
@@ -315,15 +339,11 @@ pub fn record(
     let result = run(source, opts, ui, interrupt, &mut out);
     ui.finish();
     let kept = out.rows();
-    let path = out.path().to_owned();
     let finished = out.finish();
     match (result, finished) {
         (Ok(mut summary), Ok(())) => {
             summary.samples = kept;
             Ok(summary)
-        }
-        (Err(RecordError::Device { error, .. }), _) => {
-            Err(RecordError::Device { error, path, kept })
         }
         (Err(e), _) | (Ok(_), Err(e)) => Err(e),
     }
@@ -355,10 +375,11 @@ fn run(
     let mut manual_take = false;
     let mut saturated_told = 0;
     let t0_s = out.t0_s;
-    let device_failed = |error: SourceError, out: &Out| RecordError::Device {
+    let device_failed = |error: SourceError, out: &Out, source: &dyn Source| RecordError::Device {
         error,
         path: out.path().to_owned(),
         kept: out.rows(),
+        garbage: source.garbage().map(Box::new),
     };
 
     match opts.routine {
@@ -382,7 +403,7 @@ fn run(
         }
         let r = match source.next_reading() {
             Ok(r) => r,
-            Err(e) => return Err(device_failed(e, out)),
+            Err(e) => return Err(device_failed(e, out, source)),
         };
         let t_s = r.t_s - t0_s;
         if t_s > opts.max_duration_s {

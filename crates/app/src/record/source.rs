@@ -229,7 +229,7 @@ where
         let period_s = 1.0 / self.rate_hz;
         let poll_s = period_s / 4.0;
         let give_up_s = (SILENT_PERIODS * period_s).max(1.0);
-        let start_s = self.clock.now_s();
+        let mut start_s = self.clock.now_s();
         loop {
             match self.retried(|m| m.read_ut()) {
                 Ok(m) => {
@@ -249,7 +249,11 @@ where
                     });
                 }
                 Err(ChipError::NotReady) => {}
-                Err(ChipError::Saturated) => self.saturated += 1,
+                Err(ChipError::Saturated) => {
+                    // Measuring, but not a field value: count it and wait for the next.
+                    self.saturated += 1;
+                    start_s = self.clock.now_s();
+                }
                 Err(e) => return Err(self.bus_error(&e)),
             }
             let waited_s = self.clock.now_s() - start_s;
