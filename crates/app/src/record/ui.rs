@@ -106,12 +106,12 @@ impl Ui for TerminalUi {
                 .bar
                 .set_position((100.0 * p.coverage.fraction()).floor() as u64),
         }
-        self.bar.set_prefix(format!(
-            "{:.1} s, {} samples, target {:.0} %",
-            p.t_s,
-            p.samples,
-            100.0 * p.target
-        ));
+        let target = match p.poses {
+            Some(_) => String::new(),
+            None => format!(", target {:.0} %", 100.0 * p.target),
+        };
+        self.bar
+            .set_prefix(format!("{:.1} s, {} samples{target}", p.t_s, p.samples));
         self.bar.set_message(p.coverage.render(5));
     }
 
@@ -120,7 +120,7 @@ impl Ui for TerminalUi {
     }
 
     fn finish(&mut self) {
-        self.bar.finish();
+        self.bar.abandon();
     }
 }
 
