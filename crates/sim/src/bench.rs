@@ -195,16 +195,22 @@ impl Hand {
         self.motion = Motion::Tumble(TumbleRate::draw(rate_rad_s, &mut self.rng));
     }
 
-    /// Moves the sensor from wherever it is at `t_s` to `quat` (sensor → NED) in `duration_s`, then holds it there.
+    /// Moves the sensor from wherever it is at `t_s` to `quat` (sensor → NED) in `duration_s` (at once if not
+    /// positive), then holds it there.
     pub fn move_to(&mut self, t_s: f64, quat: [f64; 4], duration_s: f64) {
         self.advance(t_s);
         let target = unit(quat);
+        if duration_s <= 0.0 {
+            self.quat = target;
+            self.motion = Motion::Still;
+            return;
+        }
         let turn = (self.quat.inverse() * target).scaled_axis();
         self.motion = Motion::Move {
             from: self.quat,
             turn,
             t0_s: self.t_s,
-            t1_s: self.t_s + duration_s.max(0.0),
+            t1_s: self.t_s + duration_s,
         };
     }
 
@@ -439,6 +445,15 @@ mod tests {
         let rms = (sum2 / 2000.0).sqrt();
         assert!((0.4..2.0).contains(&rms), "{rms}");
         assert!(prev.raw_ut[0] != prev.clean_raw_ut[0]);
+    }
+
+    #[test]
+    fn a_move_of_no_duration_is_there_at_once() {
+        let mut bench = Bench::new(BenchConfig::ideal([20.0, 0.0, 45.0], 5)).unwrap();
+        let target = cube24_poses()[4].quat;
+        bench.hand_mut().move_to(0.0, target, 0.0);
+        assert!(angle_deg(bench.sample(0.0).quat, target) < 1e-9);
+        assert!(bench.hand().is_still());
     }
 
     #[test]
