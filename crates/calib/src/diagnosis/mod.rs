@@ -40,10 +40,12 @@ use crate::noise::NoiseFloor;
 use candidates::{Candidate, Offer};
 use samples::Samples;
 use select::{SetAside, select};
-use stats::{BlockStats, Problem};
+use stats::{Batches, BlockStats, Problem};
 
 /// Contiguous time blocks of the cross-validation.
 const CV_BLOCKS: usize = 5;
+/// Contiguous batches for the residual's autocorrelation (method of batch means).
+const AUTOCORRELATION_BATCHES: usize = 100;
 
 /// The reference a recording offers.
 #[derive(Clone, Copy, Debug)]
@@ -283,10 +285,12 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     // Accumulate the normal equations per block.
     let base_cal = |m: [f64; 3]| frames::add(frames::mat_vec(&base.a, m), base.b_ut);
     let mut blocks: Vec<BlockStats> = (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
+    let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
     let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
     let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
     for i in 0..n {
         let block = &mut blocks[i * CV_BLOCKS / n];
+        let batch = i * AUTOCORRELATION_BATCHES / n;
         block.samples += 1;
         let ctx = samples.context(i);
         for (c, cand) in cands.iter().enumerate() {
@@ -302,6 +306,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                     entries.extend((0..cand.n).map(|k| (cand.first + k, -regs[c][k][j])));
                 }
                 block.add_row(&entries, samples.field[i][j]);
+                batches.add_row(batch, j, &entries, samples.field[i][j]);
             }
         } else {
             // ρ + J·Δ − u·G·θ ≈ 0 around the base fit, with the readings centred.
@@ -320,7 +325,9 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             for (c, cand) in cands.iter().enumerate() {
                 entries.extend((0..cand.n).map(|k| (cand.first + k, -frames::dot(u, regs[c][k]))));
             }
-            block.add_row(&entries, -(frames::norm(b) - field_ut));
+            let y = -(frames::norm(b) - field_ut);
+            block.add_row(&entries, y);
+            batches.add_row(batch, 0, &entries, y);
         }
     }
     let correction: Vec<DVector<f64>> = blocks
@@ -337,7 +344,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             c
         })
         .collect();
-    let problem = Problem::new(blocks, correction);
+    let problem = Problem::new(blocks, batches, correction);
     let base_columns: Vec<usize> = (0..n_base).collect();
     let a_columns: Vec<usize> = if vector {
         (0..3)
@@ -346,12 +353,6 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     } else {
         (0..6).collect()
     };
-    let sel = select(&problem, &base_columns, &cands, &a_columns).ok_or(FitError::Singular(
-        "the diagnosis' base problem has no solution",
-    ))?;
-
-    let rows = problem.total.rows as f64;
-    let rms = |rss: f64| (rss / rows).sqrt();
     let noise_floor_ut = if vector {
         input.noise.calibrated_rms_ut(&base.a)
     } else {
@@ -367,11 +368,26 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             / n as f64;
         along.sqrt()
     };
+    let sel = select(
+        &problem,
+        &base_columns,
+        &cands,
+        &a_columns,
+        noise_floor_ut.powi(2),
+    )
+    .ok_or(FitError::Singular(
+        "the diagnosis' base problem has no solution",
+    ))?;
 
+    let rows = problem.total.rows as f64;
+    let rms = |rss: f64| (rss / rows).sqrt();
     // The final joint fit's parameters.
     let last = &sel.last;
     let dof = (rows - last.columns.len() as f64).max(1.0);
-    let sigma2_last = last.rss / dof;
+    // Standard errors allow for residuals that are alike from sample to sample (see `select`): the variance per row
+    // is scaled by the autocorrelation factor.
+    let tau_last = problem.autocorrelation(last);
+    let sigma2_last = last.rss / dof * tau_last;
     let coef = |col: usize| {
         last.columns
             .iter()
@@ -511,7 +527,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                 noise_floor_ut,
                 field_ut,
             ),
-            params: params_of(&effect, *se, cand, last.rss / rows),
+            params: params_of(&effect, *se, cand, last.rss / rows * tau_last),
             effect,
             channel: cand.channel.clone(),
             rms_before_ut: rms(step.rss.0),
@@ -620,14 +636,14 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         base: FitSummary {
             a: base_a,
             b_ut: base_b,
-            se: vector.then(|| linear_se(&sel.base, rows, raw_mean)),
+            se: vector.then(|| linear_se(&problem, &sel.base, rows, raw_mean)),
             rms_ut: rms(sel.base.rss),
             holdout_rms_ut: rms(sel.base_cv),
         },
         extended: FitSummary {
             a: ext_a,
             b_ut: ext_b,
-            se: vector.then(|| linear_se(&sel.last, rows, raw_mean)),
+            se: vector.then(|| linear_se(&problem, &sel.last, rows, raw_mean)),
             rms_ut: rms(sel.last.rss),
             holdout_rms_ut: rms(sel.last_cv),
         },
@@ -649,10 +665,16 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     })
 }
 
-/// Standard errors of `A` and `b` from a vector-method solution on centred readings: `b = b' − A·mean`, so
+/// Standard errors of `A` and `b` from a vector-method solution on centred readings (allowing for autocorrelated
+/// residuals, as the effects' are): `b = b' − A·mean`, so
 /// `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the covariance of row `j`'s `(a_j, b'_j)`.
-fn linear_se(sol: &stats::Solution, rows: f64, raw_mean: [f64; 3]) -> (Mat3, [f64; 3]) {
-    let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0);
+fn linear_se(
+    problem: &Problem,
+    sol: &stats::Solution,
+    rows: f64,
+    raw_mean: [f64; 3],
+) -> (Mat3, [f64; 3]) {
+    let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0) * problem.autocorrelation(sol);
     let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
     let cov = |c: usize, d: usize| match (pos(c), pos(d)) {
         (Some(p), Some(q)) => sol.inverse[(p, q)] * s2,

@@ -58,6 +58,76 @@ impl BlockStats {
     }
 }
 
+/// Per contiguous batch of samples and per row kind (calibrated axis), the sums `Σx` and `Σy`: the residual's batch
+/// means for any coefficients, hence the residual's autocorrelation by the method of batch means.
+#[derive(Clone, Debug)]
+pub(crate) struct Batches {
+    dims: usize,
+    columns: usize,
+    sx: Vec<f64>,
+    sy: Vec<f64>,
+    count: Vec<usize>,
+}
+
+impl Batches {
+    pub fn new(batches: usize, dims: usize, columns: usize) -> Batches {
+        Batches {
+            dims,
+            columns,
+            sx: vec![0.0; batches * dims * columns],
+            sy: vec![0.0; batches * dims],
+            count: vec![0; batches * dims],
+        }
+    }
+
+    /// Adds one row of kind `dim` to batch `batch`.
+    pub fn add_row(&mut self, batch: usize, dim: usize, entries: &[(usize, f64)], y: f64) {
+        let slot = batch * self.dims + dim;
+        for &(i, x) in entries {
+            self.sx[slot * self.columns + i] += x;
+        }
+        self.sy[slot] += y;
+        self.count[slot] += 1;
+    }
+
+    /// The integrated autocorrelation factor of the residual under a solution (`sigma2`: its variance per row):
+    /// `L·Var(batch means)/σ²`, 1 for white noise, larger when neighbouring residuals are alike.
+    pub fn autocorrelation(&self, sol: &Solution, sigma2: f64) -> f64 {
+        let slots = self.count.len();
+        let (mut sum, mut used) = (0.0, 0usize);
+        let mut means = vec![0.0; slots];
+        for (slot, mean) in means.iter_mut().enumerate() {
+            let n = self.count[slot];
+            if n == 0 {
+                continue;
+            }
+            let fitted: f64 = sol
+                .columns
+                .iter()
+                .zip(sol.beta.iter())
+                .map(|(&c, b)| self.sx[slot * self.columns + c] * b)
+                .sum();
+            *mean = (self.sy[slot] - fitted) / n as f64;
+            sum += *mean;
+            used += 1;
+        }
+        if used < 2 || sigma2 <= 0.0 {
+            return 1.0;
+        }
+        let centre = sum / used as f64;
+        let (mut var_sum, mut len_sum) = (0.0, 0.0);
+        for slot in 0..slots {
+            let n = self.count[slot];
+            if n > 0 {
+                var_sum += n as f64 * (means[slot] - centre).powi(2);
+                len_sum += 1.0;
+            }
+        }
+        // Σ n_b·(m_b − m̄)² / (B − 1) estimates L·Var(m_b) for batches of (nearly) equal length.
+        var_sum / (len_sum - 1.0) / sigma2
+    }
+}
+
 /// A least-squares solution on a subset of columns.
 #[derive(Clone, Debug)]
 pub(crate) struct Solution {
@@ -75,13 +145,18 @@ pub(crate) struct Solution {
 #[derive(Clone, Debug)]
 pub(crate) struct Problem {
     pub blocks: Vec<BlockStats>,
+    pub batches: Batches,
     pub total: BlockStats,
     /// Per block, a diagonal correction subtracted from `XᵀX` when fitting (not when evaluating residuals).
     pub correction: Vec<DVector<f64>>,
 }
 
 impl Problem {
-    pub fn new(mut blocks: Vec<BlockStats>, correction: Vec<DVector<f64>>) -> Problem {
+    pub fn new(
+        mut blocks: Vec<BlockStats>,
+        batches: Batches,
+        correction: Vec<DVector<f64>>,
+    ) -> Problem {
         for b in &mut blocks {
             b.symmetrise();
         }
@@ -91,6 +166,7 @@ impl Problem {
         }
         Problem {
             blocks,
+            batches,
             total,
             correction,
         }
@@ -172,6 +248,12 @@ impl Problem {
         (block.yty - 2.0 * lin + quad).max(0.0)
     }
 
+    /// The residual's autocorrelation factor under a solution, at least 1 (see [`Batches::autocorrelation`]).
+    pub fn autocorrelation(&self, sol: &Solution) -> f64 {
+        let sigma2 = sol.rss / self.total.rows.max(1) as f64;
+        self.batches.autocorrelation(sol, sigma2).max(1.0)
+    }
+
     /// Blocked cross-validation: the held-out residual sum of squares, summed over the blocks, each predicted by a
     /// fit on the others.
     pub fn cv_rss(&self, columns: &[usize]) -> Option<f64> {
@@ -236,7 +318,7 @@ mod tests {
             blocks[i / 10].add_row(&[(0, 1.0), (1, x), (2, 2.0)], 2.0 + 3.0 * x + noise);
             blocks[i / 10].samples += 1;
         }
-        Problem::new(blocks, vec![DVector::zeros(3); 4])
+        Problem::new(blocks, Batches::new(1, 1, 3), vec![DVector::zeros(3); 4])
     }
 
     #[test]
