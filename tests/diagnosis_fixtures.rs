@@ -27,7 +27,10 @@ fn fixtures() -> Vec<(String, Vec<String>)> {
         .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
         .map(|l| {
             let (name, args) = l.split_once('|').unwrap();
-            (name.trim().to_owned(), args.split_whitespace().map(str::to_owned).collect())
+            (
+                name.trim().to_owned(),
+                args.split_whitespace().map(str::to_owned).collect(),
+            )
         })
         .collect()
 }
@@ -40,9 +43,18 @@ struct Truth {
 fn truth(name: &str, rec: &Recording) -> Truth {
     let text = std::fs::read_to_string(dir().join(format!("{name}.truth.toml"))).unwrap();
     let value: toml::Value = toml::from_str(&text).unwrap();
-    let noise: Vec<f64> = value["noise_ut"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+    let noise: Vec<f64> = value["noise_ut"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_float().unwrap())
+        .collect();
     let currents: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
-    let defaults = Defaults { t_ref_c: f64::NAN, field_drift_t_ref_s: f64::NAN, currents: &currents };
+    let defaults = Defaults {
+        t_ref_c: f64::NAN,
+        field_drift_t_ref_s: f64::NAN,
+        currents: &currents,
+    };
     Truth {
         noise_ut: [noise[0], noise[1], noise[2]],
         effects: value["effects"]
@@ -56,10 +68,16 @@ fn truth(name: &str, rec: &Recording) -> Truth {
 
 /// The effect's perturbation at every sample, from the recording's own channels and its (exact) attitude.
 fn perturbation(rec: &Recording, e: &Effect) -> Vec<[f64; 3]> {
-    let f = rec.meta.field_ned_ut.expect("vector fixtures carry the field");
+    let f = rec
+        .meta
+        .field_ned_ut
+        .expect("vector fixtures carry the field");
     let q = rec.quat.as_ref().unwrap();
     let t = rec.t_s.as_ref().unwrap();
-    let field: Vec<[f64; 3]> = q.iter().map(|q| frames::expected_sensor_field(*q, f)).collect();
+    let field: Vec<[f64; 3]> = q
+        .iter()
+        .map(|q| frames::expected_sensor_field(*q, f))
+        .collect();
     let n = rec.len();
     (0..n)
         .map(|i| {
@@ -72,7 +90,10 @@ fn perturbation(rec: &Recording, e: &Effect) -> Vec<[f64; 3]> {
                 currents_a: &currents,
                 field_ut: field[i],
                 field_rate_ut_per_s: rate,
-                world: Some(WorldContext { sensor_to_ned: frames::quat_to_matrix(q[i]), field_ned_ut: f }),
+                world: Some(WorldContext {
+                    sensor_to_ned: frames::quat_to_matrix(q[i]),
+                    field_ned_ut: f,
+                }),
             };
             e.perturbation_ut(&ctx)
         })
@@ -82,8 +103,13 @@ fn perturbation(rec: &Recording, e: &Effect) -> Vec<[f64; 3]> {
 /// The share of the perturbation's energy the base model (per axis: the field components and a constant) takes up.
 fn absorbed_share(rec: &Recording, delta: &[[f64; 3]]) -> f64 {
     let f = rec.meta.field_ned_ut.unwrap();
-    let r: Vec<[f64; 3]> =
-        rec.quat.as_ref().unwrap().iter().map(|q| frames::expected_sensor_field(*q, f)).collect();
+    let r: Vec<[f64; 3]> = rec
+        .quat
+        .as_ref()
+        .unwrap()
+        .iter()
+        .map(|q| frames::expected_sensor_field(*q, f))
+        .collect();
     let x = DMatrix::from_fn(r.len(), 4, |i, k| if k < 3 { r[i][k] } else { 1.0 });
     let (mut total, mut left) = (0.0, 0.0);
     for j in 0..3 {
@@ -102,7 +128,9 @@ fn assert_params_within(name: &str, found: &Value, truth: &Effect, currents: &[S
     let params = &found["params"];
     for part in spec.split_once(':').unwrap().1.split(';') {
         let (pname, values) = part.split_once('=').unwrap();
-        let Some(se) = params.get(format!("{pname}_se")) else { continue };
+        let Some(se) = params.get(format!("{pname}_se")) else {
+            continue;
+        };
         let want: Vec<f64> = values.split(',').map(|v| v.parse().unwrap()).collect();
         let got: Vec<f64> = match &params[pname] {
             Value::Array(a) => a.iter().map(|v| v.as_f64().unwrap()).collect(),
@@ -114,7 +142,13 @@ fn assert_params_within(name: &str, found: &Value, truth: &Effect, currents: &[S
         };
         for c in 0..want.len() {
             let z = (got[c] - want[c]) / se[c];
-            assert!(z.abs() <= k, "{name}: {pname}[{c}] = {} ± {}, truth {} (z = {z:.2})", got[c], se[c], want[c]);
+            assert!(
+                z.abs() <= k,
+                "{name}: {pname}[{c}] = {} ± {}, truth {} (z = {z:.2})",
+                got[c],
+                se[c],
+                want[c]
+            );
         }
     }
 }
@@ -127,7 +161,12 @@ fn each_concealed_effect_is_diagnosed_with_its_parameters() {
         let truth = truth(&name, &rec);
         let report = fit_report(&path, &[]);
         let d = &report["diagnosis"];
-        let ids: Vec<&str> = d["effects"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();
+        let ids: Vec<&str> = d["effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e["id"].as_str().unwrap())
+            .collect();
         let Some(effect) = truth.effects.first() else {
             assert_eq!(d["verdict"], "consistent", "{name}: {ids:?}");
             assert!(ids.is_empty());
@@ -139,8 +178,10 @@ fn each_concealed_effect_is_diagnosed_with_its_parameters() {
         let currents: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
         // Three standard errors: a parameter outside is a 0.3 % event for a Gaussian estimate.
         assert_params_within(&name, found, effect, &currents, 3.0);
-        let (before, after) =
-            (found["holdout_rms_before_ut"].as_f64().unwrap(), found["holdout_rms_after_ut"].as_f64().unwrap());
+        let (before, after) = (
+            found["holdout_rms_before_ut"].as_f64().unwrap(),
+            found["holdout_rms_after_ut"].as_f64().unwrap(),
+        );
         assert!(after < before, "{name}: held-out {before} → {after}");
     }
 }
@@ -156,10 +197,20 @@ fn the_effects_are_concealed_below_the_noise_and_partly_absorbed() {
         let noise_rms = (truth.noise_ut.iter().map(|s| s * s).sum::<f64>() / 3.0).sqrt();
         for e in &truth.effects {
             let delta = perturbation(&rec, e);
-            let largest = delta.iter().map(|d| frames::norm(*d) / 3f64.sqrt()).fold(0.0, f64::max);
-            assert!(largest < noise_rms, "{name}: a sample carries {largest:.3} µT per axis, noise {noise_rms:.3}");
+            let largest = delta
+                .iter()
+                .map(|d| frames::norm(*d) / 3f64.sqrt())
+                .fold(0.0, f64::max);
+            assert!(
+                largest < noise_rms,
+                "{name}: a sample carries {largest:.3} µT per axis, noise {noise_rms:.3}"
+            );
             let share = absorbed_share(&rec, &delta);
-            assert!(share > 0.005 && share < 0.98, "{name}: the base model absorbs {:.1} %", 100.0 * share);
+            assert!(
+                share > 0.005 && share < 0.98,
+                "{name}: the base model absorbs {:.1} %",
+                100.0 * share
+            );
         }
     }
 }
@@ -167,7 +218,16 @@ fn the_effects_are_concealed_below_the_noise_and_partly_absorbed() {
 #[test]
 fn the_fixtures_are_what_their_commands_write() {
     let tmp = tempfile::tempdir().unwrap();
-    let common = ["--duration", "90", "--rate", "30", "--temperature", "22,6,40,1,35", "--current", "motor:1.2,4,6"];
+    let common = [
+        "--duration",
+        "90",
+        "--rate",
+        "30",
+        "--temperature",
+        "22,6,40,1,35",
+        "--current",
+        "motor:1.2,4,6",
+    ];
     for (name, args) in fixtures() {
         let out = tmp.path().join(format!("{name}.csv"));
         let status = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
@@ -179,10 +239,16 @@ fn the_fixtures_are_what_their_commands_write() {
             .status()
             .unwrap();
         assert!(status.success());
-        let (a, b) = (Recording::read(&out).unwrap(), Recording::read(&dir().join(format!("{name}.csv"))).unwrap());
+        let (a, b) = (
+            Recording::read(&out).unwrap(),
+            Recording::read(&dir().join(format!("{name}.csv"))).unwrap(),
+        );
         assert_eq!(a.len(), b.len(), "{name}");
         for (x, y) in a.mag_ut.iter().zip(&b.mag_ut) {
-            assert!((0..3).all(|k| (x[k] - y[k]).abs() < 1e-5), "{name}: {x:?} vs {y:?}");
+            assert!(
+                (0..3).all(|k| (x[k] - y[k]).abs() < 1e-5),
+                "{name}: {x:?} vs {y:?}"
+            );
         }
     }
 }

@@ -187,9 +187,14 @@ fn main() -> anyhow::Result<()> {
         .map(|e| effect_spec::parse(e, &defaults))
         .collect::<Result<_, _>>()?;
     for spec in &args.effect_rms {
-        let (id, size) = spec.split_once(':').with_context(|| format!("--effect-rms {spec:?}: expected ID:SIZE_UT"))?;
-        let id = EffectId::parse(id).with_context(|| format!("--effect-rms {spec:?}: unknown effect {id:?}"))?;
-        let size: f64 = size.parse().with_context(|| format!("--effect-rms {spec:?}: {size:?} is not a size in µT"))?;
+        let (id, size) = spec
+            .split_once(':')
+            .with_context(|| format!("--effect-rms {spec:?}: expected ID:SIZE_UT"))?;
+        let id = EffectId::parse(id)
+            .with_context(|| format!("--effect-rms {spec:?}: unknown effect {id:?}"))?;
+        let size: f64 = size
+            .parse()
+            .with_context(|| format!("--effect-rms {spec:?}: {size:?} is not a size in µT"))?;
         let shape = study::random_effect(id, &s, args.seed);
         s.effects.push(study::scale_to_rms(&s, &shape, size));
     }
@@ -198,7 +203,11 @@ fn main() -> anyhow::Result<()> {
         .write(&args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;
     if let Some(path) = &args.truth {
-        let effects: Vec<String> = s.effects.iter().map(|e| effect_spec::format(e, &names)).collect();
+        let effects: Vec<String> = s
+            .effects
+            .iter()
+            .map(|e| effect_spec::format(e, &names))
+            .collect();
         let text = format!(
             "# magcal-sim truth for {}\nseed = {}\nA = {:?}\nb_ut = {:?}\nnoise_ut = {:?}\neffects = {:?}\n",
             args.out.display(),

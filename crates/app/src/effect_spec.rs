@@ -152,25 +152,47 @@ pub fn parse(spec: &str, defaults: &Defaults<'_>) -> Result<Effect, EffectSpecEr
 pub fn format(e: &Effect, currents: &[String]) -> String {
     let v = |x: [f64; 3]| format!("{},{},{}", x[0], x[1], x[2]);
     let params = match *e {
-        Effect::TemperatureBias { coef_ut_per_c, t_ref_c } => {
+        Effect::TemperatureBias {
+            coef_ut_per_c,
+            t_ref_c,
+        } => {
             format!("coef_ut_per_c={};t_ref_c={t_ref_c}", v(coef_ut_per_c))
         }
-        Effect::TemperatureScale { coef_per_c, t_ref_c } => format!("coef_per_c={};t_ref_c={t_ref_c}", v(coef_per_c)),
-        Effect::CurrentBias { channel, coef_ut_per_a } => format!(
+        Effect::TemperatureScale {
+            coef_per_c,
+            t_ref_c,
+        } => format!("coef_per_c={};t_ref_c={t_ref_c}", v(coef_per_c)),
+        Effect::CurrentBias {
+            channel,
+            coef_ut_per_a,
+        } => format!(
             "channel={};coef_ut_per_a={}",
             currents.get(channel).map_or("?", String::as_str),
             v(coef_ut_per_a)
         ),
         Effect::TimeLag { lag_s } => format!("lag_s={lag_s}"),
         Effect::RateCoupling { lag_axis_s } => format!("lag_axis_s={}", v(lag_axis_s)),
-        Effect::FieldDrift { rate_ut_per_s, t_ref_s } => format!("rate_ut_per_s={};t_ref_s={t_ref_s}", v(rate_ut_per_s)),
-        Effect::FieldDirectionError { declination_error_deg, inclination_error_deg } => format!(
+        Effect::FieldDrift {
+            rate_ut_per_s,
+            t_ref_s,
+        } => format!("rate_ut_per_s={};t_ref_s={t_ref_s}", v(rate_ut_per_s)),
+        Effect::FieldDirectionError {
+            declination_error_deg,
+            inclination_error_deg,
+        } => format!(
             "declination_error_deg={declination_error_deg};inclination_error_deg={inclination_error_deg}"
         ),
         Effect::Nonlinearity { cubic_per_ut2 } => format!("cubic_per_ut2={}", v(cubic_per_ut2)),
         Effect::BiasStep { t_s, step_ut } => format!("t_s={t_s};step_ut={}", v(step_ut)),
-        Effect::BiasDrift { rate_ut_per_s, t_ref_s } => format!("rate_ut_per_s={};t_ref_s={t_ref_s}", v(rate_ut_per_s)),
-        Effect::Disturbance { t0_s, t1_s, field_ned_ut } => {
+        Effect::BiasDrift {
+            rate_ut_per_s,
+            t_ref_s,
+        } => format!("rate_ut_per_s={};t_ref_s={t_ref_s}", v(rate_ut_per_s)),
+        Effect::Disturbance {
+            t0_s,
+            t1_s,
+            field_ned_ut,
+        } => {
             format!("t0_s={t0_s};t1_s={t1_s};field_ned_ut={}", v(field_ned_ut))
         }
     };
@@ -220,19 +242,51 @@ mod tests {
     #[test]
     fn every_effect_round_trips_through_its_spec() {
         let currents = ["i_motor".to_owned()];
-        let d = Defaults { currents: &currents, ..defaults() };
+        let d = Defaults {
+            currents: &currents,
+            ..defaults()
+        };
         let effects = [
-            Effect::TemperatureBias { coef_ut_per_c: [0.1, -0.2, 0.3], t_ref_c: 21.5 },
-            Effect::TemperatureScale { coef_per_c: [1e-4, 0.0, -2e-4], t_ref_c: 20.0 },
-            Effect::CurrentBias { channel: 0, coef_ut_per_a: [0.5, 0.25, 0.0] },
+            Effect::TemperatureBias {
+                coef_ut_per_c: [0.1, -0.2, 0.3],
+                t_ref_c: 21.5,
+            },
+            Effect::TemperatureScale {
+                coef_per_c: [1e-4, 0.0, -2e-4],
+                t_ref_c: 20.0,
+            },
+            Effect::CurrentBias {
+                channel: 0,
+                coef_ut_per_a: [0.5, 0.25, 0.0],
+            },
             Effect::TimeLag { lag_s: -0.0125 },
-            Effect::RateCoupling { lag_axis_s: [0.01, 0.0, 0.002] },
-            Effect::FieldDrift { rate_ut_per_s: [1e-3, 0.0, -2e-3], t_ref_s: 45.0 },
-            Effect::FieldDirectionError { declination_error_deg: 0.3, inclination_error_deg: -0.1 },
-            Effect::Nonlinearity { cubic_per_ut2: [1e-6, 0.0, 0.0] },
-            Effect::BiasStep { t_s: 33.3, step_ut: [0.1, 0.0, 0.0] },
-            Effect::BiasDrift { rate_ut_per_s: [0.0, 1e-3, 0.0], t_ref_s: 0.0 },
-            Effect::Disturbance { t0_s: 10.0, t1_s: 20.0, field_ned_ut: [0.0, 0.5, 0.0] },
+            Effect::RateCoupling {
+                lag_axis_s: [0.01, 0.0, 0.002],
+            },
+            Effect::FieldDrift {
+                rate_ut_per_s: [1e-3, 0.0, -2e-3],
+                t_ref_s: 45.0,
+            },
+            Effect::FieldDirectionError {
+                declination_error_deg: 0.3,
+                inclination_error_deg: -0.1,
+            },
+            Effect::Nonlinearity {
+                cubic_per_ut2: [1e-6, 0.0, 0.0],
+            },
+            Effect::BiasStep {
+                t_s: 33.3,
+                step_ut: [0.1, 0.0, 0.0],
+            },
+            Effect::BiasDrift {
+                rate_ut_per_s: [0.0, 1e-3, 0.0],
+                t_ref_s: 0.0,
+            },
+            Effect::Disturbance {
+                t0_s: 10.0,
+                t1_s: 20.0,
+                field_ned_ut: [0.0, 0.5, 0.0],
+            },
         ];
         for e in effects {
             assert_eq!(parse(&format(&e, &currents), &d), Ok(e));

@@ -161,44 +161,58 @@ fn advice(d: [f64; 3]) -> String {
     )
 }
 
-/// Fraction of the sphere of directions visited, on a grid of `cells` roughly equal-area cells (latitude bands of
-/// equal height, each divided into as many longitude cells as keeps their area near `4π/cells`).
-pub fn sphere_fraction(directions: impl IntoIterator<Item = [f64; 3]>, cells: usize) -> f64 {
-    let bands = ((cells as f64 * std::f64::consts::PI / 4.0).sqrt().round() as usize).max(1);
-    let per_band: Vec<usize> = (0..bands)
-        .map(|i| {
-            let z0 = -1.0 + 2.0 * i as f64 / bands as f64;
-            let z1 = z0 + 2.0 / bands as f64;
-            let mid = ((z0 + z1) / 2.0).clamp(-1.0, 1.0);
-            let circumference = (1.0 - mid * mid).sqrt();
-            ((cells as f64 / bands as f64) * circumference * std::f64::consts::PI / 2.0)
-                .round()
-                .max(1.0) as usize
-        })
-        .collect();
-    let offsets: Vec<usize> = per_band
-        .iter()
-        .scan(0, |acc, &n| {
-            let o = *acc;
-            *acc += n;
-            Some(o)
-        })
-        .collect();
-    let total: usize = per_band.iter().sum();
-    let mut seen = vec![false; total];
-    for d in directions {
+/// A grid of equal-area cells on the sphere of directions: latitude bands of equal height (equal area, by
+/// Archimedes' hat-box theorem), each cut into the same number of longitude cells.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SphereGrid {
+    bands: usize,
+    per_band: usize,
+}
+
+impl SphereGrid {
+    /// A grid of about `cells` cells (`bands = round(√(cells/2))`, as many cells per band as keeps the total near
+    /// `cells`: 98 for 100).
+    pub fn new(cells: usize) -> SphereGrid {
+        let bands = ((cells as f64 / 2.0).sqrt().round() as usize).max(1);
+        let per_band = ((cells as f64 / bands as f64).round() as usize).max(1);
+        SphereGrid { bands, per_band }
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.bands * self.per_band
+    }
+
+    /// Always false: a grid has at least one cell.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// The cell of a direction (any length); `None` for a zero or non-finite vector.
+    pub fn cell(&self, d: [f64; 3]) -> Option<usize> {
         let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        if n.is_nan() || n <= 0.0 {
-            continue;
+        if !(n.is_finite() && n > 0.0) {
+            return None;
         }
         let z = (d[2] / n).clamp(-1.0, 1.0);
-        let band = (((z + 1.0) / 2.0 * bands as f64) as usize).min(bands - 1);
+        let band = (((z + 1.0) / 2.0 * self.bands as f64) as usize).min(self.bands - 1);
         let lon = d[1].atan2(d[0]) + std::f64::consts::PI;
-        let cell = ((lon / std::f64::consts::TAU * per_band[band] as f64) as usize)
-            .min(per_band[band] - 1);
-        seen[offsets[band] + cell] = true;
+        let cell =
+            ((lon / std::f64::consts::TAU * self.per_band as f64) as usize).min(self.per_band - 1);
+        Some(band * self.per_band + cell)
     }
-    seen.iter().filter(|s| **s).count() as f64 / total as f64
+}
+
+/// Fraction of the sphere of directions visited, on a [`SphereGrid`] of about `cells` equal-area cells.
+pub fn sphere_fraction(directions: impl IntoIterator<Item = [f64; 3]>, cells: usize) -> f64 {
+    let grid = SphereGrid::new(cells);
+    let mut seen = vec![false; grid.len()];
+    for d in directions {
+        if let Some(c) = grid.cell(d) {
+            seen[c] = true;
+        }
+    }
+    seen.iter().filter(|s| **s).count() as f64 / grid.len() as f64
 }
 
 #[cfg(test)]
@@ -270,5 +284,17 @@ mod tests {
         let north: Vec<[f64; 3]> = pts.iter().copied().filter(|p| p[2] > 0.0).collect();
         let f = sphere_fraction(north, 100);
         assert!((f - 0.5).abs() < 0.08, "{f}");
+        // Equal-area cells: uniformly spread directions fill every cell about equally.
+        let grid = SphereGrid::new(100);
+        assert_eq!(grid.len(), 98);
+        let mut counts = vec![0usize; grid.len()];
+        for p in &pts {
+            counts[grid.cell(*p).unwrap()] += 1;
+        }
+        let (lo, hi) = (counts.iter().min().unwrap(), counts.iter().max().unwrap());
+        assert!(
+            *lo >= 15 && *hi <= 26,
+            "{lo}..{hi} points per cell for 2000/98 = 20.4"
+        );
     }
 }

@@ -3,64 +3,15 @@
 
 use std::fmt::Write as _;
 
+use magcal_calib::coverage::SphereGrid;
 use nalgebra::{Matrix4, Vector4};
 
-/// The grid's nominal cell count, the fitter's (its rounding makes 125 cells).
+/// The grid's nominal cell count, the fitter's (98 equal-area cells).
 pub const CELLS: usize = 100;
 /// The centre estimate has to move this far (µT) before the cells are counted again from all readings.
 const RECENTRE_UT: f64 = 2.0;
 /// The centre is estimated again after every this many readings.
 const REFIT_EVERY: usize = 25;
-
-/// The grid of [`magcal_calib::coverage::sphere_fraction`], so that the recorder's coverage and the fitter's report
-/// agree: latitude bands of equal height, each cut into longitude cells in proportion to its circumference (cells of
-/// about equal shape; the polar ones cover about twice the solid angle of the equatorial ones).
-#[derive(Clone, Debug, PartialEq)]
-struct Grid {
-    per_band: Vec<usize>,
-    offsets: Vec<usize>,
-}
-
-impl Grid {
-    fn new(cells: usize) -> Grid {
-        let bands = ((cells as f64 * std::f64::consts::PI / 4.0).sqrt().round() as usize).max(1);
-        let per_band: Vec<usize> = (0..bands)
-            .map(|i| {
-                let z_mid = -1.0 + (2.0 * i as f64 + 1.0) / bands as f64;
-                let ring = (1.0 - z_mid * z_mid).sqrt();
-                ((cells as f64 / bands as f64) * ring * std::f64::consts::FRAC_PI_2)
-                    .round()
-                    .max(1.0) as usize
-            })
-            .collect();
-        let mut offsets = Vec::with_capacity(bands);
-        let mut sum = 0;
-        for n in &per_band {
-            offsets.push(sum);
-            sum += n;
-        }
-        Grid { per_band, offsets }
-    }
-
-    fn len(&self) -> usize {
-        self.per_band.iter().sum()
-    }
-
-    /// The cell of a direction; `None` for a zero or non-finite vector.
-    fn cell(&self, d: [f64; 3]) -> Option<usize> {
-        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        if !(n.is_finite() && n > 0.0) {
-            return None;
-        }
-        let bands = self.per_band.len();
-        let z = (d[2] / n).clamp(-1.0, 1.0);
-        let band = (((z + 1.0) / 2.0 * bands as f64) as usize).min(bands - 1);
-        let lon = d[1].atan2(d[0]) + std::f64::consts::PI;
-        let k = self.per_band[band];
-        let cell = ((lon / std::f64::consts::TAU * k as f64) as usize).min(k - 1);
-        Some(self.offsets[band] + cell)
-    }
-}
 
 /// Coverage of the sphere of field directions, measured from raw readings around a running estimate of their centre
 /// (the hard-iron offset, roughly): the least-squares sphere through the readings, `|m|² = 2·c·m + k`, which is
@@ -68,7 +19,7 @@ impl Grid {
 /// not, and would overstate the coverage of a half-turned sensor).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CoverageMap {
-    grid: Grid,
+    grid: SphereGrid,
     seen: Vec<bool>,
     readings: Vec<[f64; 3]>,
     /// Normal equations of the sphere fit: Σ x·xᵀ and Σ x·|m|² with x = (2m, 1).
@@ -87,7 +38,7 @@ impl Default for CoverageMap {
 impl CoverageMap {
     /// An empty map of [`CELLS`] cells.
     pub fn new() -> CoverageMap {
-        let grid = Grid::new(CELLS);
+        let grid = SphereGrid::new(CELLS);
         let seen = vec![false; grid.len()];
         CoverageMap {
             grid,
@@ -225,7 +176,7 @@ mod tests {
 
     #[test]
     fn the_grid_is_the_fitters_and_every_cell_can_be_hit() {
-        let g = Grid::new(CELLS);
+        let g = SphereGrid::new(CELLS);
         let cap: Vec<[f64; 3]> = fibonacci_sphere(4000, 1.0, [0.0; 3])
             .into_iter()
             .filter(|p| p[0] > 0.3 || p[2] < -0.5)
