@@ -2,10 +2,18 @@
 //! 0.05–0.5 µT, 20–100 Hz, 2–5 minutes; temperature and a current always recorded). For each effect at 0.5 σ RMS per
 //! axis the detection rate with the right id is at least 95 %; on null recordings the false-alarm rate is at most 1 %.
 //!
-//! Heavy; regenerate the table in docs/diagnosis.md with
+//! For the effects detected, each fitted parameter's error divided by its reported standard error is collected: its
+//! standard deviation must be near 1 (0.75–1.3) for the uncertainties to be honest.
+//!
+//! Heavy; regenerate the tables in docs/diagnosis.md with
 //! `cargo test --release --test diagnosis_power -- --ignored --nocapture`.
 
+use std::collections::BTreeMap;
 use std::sync::Mutex;
+
+use magcal_app::effect_spec;
+use magcal_calib::diagnosis::{FoundEffect, ParamValue};
+use magcal_calib::effects::Effect;
 
 use magcal_app::calibrate::{Method, calibrate};
 use magcal_app::field::ReferenceField;
@@ -42,12 +50,36 @@ struct Tally {
     extra: usize,
 }
 
+/// Error over standard error of each fitted parameter of `found`, by parameter name, against the injected `truth`.
+fn z_scores(found: &FoundEffect, truth: &Effect) -> Vec<(&'static str, f64)> {
+    let spec = effect_spec::format(truth, &["i_motor".to_owned()]);
+    let truth_values: Vec<(&str, Vec<f64>)> = spec
+        .split_once(':')
+        .map_or("", |(_, p)| p)
+        .split(';')
+        .filter_map(|part| part.split_once('='))
+        .filter_map(|(name, v)| v.split(',').map(|x| x.parse().ok()).collect::<Option<Vec<f64>>>().map(|v| (name, v)))
+        .collect();
+    let mut out = Vec::new();
+    for p in &found.params {
+        let Some((_, want)) = truth_values.iter().find(|(n, _)| *n == p.name) else { continue };
+        let (got, se) = match (&p.value, &p.se) {
+            (ParamValue::Number(v), Some(ParamValue::Number(s))) => (vec![*v], vec![*s]),
+            (ParamValue::Vector(v), Some(ParamValue::Vector(s))) => (v.to_vec(), s.to_vec()),
+            _ => continue,
+        };
+        out.extend((0..got.len()).map(|k| (p.name, (got[k] - want[k]) / se[k])));
+    }
+    out
+}
+
 #[test]
 #[ignore = "statistics over 200 seeds × 12 recordings: run in release (CI does)"]
 fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
     let ids = EffectId::ALL;
     let tallies = Mutex::new(vec![Tally::default(); ids.len()]);
     let nulls = Mutex::new((0usize, 0usize, Vec::new()));
+    let zs: Mutex<BTreeMap<&str, Vec<f64>>> = Mutex::new(BTreeMap::new());
     let next = Mutex::new(0u64);
     std::thread::scope(|scope| {
         for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
@@ -88,6 +120,12 @@ fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
                         let found: Vec<EffectId> =
                             d.effects.iter().map(|e| e.effect.id()).collect();
                         let ambiguous = d.ambiguous.iter().any(|a| a.ids.contains(id));
+                        if let Some(f) = d.effects.iter().find(|f| f.effect.id() == *id) {
+                            let mut z = zs.lock().unwrap();
+                            for (name, v) in z_scores(f, &e) {
+                                z.entry(name).or_default().push(v);
+                            }
+                        }
                         let mut t = tallies.lock().unwrap();
                         t[k].runs += 1;
                         t[k].detected += usize::from(found.contains(id));
@@ -121,6 +159,23 @@ fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
     );
     for a in &alarm_list {
         println!("false alarm: {a}");
+    }
+    println!();
+    println!("| parameter | estimates | mean error / SE | SD of error / SE |");
+    println!("|---|---|---|---|");
+    let zs = zs.into_inner().unwrap();
+    let moments = |z: &[f64]| {
+        let n = z.len() as f64;
+        let mean = z.iter().sum::<f64>() / n;
+        (mean, (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt())
+    };
+    for (name, z) in &zs {
+        let (mean, sd) = moments(z);
+        println!("| `{name}` | {} | {mean:+.2} | {sd:.2} |", z.len());
+    }
+    for (name, z) in &zs {
+        let (_, sd) = moments(z);
+        assert!((0.75..=1.3).contains(&sd), "{name}: SD of error/SE {sd:.2}: the uncertainties are not honest");
     }
     for (id, t) in ids.iter().zip(&tallies) {
         assert!(
