@@ -58,11 +58,18 @@ fn z_scores(found: &FoundEffect, truth: &Effect) -> Vec<(&'static str, f64)> {
         .map_or("", |(_, p)| p)
         .split(';')
         .filter_map(|part| part.split_once('='))
-        .filter_map(|(name, v)| v.split(',').map(|x| x.parse().ok()).collect::<Option<Vec<f64>>>().map(|v| (name, v)))
+        .filter_map(|(name, v)| {
+            v.split(',')
+                .map(|x| x.parse().ok())
+                .collect::<Option<Vec<f64>>>()
+                .map(|v| (name, v))
+        })
         .collect();
     let mut out = Vec::new();
     for p in &found.params {
-        let Some((_, want)) = truth_values.iter().find(|(n, _)| *n == p.name) else { continue };
+        let Some((_, want)) = truth_values.iter().find(|(n, _)| *n == p.name) else {
+            continue;
+        };
         let (got, se) = match (&p.value, &p.se) {
             (ParamValue::Number(v), Some(ParamValue::Number(s))) => (vec![*v], vec![*s]),
             (ParamValue::Vector(v), Some(ParamValue::Vector(s))) => (v.to_vec(), s.to_vec()),
@@ -167,7 +174,10 @@ fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
     let moments = |z: &[f64]| {
         let n = z.len() as f64;
         let mean = z.iter().sum::<f64>() / n;
-        (mean, (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt())
+        (
+            mean,
+            (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt(),
+        )
     };
     for (name, z) in &zs {
         let (mean, sd) = moments(z);
@@ -175,7 +185,10 @@ fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
     }
     for (name, z) in &zs {
         let (_, sd) = moments(z);
-        assert!((0.75..=1.3).contains(&sd), "{name}: SD of error/SE {sd:.2}: the uncertainties are not honest");
+        assert!(
+            (0.75..=1.3).contains(&sd),
+            "{name}: SD of error/SE {sd:.2}: the uncertainties are not honest"
+        );
     }
     for (id, t) in ids.iter().zip(&tallies) {
         assert!(

@@ -6,17 +6,17 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, bail};
-use clap::{Parser, ValueEnum};
+use clap::Parser;
 use magcal_app::calibrate::{Calibration, Fit, Method, calibrate};
+use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
-use magcal_app::field::{FieldArgs, resolve};
-use magcal_app::files::write_atomic;
+use magcal_app::field::resolve;
 use magcal_app::params::ParamsFile;
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{RecordOptions, Routine, Stop, device_metadata, record, ui};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
-use magcal_recording::{Date, Location, Recording};
+use magcal_recording::Recording;
 
 /// The bench calibration workflow in one command: record the magnetometer through a routine, fit the calibration
 /// B = A·raw + b, print the summary, and write MAGCAL-OUT/recording.csv, params.toml and report.json.
@@ -37,83 +37,33 @@ struct Args {
     #[arg(long, default_value = "sim", value_name = "DEV")]
     device: DeviceSpec,
     /// The routine: cube24 (vector calibration; needs the local field for real devices) or free (scalar).
-    #[arg(long, value_enum, default_value_t = RoutineArg::Cube24)]
-    routine: RoutineArg,
+    #[arg(long, value_enum, default_value_t = Routine::Cube24)]
+    routine: Routine,
     /// Where the recording, parameters and report go.
     #[arg(long, default_value = "magcal-out", value_name = "DIR")]
     out_dir: PathBuf,
-    /// World field N,E,D in µT.
-    #[arg(long, value_name = "N,E,D", value_parser = parse3, allow_hyphen_values = true, conflicts_with = "location")]
-    field_ned: Option<[f64; 3]>,
-    /// Where you are, for the World Magnetic Model: latitude, longitude (degrees), altitude (m). Needs --date.
-    #[arg(long, value_name = "LAT,LON,ALT", value_parser = parse3, allow_hyphen_values = true, requires = "date")]
-    location: Option<[f64; 3]>,
-    /// The date, for the World Magnetic Model, YYYY-MM-DD.
-    #[arg(long, value_name = "YYYY-MM-DD", requires = "location")]
-    date: Option<Date>,
+    /// The local field (for real devices; a simulated bench knows its own).
+    #[command(flatten)]
+    field: WorldFieldOpts,
     /// sim: seed of the simulated sensor.
     #[arg(long, default_value_t = 1, value_name = "N")]
     sim_seed: u64,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum RoutineArg {
-    /// Free rotation until 90 % of the sphere is covered.
-    Free,
-    /// The 24 poses of a cube jig.
-    Cube24,
-}
-
-fn parse3(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
-    v.try_into()
-        .map_err(|_| format!("expected three comma-separated numbers, got {s:?}"))
-}
-
 fn main() -> ExitCode {
-    match run(Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("magcal: error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    exit("magcal", run(Args::parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;
     let rec_path = args.out_dir.join("recording.csv");
-    let routine = match args.routine {
-        RoutineArg::Free => Routine::Free,
-        RoutineArg::Cube24 => Routine::Cube24,
-    };
-    let location = args
-        .location
-        .zip(args.date)
-        .map(|([lat_deg, lon_deg, alt_m], d)| {
-            (
-                Location {
-                    lat_deg,
-                    lon_deg,
-                    alt_m,
-                },
-                d,
-            )
-        });
+    let routine = args.routine;
 
     // Record.
     let mut opts = RecordOptions::new(routine, rec_path.clone());
     opts.auto = args.device.is_sim();
-    opts.meta.field_ned_ut = args.field_ned;
-    if let Some((loc, date)) = location {
-        opts.meta.location = Some(loc);
-        opts.meta.date = Some(date);
-    }
+    args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&args.device, args.sim_seed, opts.meta);
     let open = OpenOptions {
         sim_seed: args.sim_seed,
@@ -152,27 +102,15 @@ fn run(args: Args) -> anyhow::Result<()> {
     // Fit.
     let rec = Recording::read(&rec_path)?;
     let name = rec_path.display().to_string();
-    let field_args = FieldArgs {
-        field_ned_ut: args.field_ned,
-        location,
-        field_ut: None,
-    };
-    let field = resolve(&field_args, &rec.meta)?;
+    let field = resolve(&args.field.field_args(None), &rec.meta)?;
     let cal = calibrate(&rec, Method::Auto, field, true)
         .with_context(|| format!("{name}: cannot calibrate"))?;
     print!("\n{}", summary(&cal, &name));
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
     let report_path = args.out_dir.join("report.json");
-    write_atomic(
-        &report_path,
-        Report::new(&cal, &name, &channels).to_json().as_bytes(),
-    )
-    .with_context(|| format!("writing {}", report_path.display()))?;
+    Report::new(&cal, &name, &channels).write(&report_path)?;
     let params_path = args.out_dir.join("params.toml");
-    let mut params = ParamsFile::new(cal.method().as_str(), &cal.model(), &channels);
-    params.sensor = rec.meta.sensor.clone();
-    params.recording = Some(name.clone());
-    params
+    ParamsFile::of(&cal, &rec, &name)
         .write(&params_path)
         .with_context(|| format!("writing {}", params_path.display()))?;
     if let DeviceSpec::Sim { chip } = args.device {

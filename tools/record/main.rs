@@ -6,13 +6,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, bail};
-use clap::{Parser, ValueEnum};
+use clap::Parser;
+use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
     RecordOptions, RecordSummary, Routine, Stop, device_metadata, record, ui,
 };
-use magcal_recording::{Date, Location};
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
 ///
@@ -52,19 +52,13 @@ struct Args {
     device: String,
     /// The routine.
     #[arg(long, value_enum)]
-    routine: RoutineArg,
+    routine: Routine,
     /// The recording to write (created or overwritten).
     #[arg(long, short, default_value = "recording.csv", value_name = "REC.csv")]
     out: PathBuf,
-    /// World field N,E,D in µT, written to the recording for the fit.
-    #[arg(long, value_name = "N,E,D", value_parser = parse3, allow_hyphen_values = true, conflicts_with = "location")]
-    field_ned: Option<[f64; 3]>,
-    /// Where you are, for the World Magnetic Model: latitude, longitude (degrees), altitude (m). Needs --date.
-    #[arg(long, value_name = "LAT,LON,ALT", value_parser = parse3, allow_hyphen_values = true, requires = "date")]
-    location: Option<[f64; 3]>,
-    /// The date, for the World Magnetic Model, YYYY-MM-DD.
-    #[arg(long, value_name = "YYYY-MM-DD", requires = "location")]
-    date: Option<Date>,
+    /// The local field, written to the recording for the fit.
+    #[command(flatten)]
+    field: WorldFieldOpts,
     /// Unattended: never wait for Enter (poses are taken on stillness only). Implied for sim devices, whose
     /// virtual hand performs the routine.
     #[arg(long)]
@@ -102,40 +96,13 @@ struct Args {
     truth: Option<PathBuf>,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum RoutineArg {
-    /// Free rotation until the coverage target.
-    Free,
-    /// The 24 poses of a cube jig.
-    Cube24,
-}
-
-fn parse3(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
-    v.try_into()
-        .map_err(|_| format!("expected three comma-separated numbers, got {s:?}"))
-}
-
 fn main() -> ExitCode {
-    match run(Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("magcal-record: error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    exit("magcal-record", run(Args::parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
     let spec: DeviceSpec = args.device.parse()?;
-    let routine = match args.routine {
-        RoutineArg::Free => Routine::Free,
-        RoutineArg::Cube24 => Routine::Cube24,
-    };
+    let routine = args.routine;
     if !(args.coverage > 0.0 && args.coverage <= 1.0) {
         bail!(
             "--coverage must be a fraction in (0, 1], got {}",
@@ -151,15 +118,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     opts.max_duration_s = args.max_duration;
     opts.dwell_s = args.dwell;
     opts.still_ut = args.still_ut;
-    opts.meta.field_ned_ut = args.field_ned;
-    if let (Some([lat_deg, lon_deg, alt_m]), Some(date)) = (args.location, args.date) {
-        opts.meta.location = Some(Location {
-            lat_deg,
-            lon_deg,
-            alt_m,
-        });
-        opts.meta.date = Some(date);
-    }
+    args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     if let DeviceSpec::Sim { chip } = spec {
         if let Some(path) = &args.truth {

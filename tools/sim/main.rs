@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
+use magcal_app::cli::parse_floats;
 use magcal_app::effect_spec::{self, Defaults};
 use magcal_app::files::write_atomic;
 use magcal_calib::effects::EffectId;
@@ -92,16 +93,6 @@ enum Reference {
     Field,
     /// None (scalar calibration only).
     None,
-}
-
-fn parse_floats<const N: usize>(s: &str) -> Result<[f64; N], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
-    v.try_into()
-        .map_err(|_| format!("expected {N} comma-separated numbers, got {s:?}"))
 }
 
 fn parse_current(s: &str) -> Result<CurrentProfile, String> {

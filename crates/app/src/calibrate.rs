@@ -12,7 +12,7 @@ use magcal_recording::Recording;
 use crate::field::ReferenceField;
 
 /// Which calibration method to use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Method {
     /// Vector when the recording has an attitude reference, scalar otherwise.
     #[default]

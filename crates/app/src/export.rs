@@ -15,7 +15,7 @@ use magcal_calib::Model;
 use nalgebra::{Matrix3, Vector3};
 
 /// An export format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ExportFormat {
     /// ArduPilot `.param` (COMPASS_OFS/DIA/ODI).
     Ardupilot,

@@ -208,6 +208,19 @@ impl ParamsFile {
         }
     }
 
+    /// The parameters file of a calibration of `rec` (named `recording` in the file): its final model.
+    pub fn of(
+        cal: &crate::calibrate::Calibration,
+        rec: &magcal_recording::Recording,
+        recording: &str,
+    ) -> ParamsFile {
+        let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
+        let mut params = ParamsFile::new(cal.method().as_str(), &cal.model(), &channels);
+        params.sensor = rec.meta.sensor.clone();
+        params.recording = Some(recording.to_owned());
+        params
+    }
+
     /// The model, with current corrections indexed into `channels` (the `i_<name>` columns `apply` will be given).
     pub fn model(&self, channels: &[String]) -> Result<Model, String> {
         let mut model = Model::linear(self.calibration.a, self.calibration.b_ut);

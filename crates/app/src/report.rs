@@ -432,6 +432,13 @@ impl Report {
         }
     }
 
+    /// Writes the report as pretty JSON, atomically.
+    pub fn write(&self, path: &std::path::Path) -> anyhow::Result<()> {
+        use anyhow::Context;
+        crate::files::write_atomic(path, self.to_json().as_bytes())
+            .with_context(|| format!("writing the report {}", path.display()))
+    }
+
     /// The report as pretty JSON.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("a report is plain data")

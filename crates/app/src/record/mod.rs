@@ -40,11 +40,11 @@ pub use still::StillWindow;
 pub use ui::{Progress, Ui};
 
 /// What the operator does during the recording.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Routine {
-    /// Free rotation until the coverage target.
+    /// Free rotation until the coverage target (a scalar calibration).
     Free,
-    /// The 24 poses of a cube jig.
+    /// The 24 poses of a cube jig against a reference edge (a vector calibration).
     Cube24,
 }
 

@@ -1,0 +1,88 @@
+//! Command-line pieces the tools share: lists of numbers, the world-field options, the exit.
+
+use std::process::ExitCode;
+
+use magcal_recording::{Date, Location, Metadata};
+
+use crate::field::FieldArgs;
+
+/// Parses `N` comma-separated numbers (`"19.8, 1.2, 45.3"`).
+pub fn parse_floats<const N: usize>(s: &str) -> Result<[f64; N], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    v.try_into()
+        .map_err(|_| format!("expected {N} comma-separated numbers, got {s:?}"))
+}
+
+/// The local world field, given directly or by place and date for the World Magnetic Model.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct WorldFieldOpts {
+    /// The world field N,E,D in µT (overrides a recording's field_ned_ut).
+    #[arg(long, value_name = "N,E,D", value_parser = parse_floats::<3>, allow_hyphen_values = true, conflicts_with = "location")]
+    pub field_ned: Option<[f64; 3]>,
+    /// Where you are, for the World Magnetic Model: latitude, longitude (degrees), altitude (m). Needs --date.
+    #[arg(long, value_name = "LAT,LON,ALT", value_parser = parse_floats::<3>, allow_hyphen_values = true, requires = "date")]
+    pub location: Option<[f64; 3]>,
+    /// The date, for the World Magnetic Model, YYYY-MM-DD.
+    #[arg(long, value_name = "YYYY-MM-DD", requires = "location")]
+    pub date: Option<Date>,
+}
+
+impl WorldFieldOpts {
+    /// The place and date, when both were given.
+    pub fn place(&self) -> Option<(Location, Date)> {
+        let [lat_deg, lon_deg, alt_m] = self.location?;
+        Some((
+            Location {
+                lat_deg,
+                lon_deg,
+                alt_m,
+            },
+            self.date?,
+        ))
+    }
+
+    /// What to resolve the field from, with a magnitude-only fallback `field_ut`.
+    pub fn field_args(&self, field_ut: Option<f64>) -> FieldArgs {
+        FieldArgs {
+            field_ned_ut: self.field_ned,
+            location: self.place(),
+            field_ut,
+        }
+    }
+
+    /// Writes the options into a recording's metadata, for the fit to use.
+    pub fn write_metadata(&self, meta: &mut Metadata) {
+        meta.field_ned_ut = self.field_ned;
+        if let Some((loc, date)) = self.place() {
+            meta.location = Some(loc);
+            meta.date = Some(date);
+        }
+    }
+}
+
+/// The process exit for a tool's result: the error chain on stderr, prefixed with the tool's name.
+pub fn exit(tool: &str, result: anyhow::Result<()>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{tool}: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_lists_say_what_is_wrong() {
+        assert_eq!(parse_floats::<3>("19.8, 1.2,45.3"), Ok([19.8, 1.2, 45.3]));
+        assert!(parse_floats::<3>("1,2").unwrap_err().contains("expected 3"));
+        assert!(parse_floats::<2>("1,x").unwrap_err().contains("\"1,x\""));
+    }
+}
