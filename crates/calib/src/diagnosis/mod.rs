@@ -253,20 +253,21 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         .iter()
         .map(|f| frames::scale(*f, 1.0 / frames::norm(*f)))
         .collect();
+    let residual3: Vec<[f64; 3]> = if vector {
+        residual.iter().map(|r| [r[0], r[1], r[2]]).collect()
+    } else {
+        Vec::new()
+    };
     let step = if !samples.has_time {
         None
     } else if vector {
-        let e: Vec<[f64; 3]> = residual.iter().map(|r| [r[0], r[1], r[2]]).collect();
-        scan::step_vector(&e, sigma2)
+        scan::step_vector(&residual3, sigma2)
     } else {
         let rho: Vec<f64> = residual.iter().map(|r| r[0]).collect();
         scan::step_scalar(&rho, &unit, sigma2)
     };
     let window = match (&samples.rot, vector && samples.has_time) {
-        (Some(rot), true) => {
-            let e: Vec<[f64; 3]> = residual.iter().map(|r| [r[0], r[1], r[2]]).collect();
-            scan::window(&e, rot, sigma2)
-        }
+        (Some(rot), true) => scan::window(&residual3, rot, sigma2),
         _ => None,
     };
 
@@ -283,7 +284,6 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     let columns = cands.last().map_or(n_base, |c| c.first + c.n);
 
     // Accumulate the normal equations per block.
-    let base_cal = |m: [f64; 3]| frames::add(frames::mat_vec(&base.a, m), base.b_ut);
     let mut blocks: Vec<BlockStats> = (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
     let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
     let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
@@ -309,8 +309,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                 batches.add_row(batch, j, &entries, samples.field[i][j]);
             }
         } else {
-            // ρ + J·Δ − u·G·θ ≈ 0 around the base fit, with the readings centred.
-            let b = base_cal(samples.raw[i]);
+            // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
             let u = unit[i];
             entries.clear();
             for (k, (r, s)) in SYM.iter().enumerate() {
@@ -325,7 +324,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             for (c, cand) in cands.iter().enumerate() {
                 entries.extend((0..cand.n).map(|k| (cand.first + k, -frames::dot(u, regs[c][k]))));
             }
-            let y = -(frames::norm(b) - field_ut);
+            let y = -residual[i][0];
             block.add_row(&entries, y);
             batches.add_row(batch, 0, &entries, y);
         }
@@ -394,18 +393,24 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             .position(|&c| c == col)
             .map(|p| (last.beta[p], (last.inverse[(p, p)] * sigma2_last).sqrt()))
     };
-    let linear_of = |get: &dyn Fn(usize) -> Option<(f64, f64)>| -> (Mat3, [f64; 3]) {
+    // A and b of a solution, back from the centred readings (and, for the scalar method, from the linearisation).
+    let linear_of = |sol: &stats::Solution| -> (Mat3, [f64; 3]) {
+        let get = |col: usize| {
+            sol.columns
+                .iter()
+                .position(|&c| c == col)
+                .map(|p| sol.beta[p])
+        };
         if vector {
-            let a: Mat3 = std::array::from_fn(|j| {
-                std::array::from_fn(|k| get(4 * j + k).map_or(0.0, |v| v.0))
-            });
-            let b_c: [f64; 3] = std::array::from_fn(|j| get(4 * j + 3).map_or(0.0, |v| v.0));
+            let a: Mat3 =
+                std::array::from_fn(|j| std::array::from_fn(|k| get(4 * j + k).unwrap_or(0.0)));
+            let b_c: [f64; 3] = std::array::from_fn(|j| get(4 * j + 3).unwrap_or(0.0));
             // Back from centred readings: b = b' − A·mean.
             (a, frames::sub(b_c, frames::mat_vec(&a, raw_mean)))
         } else {
             let mut a = base.a;
             for (k, (r, s)) in SYM.iter().enumerate() {
-                let d = get(k).map_or(0.0, |v| v.0);
+                let d = get(k).unwrap_or(0.0);
                 a[*r][*s] += d;
                 if r != s {
                     a[*s][*r] += d;
@@ -413,19 +418,12 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             }
             // b' = b + A·mean was linearised; b = b' − A·mean with the updated A.
             let b_c0 = frames::add(base.b_ut, frames::mat_vec(&base.a, raw_mean));
-            let b_c: [f64; 3] = std::array::from_fn(|k| b_c0[k] + get(6 + k).map_or(0.0, |v| v.0));
+            let b_c: [f64; 3] = std::array::from_fn(|k| b_c0[k] + get(6 + k).unwrap_or(0.0));
             (a, frames::sub(b_c, frames::mat_vec(&a, raw_mean)))
         }
     };
-    let base_get = |col: usize| {
-        sel.base
-            .columns
-            .iter()
-            .position(|&c| c == col)
-            .map(|p| (sel.base.beta[p], 0.0))
-    };
-    let (base_a, base_b) = linear_of(&base_get);
-    let (ext_a, ext_b) = linear_of(&coef);
+    let (base_a, base_b) = linear_of(&sel.base);
+    let (ext_a, ext_b) = linear_of(last);
 
     let mut model = Model::linear(ext_a, ext_b);
     let mut effects = Vec::new();
