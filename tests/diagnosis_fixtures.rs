@@ -9,6 +9,9 @@ use std::path::{Path, PathBuf};
 
 use common::fit_report;
 use magcal_app::effect_spec::{self, Defaults};
+use magcal_app::params::ParamsFile;
+use magcal_calib::Inputs;
+use magcal_calib::effects::Frame;
 use magcal_calib::effects::{Context, Effect, WorldContext};
 use magcal_calib::frames;
 use magcal_recording::Recording;
@@ -250,5 +253,64 @@ fn the_fixtures_are_what_their_commands_write() {
                 "{name}: {x:?} vs {y:?}"
             );
         }
+    }
+}
+
+/// The extended model goes to the parameters file, and `apply` with it removes the body-fixed effect: applied to
+/// the fixture, the file's model leaves the residual the report gives for the final model.
+#[test]
+fn the_extended_model_is_written_and_applied() {
+    for (name, args) in fixtures() {
+        if args.iter().any(|a| a == "none") {
+            continue;
+        }
+        let path = dir().join(format!("{name}.csv"));
+        let rec = Recording::read(&path).unwrap();
+        let Some(effect) = truth(&name, &rec).effects.first().copied() else {
+            continue;
+        };
+        if effect.id().frame() != Frame::Body {
+            continue;
+        }
+        let tmp = tempfile::tempdir().unwrap();
+        let params = tmp.path().join("params.toml");
+        let report = fit_report(&path, &["--out", params.to_str().unwrap()]);
+        let text = std::fs::read_to_string(&params).unwrap();
+        assert!(
+            text.contains(&format!("id = \"{}\"", effect.id())),
+            "{name}: {text}"
+        );
+        let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
+        let model = ParamsFile::read(&params).unwrap().model(&channels).unwrap();
+        let f = rec.meta.field_ned_ut.unwrap();
+        let (q, t, temp) = (
+            rec.quat.as_ref().unwrap(),
+            rec.t_s.as_ref().unwrap(),
+            rec.temp_c.as_ref().unwrap(),
+        );
+        let mut ss = 0.0;
+        for i in 0..rec.len() {
+            let currents: Vec<f64> = rec.currents.iter().map(|c| c.values[i]).collect();
+            let inputs = Inputs {
+                t_s: t[i],
+                temp_c: temp[i],
+                currents_a: &currents,
+            };
+            let d = frames::sub(
+                model.apply(rec.mag_ut[i], &inputs),
+                frames::expected_sensor_field(q[i], f),
+            );
+            ss += frames::dot(d, d);
+        }
+        let applied = (ss / (3.0 * rec.len() as f64)).sqrt();
+        let reported = report["residual"]["rms_ut"].as_f64().unwrap();
+        assert!(
+            (applied / reported - 1.0).abs() < 0.01,
+            "{name}: apply gives {applied}, the report {reported}"
+        );
+        assert!(
+            reported < report["base"]["rms_ut"].as_f64().unwrap(),
+            "{name}"
+        );
     }
 }
