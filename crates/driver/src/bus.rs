@@ -40,6 +40,19 @@ impl<I2C: I2c> Bus<I2C> {
             .map_err(Error::I2c)
     }
 
+    /// Reads the one-byte identification register `reg` and checks it holds `expected` (a different value is
+    /// [`Error::WrongId`] with both).
+    pub(crate) fn expect_id(&mut self, reg: u8, expected: u8) -> Result<(), Error<I2C::Error>> {
+        let found = self.read_reg(reg)?;
+        if found != expected {
+            return Err(Error::WrongId {
+                expected: expected.into(),
+                found: found.into(),
+            });
+        }
+        Ok(())
+    }
+
     /// Reads `reg` until `done` holds for its value, at most [`MAX_POLLS`] times.
     pub(crate) fn poll_until(
         &mut self,

@@ -332,14 +332,7 @@ impl<I2C: I2c> Magnetometer for Lis3mdl<I2C> {
     type Error = Error<I2C::Error>;
 
     fn identify(&mut self) -> Result<(), Self::Error> {
-        let found = self.bus.read_reg(regs::WHO_AM_I)?;
-        if found != regs::WHO_AM_I_VALUE {
-            return Err(Error::WrongId {
-                expected: regs::WHO_AM_I_VALUE.into(),
-                found: found.into(),
-            });
-        }
-        Ok(())
+        self.bus.expect_id(regs::WHO_AM_I, regs::WHO_AM_I_VALUE)
     }
 
     fn init(&mut self) -> Result<(), Self::Error> {

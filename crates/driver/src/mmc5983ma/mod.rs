@@ -492,14 +492,7 @@ impl<I2C: I2c> Magnetometer for Mmc5983ma<I2C> {
     type Error = Error<I2C::Error>;
 
     fn identify(&mut self) -> Result<(), Self::Error> {
-        let found = self.bus.read_reg(regs::PRODUCT_ID)?;
-        if found != regs::PRODUCT_ID_VALUE {
-            return Err(Error::WrongId {
-                expected: regs::PRODUCT_ID_VALUE.into(),
-                found: found.into(),
-            });
-        }
-        Ok(())
+        self.bus.expect_id(regs::PRODUCT_ID, regs::PRODUCT_ID_VALUE)
     }
 
     fn init(&mut self) -> Result<(), Self::Error> {

@@ -252,14 +252,7 @@ impl<I2C: I2c> Magnetometer for Qmc5883l<I2C> {
     type Error = Error<I2C::Error>;
 
     fn identify(&mut self) -> Result<(), Self::Error> {
-        let found = self.bus.read_reg(regs::CHIP_ID)?;
-        if found != regs::CHIP_ID_VALUE {
-            return Err(Error::WrongId {
-                expected: regs::CHIP_ID_VALUE.into(),
-                found: found.into(),
-            });
-        }
-        Ok(())
+        self.bus.expect_id(regs::CHIP_ID, regs::CHIP_ID_VALUE)
     }
 
     fn init(&mut self) -> Result<(), Self::Error> {
