@@ -2,6 +2,8 @@
 //! chip that does not keep what was written fails the verification; chips without offset registers are refused with
 //! a reason; the parameters file is written before the device is tried.
 
+mod common;
+
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -13,19 +15,9 @@ use magcal_driver::ChipKind;
 use magcal_mockhw::{Fault, SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
+/// A simulated free-rotation recording of a LIS2MDL.
 fn recording(dir: &Path) -> PathBuf {
-    let path = dir.join("rec.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
-        .args(["--device", "sim:lis2mdl", "--routine", "free", "--out"])
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    path
+    common::sim_recording(dir, "sim:lis2mdl", "free")
 }
 
 fn fit_to(dir: &Path, device: &str) -> Output {

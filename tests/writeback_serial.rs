@@ -4,6 +4,8 @@
 
 mod pty;
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::Arc;
@@ -16,18 +18,7 @@ use nalgebra::{Matrix3, Vector3};
 
 /// A simulated cube24 recording (a vector fit, so A is not symmetric and the packet needs the polar factor).
 fn recording(dir: &Path) -> PathBuf {
-    let path = dir.join("rec.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
-        .args(["--device", "sim:lis3mdl", "--routine", "cube24", "--out"])
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    path
+    common::sim_recording(dir, "sim:lis3mdl", "cube24")
 }
 
 /// Runs `magcal-fit REC --out --report --write-to serial:PTY` against a firmware echoing as `echo`.

@@ -11,6 +11,22 @@ pub fn real(rel: &str) -> PathBuf {
         .join(rel)
 }
 
+/// Records `dir/rec.csv` from a simulated device with `magcal-record` (panics with stderr if it fails).
+pub fn sim_recording(dir: &Path, device: &str, routine: &str) -> PathBuf {
+    let path = dir.join("rec.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
+        .args(["--device", device, "--routine", routine, "--out"])
+        .arg(&path)
+        .output()
+        .expect("magcal-record runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    path
+}
+
 /// Runs `magcal-fit` with these arguments.
 pub fn magcal_fit(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
