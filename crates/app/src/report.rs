@@ -4,7 +4,6 @@
 //! 12-parameter fit.
 
 use magcal_calib::diagnosis::{Diagnosis, ParamValue, Verdict};
-use magcal_calib::noise::NoiseSource;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
@@ -32,8 +31,11 @@ pub struct Report {
     pub coverage: CoverageReport,
     /// The world field used.
     pub field: FieldReport,
-    /// Warnings and what the method cannot see.
+    /// What the method cannot see, and other things worth knowing.
     pub notes: Vec<String>,
+    /// What may make the calibration wrong or unusable as it stands, and what to do (empty when all is well).
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// What the base model leaves out (absent with `--no-diagnose`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnosis: Option<DiagnosisReport>,
@@ -404,12 +406,7 @@ impl Report {
                 sigma_ut: cal.noise.sigma_ut,
                 lsb_ut: cal.noise.lsb_ut,
                 floor_ut: cal.noise.floor_ut,
-                source: match cal.noise.source {
-                    NoiseSource::Still { start, end } => {
-                        format!("still segment, samples {start}–{end}")
-                    }
-                    NoiseSource::Differences { order } => format!("differences of order {order}"),
-                },
+                source: crate::calibrate::noise_source(&cal.noise),
             },
             samples: SamplesReport {
                 total: cal.samples.total,
@@ -428,6 +425,7 @@ impl Report {
                 source: cal.field.source().to_owned(),
             },
             notes: cal.notes.clone(),
+            warnings: cal.warnings.clone(),
             diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
         }
     }
