@@ -116,6 +116,40 @@ impl Calibration {
             .map_or(self.residual_rms_ut, |d| d.extended.rms_ut)
     }
 
+    /// Standard errors of the offset `−A⁻¹·b` of the final model, µT: from the scalar fit's centre covariance, or
+    /// propagated through `dc = −A⁻¹·(dA·c + db)` from the vector fit's covariance (rows independent); for a model
+    /// extended by the diagnosis, from its standard errors with the entries' covariances neglected.
+    pub fn offset_se_ut(&self) -> [f64; 3] {
+        let model = self.model();
+        let c = scalar::centre(&model.a, model.b_ut);
+        let row_var: [f64; 3] = match (
+            &self.fit,
+            self.diagnosis.as_ref().and_then(|d| d.extended.se),
+        ) {
+            (Fit::Scalar(s), None) => {
+                return std::array::from_fn(|k| s.centre_cov_ut2[k][k].sqrt());
+            }
+            (_, Some((a_se, b_se))) => std::array::from_fn(|j| {
+                (0..3).map(|k| (c[k] * a_se[j][k]).powi(2)).sum::<f64>() + b_se[j].powi(2)
+            }),
+            (Fit::Vector(v), None) => std::array::from_fn(|j| {
+                let g = [c[0], c[1], c[2], 1.0];
+                (0..4)
+                    .flat_map(|r| (0..4).map(move |s| (r, s)))
+                    .map(|(r, s)| g[r] * v.covariance[j][r][s] * g[s])
+                    .sum::<f64>()
+            }),
+        };
+        let a = nalgebra::Matrix3::from_fn(|j, k| model.a[j][k]);
+        let inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix3::zeros);
+        std::array::from_fn(|k| {
+            (0..3)
+                .map(|j| (inv[(k, j)].powi(2)) * row_var[j])
+                .sum::<f64>()
+                .sqrt()
+        })
+    }
+
     /// Standard errors of the final model's `A` and `b`.
     pub fn standard_errors(&self) -> ([[f64; 3]; 3], [f64; 3]) {
         if let Some(se) = self.diagnosis.as_ref().and_then(|d| d.extended.se) {

@@ -74,12 +74,12 @@ pub fn check(
     };
     let (low, high) = EARTH_FIELD_UT;
     let raw_in_range = (0.5 * low..=1.5 * high).contains(&raw_radius);
-    let scale_known = match fit {
-        Fit::Scalar(s) => s.field_given,
-        Fit::Vector(_) => true,
+    let known = match fit {
+        Fit::Scalar(s) => s.field_given.then_some(s.field_ut),
+        Fit::Vector(_) => Some(calibrated),
     };
     if !raw_in_range && raw_radius > 0.0 {
-        warnings.push(units_warning(raw_radius, model, c, scale_known));
+        warnings.push(units_warning(raw_radius, model, c, known));
     } else if !(low..=high).contains(&calibrated) {
         warnings.push(format!(
             "the calibrated field is {calibrated:.1} µT, outside the Earth's {low:.0}–{high:.0} µT: if the readings \
@@ -98,10 +98,17 @@ pub fn check(
     Ok(warnings)
 }
 
-/// What raw readings of this radius look like, and the scale that would make them µT.
-fn units_warning(raw_radius: f64, model: &Model, c: [f64; 3], scale_known: bool) -> String {
-    let want = (EARTH_FIELD_UT.0 * EARTH_FIELD_UT.1).sqrt();
-    let scale = want / raw_radius;
+/// What raw readings of this radius look like, and the scale that would make them µT (exact when the field's
+/// magnitude is known, a range over the Earth's fields otherwise).
+fn units_warning(raw_radius: f64, model: &Model, c: [f64; 3], field_ut: Option<f64>) -> String {
+    let (low, high) = EARTH_FIELD_UT;
+    let (scale, span) = match field_ut {
+        Some(f) => (f / raw_radius, format!("{:.4}", f / raw_radius)),
+        None => (
+            (low * high).sqrt() / raw_radius,
+            format!("{:.4}–{:.4}", low / raw_radius, high / raw_radius),
+        ),
+    };
     let near: Vec<&str> = SCALES
         .iter()
         .filter(|(_, s)| (s / scale).ln().abs() < 1.5f64.ln())
@@ -114,12 +121,10 @@ fn units_warning(raw_radius: f64, model: &Model, c: [f64; 3], scale_known: bool)
     };
     format!(
         "the raw readings are not in µT: they lie {raw_radius:.1} units from their centre, where the Earth's field \
-         is {:.0}–{:.0} µT. They look like raw counts or another unit: multiplying them by about {scale:.4}{like} \
-         would make them µT. {} The offset [{:.1}, {:.1}, {:.1}] is in the raw units, and exports to autopilots \
-         (which expect gauss or mGauss) are wrong: convert the recording to µT and fit again",
-        EARTH_FIELD_UT.0,
-        EARTH_FIELD_UT.1,
-        if scale_known {
+         is {low:.0}–{high:.0} µT. They look like raw counts or another unit: multiplying them by {span}{like} would \
+         make them µT. {} The offset [{:.1}, {:.1}, {:.1}] is in the raw units, and exports to autopilots (which \
+         expect gauss or mGauss) are wrong: convert the recording to µT and fit again",
+        if field_ut.is_some() {
             format!(
                 "A (mean gain {:.4}) absorbs the scale, so the calibrated field is in µT.",
                 (model.a[0][0] + model.a[1][1] + model.a[2][2]) / 3.0

@@ -242,6 +242,9 @@ pub struct CalibrationReport {
     pub b_se_ut: [f64; 3],
     /// The hard-iron offset in raw units, `−A⁻¹·b`, µT.
     pub offset_ut: [f64; 3],
+    /// Standard errors of the offset, µT.
+    #[serde(default)]
+    pub offset_se_ut: [f64; 3],
     /// Body-fixed corrections.
     pub corrections: Vec<Correction>,
     /// Scalar method: the raw ellipsoid's semi-axes, largest first, µT.
@@ -365,6 +368,7 @@ impl Report {
                 a_se,
                 b_se_ut,
                 offset_ut: magcal_calib::scalar::centre(&model.a, model.b_ut),
+                offset_se_ut: cal.offset_se_ut(),
                 corrections: model
                     .corrections()
                     .filter_map(|e| Correction::from_effect(e, channels))

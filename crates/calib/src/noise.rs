@@ -89,6 +89,8 @@ const MEDIAN_PROBE: usize = 65_536;
 const STILL_WINDOW: usize = 50;
 /// A still segment must be at least this many windows long.
 const STILL_MIN_WINDOWS: usize = 4;
+/// A still window's spread is at most this fraction of the recording's largest spread.
+const STILL_OF_ROTATION: f64 = 0.1;
 /// Poses give the noise when their pooled degrees of freedom reach this.
 const POSES_MIN_DOF: usize = 20;
 
@@ -220,10 +222,14 @@ fn still_segment(
 ) -> Option<(usize, usize, [f64; 3])> {
     let n = columns[0].len();
     let windows = n / STILL_WINDOW;
+    // Still means small against the rotation too: rows in random order also have windows whose spread matches their
+    // differences, and they are not still.
+    let rotation = columns.iter().map(|c| plain_sigma(c)).fold(0.0, f64::max);
     let still = |w: usize| {
         (0..3).all(|k| {
             let seg = &columns[k][w * STILL_WINDOW..(w + 1) * STILL_WINDOW];
-            plain_sigma(seg) <= 1.3 * diff_sigma[k].max(1e-9)
+            let spread = plain_sigma(seg);
+            spread <= 1.3 * diff_sigma[k].max(1e-9) && spread <= STILL_OF_ROTATION * rotation
         })
     };
     let (mut best, mut run_start) = ((0, 0), None);
