@@ -4,8 +4,11 @@ use magcal_calib::coverage::sphere_fraction;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
-use magcal_calib::scalar::{self, ScalarFit, ScalarOptions};
-use magcal_calib::vector::{self, VectorFit, VectorOptions};
+use std::borrow::Cow;
+
+use magcal_calib::robust;
+use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
+use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Inputs, Model};
 use magcal_recording::Recording;
 
@@ -55,8 +58,10 @@ pub struct SampleCounts {
     pub total: usize,
     /// Rows the fit used.
     pub used: usize,
-    /// Rows left out because their attitude reference was missing (vector method).
+    /// Rows left out because their attitude reference (vector method) or reading was missing.
     pub missing_reference: usize,
+    /// Rows the robust base fit excluded as grossly off.
+    pub excluded: usize,
 }
 
 /// A fitted calibration and what was measured around it.
@@ -80,6 +85,8 @@ pub struct Calibration {
     pub notes: Vec<String>,
     /// Things the user must not miss: the calibration may be wrong or unusable as it stands, and what to do.
     pub warnings: Vec<String>,
+    /// What the robust base fit left out.
+    pub robust: RobustSummary,
     /// What the base model leaves out, when diagnosed.
     pub diagnosis: Option<Diagnosis>,
 }
@@ -162,6 +169,92 @@ impl Calibration {
     }
 }
 
+/// What the robust base fit left out: samples whose residual departs grossly from the rest (see
+/// [`magcal_calib::robust`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobustSummary {
+    /// Per recording row: kept by the base fit (rows it cannot use count as kept).
+    pub kept: Vec<bool>,
+    /// The residual's scale (a standard deviation per axis, or of |B|, from the median residual), µT.
+    pub scale_ut: f64,
+    /// The excluded spans: recording rows `[start, end)`, and their times when the recording has them, s.
+    pub spans: Vec<ExcludedSpan>,
+}
+
+/// A span of rows the base fit excluded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExcludedSpan {
+    /// First row.
+    pub start: usize,
+    /// One past the last row.
+    pub end: usize,
+    /// Time of the first and last row, s (NaN without a time column).
+    pub t0_s: f64,
+    /// See `t0_s`.
+    pub t1_s: f64,
+    /// Rows excluded in it (a span may hold kept rows between excluded ones).
+    pub excluded: usize,
+}
+
+/// Excluded rows closer than this in time are one span, s.
+const SPAN_GAP_S: f64 = 0.5;
+
+impl RobustSummary {
+    fn of(kept: Vec<bool>, scale_ut: f64, rec: &Recording) -> RobustSummary {
+        let t = rec.t_s.as_deref();
+        let spans = robust::excluded_spans(&kept, t, SPAN_GAP_S)
+            .into_iter()
+            .map(|(start, end)| ExcludedSpan {
+                start,
+                end,
+                t0_s: t.map_or(f64::NAN, |t| t[start]),
+                t1_s: t.map_or(f64::NAN, |t| t[end - 1]),
+                excluded: kept[start..end].iter().filter(|k| !**k).count(),
+            })
+            .collect();
+        RobustSummary {
+            kept,
+            scale_ut,
+            spans,
+        }
+    }
+
+    /// Rows excluded.
+    pub fn excluded(&self) -> usize {
+        self.spans.iter().map(|s| s.excluded).sum()
+    }
+
+    /// A note saying what was excluded, when anything was.
+    pub fn note(&self) -> Option<String> {
+        if self.spans.is_empty() {
+            return None;
+        }
+        const SHOWN: usize = 6;
+        let mut spans: Vec<String> = self
+            .spans
+            .iter()
+            .take(SHOWN)
+            .map(|s| {
+                if s.t0_s.is_finite() {
+                    format!("{:.1}–{:.1} s", s.t0_s, s.t1_s)
+                } else {
+                    format!("rows {}–{}", s.start + 1, s.end)
+                }
+            })
+            .collect();
+        if self.spans.len() > SHOWN {
+            spans.push(format!("and {} more", self.spans.len() - SHOWN));
+        }
+        Some(format!(
+            "{} samples left out of the base fit, their residual more than {:.0} times the typical {:.2} µT: {}",
+            self.excluded(),
+            robust::GROSS_SIGMA,
+            self.scale_ut,
+            spans.join(", ")
+        ))
+    }
+}
+
 /// Why a recording could not be calibrated.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrateError {
@@ -224,31 +317,30 @@ pub fn calibrate(
         m => m,
     };
     let mut notes = Vec::new();
-    let (fit, mut noise, used) = match method {
+    let (fit, mut noise, used, robust) = match method {
         Method::Vector => {
             let expected = expected_field(rec, &field)?;
             let noise = noise::estimate(&rec.mag_ut, Some(&expected));
-            let v = vector::fit(
-                &rec.mag_ut,
-                &expected,
-                &VectorOptions {
-                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-                    ..Default::default()
-                },
-            )?;
-            let n = v.n;
-            (Fit::Vector(v), noise, n)
+            let r = robust::fit(&VectorProblem {
+                raw_ut: Cow::Borrowed(&rec.mag_ut),
+                expected_ut: Cow::Owned(expected),
+                raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+            })?;
+            let n = r.fit.n;
+            let (fit, kept) = (
+                Fit::Vector(r.fit),
+                RobustSummary::of(r.kept, r.sigma_ut, rec),
+            );
+            (fit, noise, n, kept)
         }
         _ => {
             let noise = noise::estimate(&rec.mag_ut, None);
-            let s = scalar::fit(
-                &rec.mag_ut,
-                &ScalarOptions {
-                    field_ut: field.magnitude(),
-                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-                    ..Default::default()
-                },
-            )?;
+            let r = robust::fit(&ScalarProblem {
+                raw_ut: Cow::Borrowed(&rec.mag_ut),
+                field_ut: field.magnitude(),
+                raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+            })?;
+            let s = r.fit;
             notes.push(format!(
                 "rotation not observable: {}",
                 scalar::ROTATION_NOTE
@@ -262,9 +354,17 @@ pub fn calibrate(
             }
             warnings.extend(s.warning());
             let n = s.n;
-            (Fit::Scalar(s), noise, n)
+            (
+                Fit::Scalar(s),
+                noise,
+                n,
+                RobustSummary::of(r.kept, r.sigma_ut, rec),
+            )
         }
     };
+    if let Some(note) = robust.note() {
+        notes.push(note);
+    }
     let (coverage, residual_rms_ut) = match &fit {
         Fit::Vector(v) => (v.coverage, rms3(v.residual_rms_ut)),
         Fit::Scalar(s) => (s.coverage, s.residual_rms_ut),
@@ -308,10 +408,12 @@ pub fn calibrate(
         samples: SampleCounts {
             total: rec.len(),
             used,
-            missing_reference: rec.len() - used,
+            missing_reference: rec.len() - used - robust.excluded(),
+            excluded: robust.excluded(),
         },
         notes,
         warnings,
+        robust,
         diagnosis: None,
     };
     // Sphere coverage from at most ~100 000 readings: the fraction of 100 cells needs no more.

@@ -304,6 +304,9 @@ pub struct SamplesReport {
     pub used: usize,
     /// Rows left out for a missing attitude reference.
     pub missing_reference: usize,
+    /// Rows the robust base fit excluded as grossly off.
+    #[serde(default)]
+    pub excluded: usize,
 }
 
 /// Coverage of the rotation.
@@ -416,6 +419,7 @@ impl Report {
                 total: cal.samples.total,
                 used: cal.samples.used,
                 missing_reference: cal.samples.missing_reference,
+                excluded: cal.samples.excluded,
             },
             coverage: CoverageReport {
                 sphere_fraction: cal.sphere_coverage,

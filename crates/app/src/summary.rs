@@ -30,6 +30,9 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
             s.missing_reference
         );
     }
+    if s.excluded > 0 {
+        let _ = write!(out, " ({} grossly off, excluded)", s.excluded);
+    }
     out.push('\n');
     match (cal.field.vector(), cal.field.magnitude()) {
         (Some(f), Some(m)) => {

@@ -23,6 +23,8 @@ mod error;
 #[cfg(feature = "std")]
 pub mod noise;
 #[cfg(feature = "std")]
+pub mod robust;
+#[cfg(feature = "std")]
 pub mod scalar;
 #[cfg(feature = "std")]
 pub mod vector;

@@ -24,10 +24,13 @@
 
 use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3, Vector4};
 
+use std::borrow::Cow;
+
 use crate::FitError;
 use crate::coverage::{Coverage, SphereGrid, describe};
 use crate::frames::Mat3;
 use crate::model::Model;
+use crate::robust::RobustProblem;
 
 /// What the scalar method cannot see, in words for reports.
 pub const ROTATION_NOTE: &str = "the scalar method constrains only |B|, and a rotation of the calibrated field leaves \
@@ -78,6 +81,9 @@ pub struct ScalarOptions<'a> {
     /// Variance of the raw readings' noise per sensor axis, µT², for the noise correction of the score (see the
     /// module docs); zero for the plain magnitude least squares.
     pub raw_noise_var_ut2: [f64; 3],
+    /// Estimates only, quickly: no noise correction, no uncertainties (zero), no refusal of an undetermined centre
+    /// (for the seeds of a robust fit).
+    pub quick: bool,
 }
 
 /// The result of a scalar fit.
@@ -159,6 +165,70 @@ impl ScalarFit {
                 rotate_advice(d)
             )
         })
+    }
+}
+
+/// The scalar method as a robust problem (see [`crate::robust`]): readings, the magnitude, the raw noise.
+#[derive(Clone, Debug)]
+pub struct ScalarProblem<'a> {
+    /// Raw readings, µT.
+    pub raw_ut: Cow<'a, [[f64; 3]]>,
+    /// The field magnitude, µT, if known.
+    pub field_ut: Option<f64>,
+    /// Variance of the raw noise per axis, µT².
+    pub raw_noise_var_ut2: [f64; 3],
+}
+
+impl RobustProblem for ScalarProblem<'_> {
+    type Fit = ScalarFit;
+    /// The median of |N(0, 1)|.
+    const MEDIAN_OF_UNIT: f64 = 0.674_49;
+
+    fn len(&self) -> usize {
+        self.raw_ut.len()
+    }
+
+    fn every(&self, stride: usize) -> Self {
+        ScalarProblem {
+            raw_ut: self.raw_ut.iter().step_by(stride).copied().collect(),
+            ..self.clone()
+        }
+    }
+
+    fn quick_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, true)
+    }
+
+    fn final_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, false)
+    }
+
+    fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
+        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
+        let b = Vector3::from(fit.b_ut);
+        self.raw_ut
+            .iter()
+            .map(|m| ((a * Vector3::from(*m) + b).norm() - fit.field_ut).abs())
+            .collect()
+    }
+
+    fn model(fit: &ScalarFit) -> Model {
+        fit.model()
+    }
+}
+
+impl ScalarProblem<'_> {
+    fn fit_with(&self, weights: &[f64], quick: bool) -> Result<ScalarFit, FitError> {
+        fit(
+            &self.raw_ut,
+            &ScalarOptions {
+                field_ut: self.field_ut,
+                skip_coverage_check: quick,
+                weights: Some(weights),
+                raw_noise_var_ut2: self.raw_noise_var_ut2,
+                quick,
+            },
+        )
     }
 }
 
@@ -445,12 +515,12 @@ impl Problem {
 
     /// The fit with the prior weighted by the residual variance: start from the sphere's residual and refit until
     /// the fit's own residual variance settles.
-    fn settle(&self, p0: SVector<f64, P>) -> Solution {
+    fn settle(&self, p0: SVector<f64, P>, rounds: usize) -> Solution {
         let mut iterations = 0;
         let mut p = p0;
         let mut sigma2 = (self.pass(&p, None).rss / self.dof).max(f64::MIN_POSITIVE);
         let mut at = self.pass(&p, None);
-        for _ in 0..MAX_ROUNDS {
+        for _ in 0..rounds {
             (p, at) = self.minimise(p, sigma2, &mut iterations);
             let settled = (at.rss / self.dof).max(f64::MIN_POSITIVE);
             let change = (settled / sigma2 - 1.0).abs();
@@ -567,6 +637,48 @@ impl Problem {
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
         Some((cov, share))
     }
+    /// From the plain fit: refuse what the coverage cannot determine, remove the noise's share of the score, and
+    /// return the parameters' covariance with the prior's share of the shape.
+    fn refine(
+        &self,
+        sol: &mut Solution,
+        opts: &ScalarOptions<'_>,
+        target: f64,
+    ) -> Result<(SMatrix<f64, P, P>, f64), FitError> {
+        let singular =
+            || FitError::Singular("the magnitude residual's normal matrix has no inverse");
+        // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful
+        // where the fit is.
+        let (plain_cov, _) = self.covariance(sol, None).ok_or_else(singular)?;
+        check_determined(
+            weakest(&plain_cov),
+            sol.p.fixed_rows::<3>(3).sum() / 3.0,
+            target,
+        )?;
+        let noise = Vector3::from(opts.raw_noise_var_ut2);
+        let noise = noise
+            .iter()
+            .any(|v| *v > 0.0)
+            .then(|| self.bounded_noise(sol, noise));
+        if let Some(s2) = &noise {
+            let plain = sol.p;
+            let converged = self.correct(sol, s2);
+            let moved = sol.p - plain;
+            let gain = plain.fixed_rows::<3>(3).sum() / 3.0;
+            let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
+                && moved.fixed_rows::<6>(3).amax() <= MAX_CORRECTION * gain;
+            if !converged || !small {
+                let (direction, se_raw) = weakest(&plain_cov);
+                return Err(FitError::Undetermined {
+                    direction,
+                    se_ut: se_raw * gain,
+                    field_ut: target,
+                    advice: rotate_advice(direction),
+                });
+            }
+        }
+        self.covariance(sol, noise.as_ref()).ok_or_else(singular)
+    }
 }
 
 /// The direction in which the centre is least certain, and its standard error there.
@@ -632,44 +744,12 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     for k in 0..3 {
         p0[3 + k] = gain;
     }
-    let mut sol = problem.settle(p0);
-    let singular = FitError::Singular("the magnitude residual's normal matrix has no inverse");
-    // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful where
-    // the fit is.
-    let (plain_cov, _) = problem.covariance(&sol, None).ok_or(singular)?;
-    check_determined(
-        weakest(&plain_cov),
-        sol.p.fixed_rows::<3>(3).sum() / 3.0,
-        target,
-    )?;
-    let noise = Vector3::from(opts.raw_noise_var_ut2);
-    let noise = noise
-        .iter()
-        .any(|v| *v > 0.0)
-        .then(|| problem.bounded_noise(&sol, noise));
-    if let Some(s2) = &noise {
-        let plain = sol.p;
-        let converged = problem.correct(&mut sol, s2);
-        let moved = sol.p - plain;
-        let gain = plain.fixed_rows::<3>(3).sum() / 3.0;
-        let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
-            && moved.fixed_rows::<6>(3).amax() <= MAX_CORRECTION * gain;
-        if !converged || !small {
-            let (direction, se_raw) = weakest(&plain_cov);
-            return Err(FitError::Undetermined {
-                direction,
-                se_ut: se_raw * gain,
-                field_ut: target,
-                advice: rotate_advice(direction),
-            });
-        }
-    }
-    let (cov, shape_prior_share) =
-        problem
-            .covariance(&sol, noise.as_ref())
-            .ok_or(FitError::Singular(
-                "the magnitude residual's normal matrix has no inverse",
-            ))?;
+    let mut sol = problem.settle(p0, if opts.quick { 1 } else { MAX_ROUNDS });
+    let (cov, shape_prior_share) = if opts.quick {
+        (SMatrix::<f64, P, P>::zeros(), 0.0)
+    } else {
+        problem.refine(&mut sol, opts, target)?
+    };
     let (c, a) = unpack(&sol.p);
     let positive = a.determinant() > 0.0;
     if !positive {
@@ -678,7 +758,9 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         ));
     }
     let weakest = weakest(&cov);
-    check_determined(weakest, a.trace() / 3.0, target)?;
+    if !opts.quick {
+        check_determined(weakest, a.trace() / 3.0, target)?;
+    }
 
     // Without a given magnitude, keep the raw ellipsoid's volume: det(A) = 1.
     let kappa = if opts.field_ut.is_some() {

@@ -19,10 +19,13 @@
 
 use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3, Vector4};
 
+use std::borrow::Cow;
+
 use crate::FitError;
 use crate::coverage::{Coverage, SphereGrid};
-use crate::frames::Mat3;
+use crate::frames::{self, Mat3};
 use crate::model::Model;
+use crate::robust::RobustProblem;
 
 /// Options of the vector fit.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -82,6 +85,73 @@ impl VectorFit {
                 .sum();
             var.max(0.0).sqrt()
         })
+    }
+}
+
+/// The vector method as a robust problem (see [`crate::robust`]): readings, expected fields, raw noise.
+#[derive(Clone, Debug)]
+pub struct VectorProblem<'a> {
+    /// Raw readings, µT.
+    pub raw_ut: Cow<'a, [[f64; 3]]>,
+    /// The expected field in sensor axes, µT (NaN = missing).
+    pub expected_ut: Cow<'a, [[f64; 3]]>,
+    /// Variance of the raw noise per axis, µT².
+    pub raw_noise_var_ut2: [f64; 3],
+}
+
+impl RobustProblem for VectorProblem<'_> {
+    type Fit = VectorFit;
+    /// The median of a χ distribution with three degrees of freedom.
+    const MEDIAN_OF_UNIT: f64 = 1.538_2;
+
+    fn len(&self) -> usize {
+        self.raw_ut.len()
+    }
+
+    fn every(&self, stride: usize) -> Self {
+        VectorProblem {
+            raw_ut: self.raw_ut.iter().step_by(stride).copied().collect(),
+            expected_ut: self.expected_ut.iter().step_by(stride).copied().collect(),
+            raw_noise_var_ut2: self.raw_noise_var_ut2,
+        }
+    }
+
+    fn quick_fit(&self, weights: &[f64]) -> Result<VectorFit, FitError> {
+        self.fit_with(weights, true)
+    }
+
+    fn final_fit(&self, weights: &[f64]) -> Result<VectorFit, FitError> {
+        self.fit_with(weights, false)
+    }
+
+    fn residuals(&self, fit: &VectorFit) -> Vec<f64> {
+        let model = fit.model();
+        self.raw_ut
+            .iter()
+            .zip(self.expected_ut.iter())
+            .map(|(m, r)| {
+                let cal = frames::add(frames::mat_vec(&model.a, *m), model.b_ut);
+                frames::norm(frames::sub(cal, *r))
+            })
+            .collect()
+    }
+
+    fn model(fit: &VectorFit) -> Model {
+        fit.model()
+    }
+}
+
+impl VectorProblem<'_> {
+    fn fit_with(&self, weights: &[f64], skip_coverage_check: bool) -> Result<VectorFit, FitError> {
+        fit(
+            &self.raw_ut,
+            &self.expected_ut,
+            &VectorOptions {
+                raw_noise_var_ut2: self.raw_noise_var_ut2,
+                skip_coverage_check,
+                weights: Some(weights),
+            },
+        )
     }
 }
 

@@ -1,0 +1,320 @@
+//! Robust estimation: a base fit that gross disturbances cannot drag.
+//!
+//! A magnet passing the sensor, a magnet attached to the board for a minute, a glitch: such samples are off by tens
+//! of µT where the rest sit at the noise and the reference's own error. Least squares follows them; this fit does
+//! not:
+//! 1. **Seeds from time spans.** Fits on contiguous spans of a third, a half and two thirds of the recording (and on
+//!    all of it), each refined by iteratively reweighted least squares with Tukey's biweight on the residual's size
+//!    against a scale from its median. A disturbance covering up to half the recording leaves at least one seed
+//!    clean. The seeds run on a subsample of at most [`SEED_SAMPLES`] samples.
+//! 2. **The best seed** is the one with the smallest median residual over all samples — the state the recording is
+//!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
+//!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
+//!    plausible ones.
+//! 3. **On all samples**, a few reweighting passes from the best seed, then samples whose residual exceeds
+//!    [`GROSS_SIGMA`] times the scale are excluded and the rest fitted by plain (weighted 0/1) least squares. Without
+//!    gross disturbances nothing is excluded and the fit *is* the least-squares fit.
+
+use crate::FitError;
+use crate::frames::Mat3;
+use crate::model::Model;
+
+/// Seeds are fitted on a subsample of at most this many samples.
+pub const SEED_SAMPLES: usize = 8_000;
+/// A residual beyond this many standard deviations (per axis) of the scale is gross.
+pub const GROSS_SIGMA: f64 = 6.0;
+/// Tukey's biweight cut-off, in the same units: samples beyond get no weight while reweighting.
+const BIWEIGHT_SIGMA: f64 = 6.0;
+/// A matrix whose singular values differ by more than this factor is an implausible calibration.
+pub const PLAUSIBLE_GAIN_RATIO: f64 = 2.5;
+const SEED_ITERATIONS: usize = 20;
+const FULL_ITERATIONS: usize = 3;
+
+/// A fitting problem that can be solved with per-sample weights: what the robust fit needs of the vector and the
+/// scalar method.
+pub trait RobustProblem: Sized {
+    /// The fit it makes.
+    type Fit;
+    /// The median size of a residual of pure noise of unit standard deviation per axis (≈1.538 for the norm of a
+    /// 3-vector, 0.6745 for the absolute value of a scalar).
+    const MEDIAN_OF_UNIT: f64;
+    /// Number of samples.
+    fn len(&self) -> usize;
+    /// Whether there are no samples.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// A problem of every `stride`-th sample, for cheap seeds.
+    fn every(&self, stride: usize) -> Self;
+    /// A quick fit (estimates only) with per-sample weights in `[0, 1]`.
+    fn quick_fit(&self, weights: &[f64]) -> Result<Self::Fit, FitError>;
+    /// The full fit (uncertainties and checks) with 0/1 weights.
+    fn final_fit(&self, weights: &[f64]) -> Result<Self::Fit, FitError>;
+    /// Each sample's residual size under a fit (NaN where the sample is unusable).
+    fn residuals(&self, fit: &Self::Fit) -> Vec<f64>;
+    /// The linear model of a fit.
+    fn model(fit: &Self::Fit) -> Model;
+}
+
+/// A robust fit and what it left out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Robust<F> {
+    /// The final fit, on the samples kept.
+    pub fit: F,
+    /// Per sample: kept (true), or excluded as grossly off (false; samples the fit cannot use are kept).
+    pub kept: Vec<bool>,
+    /// The scale of the residual: a standard deviation per axis from the median residual, µT.
+    pub sigma_ut: f64,
+    /// Each sample's residual size under the fit, µT (NaN where unusable).
+    pub residual_ut: Vec<f64>,
+}
+
+impl<F> Robust<F> {
+    /// Samples excluded.
+    pub fn excluded(&self) -> usize {
+        self.kept.iter().filter(|k| !**k).count()
+    }
+}
+
+/// The robust fit of a problem (see the module docs).
+pub fn fit<P: RobustProblem>(problem: &P) -> Result<Robust<P::Fit>, FitError> {
+    let n = problem.len();
+    let stride = n.div_ceil(SEED_SAMPLES).max(1);
+    let sub = (stride > 1).then(|| problem.every(stride));
+    let seeds = sub.as_ref().unwrap_or(problem);
+    let m = seeds.len();
+    // (plausible, scale, fit): plausible seeds first, then the smallest scale.
+    let mut best: Option<(bool, f64, P::Fit)> = None;
+    for (a, b) in seed_spans(m) {
+        let mut w = vec![0.0; m];
+        w[a..b].fill(1.0);
+        let Some((fit, scale)) = reweight(seeds, &w, SEED_ITERATIONS) else {
+            continue;
+        };
+        let plausible = plausible(&P::model(&fit).a);
+        let better = best
+            .as_ref()
+            .is_none_or(|(p, s, _)| (plausible, -scale) > (*p, -*s));
+        if better {
+            best = Some((plausible, scale, fit));
+        }
+    }
+    // No seed could be fitted: the full data decides (and its error says why).
+    let Some((_, _, seed)) = best else {
+        let fit = problem.final_fit(&vec![1.0; n])?;
+        let residual_ut = problem.residuals(&fit);
+        let sigma_ut = scale::<P>(&residual_ut);
+        return Ok(Robust {
+            fit,
+            kept: vec![true; n],
+            sigma_ut,
+            residual_ut,
+        });
+    };
+    // On all samples: reweight from the best seed, then exclude what is gross and fit the rest plainly.
+    let mut fit = seed;
+    let mut residual_ut = problem.residuals(&fit);
+    for _ in 0..FULL_ITERATIONS {
+        let w = biweight(&residual_ut, scale::<P>(&residual_ut));
+        match problem.quick_fit(&w) {
+            Ok(f) => fit = f,
+            Err(_) => break,
+        }
+        residual_ut = problem.residuals(&fit);
+    }
+    let sigma_ut = scale::<P>(&residual_ut);
+    let kept: Vec<bool> = residual_ut
+        .iter()
+        .map(|e| !(e.is_finite() && *e > GROSS_SIGMA * sigma_ut))
+        .collect();
+    let weights: Vec<f64> = kept.iter().map(|k| if *k { 1.0 } else { 0.0 }).collect();
+    let fit = problem.final_fit(&weights)?;
+    let residual_ut = problem.residuals(&fit);
+    Ok(Robust {
+        fit,
+        kept,
+        sigma_ut,
+        residual_ut,
+    })
+}
+
+/// The seeds' spans: all samples, and contiguous thirds, halves and two-thirds at offsets of a sixth.
+fn seed_spans(n: usize) -> Vec<(usize, usize)> {
+    let mut spans = vec![(0, n)];
+    for len6 in [2usize, 3, 4] {
+        for start6 in 0..=(6 - len6) {
+            spans.push((start6 * n / 6, (start6 + len6) * n / 6));
+        }
+    }
+    spans
+}
+
+/// IRLS with the biweight from the fit on `w0`: the fit and the scale of its residual, or `None` if a fit fails.
+fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P::Fit, f64)> {
+    let mut fit = p.quick_fit(w0).ok()?;
+    let mut w_prev = w0.to_vec();
+    for _ in 0..iterations {
+        let e = p.residuals(&fit);
+        let w = biweight(&e, scale::<P>(&e));
+        let change = w
+            .iter()
+            .zip(&w_prev)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        fit = p.quick_fit(&w).ok()?;
+        if change < 1e-3 {
+            break;
+        }
+        w_prev = w;
+    }
+    let e = p.residuals(&fit);
+    Some((fit, scale::<P>(&e)))
+}
+
+/// The residual's scale: the median residual size over the usable samples, as a standard deviation per axis.
+fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
+    let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mid = v.len() / 2;
+    let median = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+    median / P::MEDIAN_OF_UNIT
+}
+
+/// Tukey's biweight of residual sizes `e` against the scale `s`.
+fn biweight(e: &[f64], s: f64) -> Vec<f64> {
+    let c = BIWEIGHT_SIGMA * s.max(f64::MIN_POSITIVE);
+    e.iter()
+        .map(|x| {
+            let u = x / c;
+            if u.is_finite() && u < 1.0 {
+                (1.0 - u * u).powi(2)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The runs of excluded samples, as index ranges `[start, end)`: neighbouring runs whose gap is at most `gap_s` in
+/// time (or, without time, [`SPAN_GAP_SAMPLES`] samples) are one span.
+pub fn excluded_spans(kept: &[bool], t_s: Option<&[f64]>, gap_s: f64) -> Vec<(usize, usize)> {
+    let mut spans: Vec<(usize, usize)> = Vec::new();
+    for (i, k) in kept.iter().enumerate() {
+        if *k {
+            continue;
+        }
+        let near = |last: usize| match t_s {
+            Some(t) => t[i] - t[last - 1] <= gap_s,
+            None => i - last < SPAN_GAP_SAMPLES,
+        };
+        match spans.last_mut() {
+            Some(span) if near(span.1) => span.1 = i + 1,
+            _ => spans.push((i, i + 1)),
+        }
+    }
+    spans
+}
+
+/// Without time, excluded samples this close are one span.
+pub const SPAN_GAP_SAMPLES: usize = 5;
+
+/// Whether a matrix's gains are within [`PLAUSIBLE_GAIN_RATIO`] of each other.
+pub fn plausible(a: &Mat3) -> bool {
+    let m = nalgebra::Matrix3::from_fn(|j, k| a[j][k]);
+    let sv = m.singular_values();
+    sv.min() > 0.0 && sv.max() / sv.min() <= PLAUSIBLE_GAIN_RATIO
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A line fit `y = a·x + b` as a robust problem (a 1-D stand-in for the calibration).
+    struct Line {
+        x: Vec<f64>,
+        y: Vec<f64>,
+    }
+
+    impl RobustProblem for Line {
+        type Fit = (f64, f64);
+        const MEDIAN_OF_UNIT: f64 = 0.6745;
+        fn len(&self) -> usize {
+            self.x.len()
+        }
+        fn every(&self, stride: usize) -> Line {
+            Line {
+                x: self.x.iter().step_by(stride).copied().collect(),
+                y: self.y.iter().step_by(stride).copied().collect(),
+            }
+        }
+        fn quick_fit(&self, w: &[f64]) -> Result<(f64, f64), FitError> {
+            let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for i in 0..self.len() {
+                sw += w[i];
+                sx += w[i] * self.x[i];
+                sy += w[i] * self.y[i];
+                sxx += w[i] * self.x[i] * self.x[i];
+                sxy += w[i] * self.x[i] * self.y[i];
+            }
+            let det = sw * sxx - sx * sx;
+            if det.abs() < 1e-12 {
+                return Err(FitError::Singular("line"));
+            }
+            let a = (sw * sxy - sx * sy) / det;
+            Ok((a, (sy - a * sx) / sw))
+        }
+        fn final_fit(&self, w: &[f64]) -> Result<(f64, f64), FitError> {
+            self.quick_fit(w)
+        }
+        fn residuals(&self, f: &(f64, f64)) -> Vec<f64> {
+            (0..self.len())
+                .map(|i| (self.y[i] - f.0 * self.x[i] - f.1).abs())
+                .collect()
+        }
+        fn model(f: &(f64, f64)) -> Model {
+            Model::linear(
+                [[f.0, 0.0, 0.0], [0.0, f.0, 0.0], [0.0, 0.0, f.0]],
+                [f.1; 3],
+            )
+        }
+    }
+
+    fn line(n: usize, disturbed: std::ops::Range<usize>) -> Line {
+        let x: Vec<f64> = (0..n).map(|i| ((i * 37) % 101) as f64 / 10.0).collect();
+        let noise = |i: usize| ((i * 7919) % 13) as f64 / 13.0 - 0.5;
+        let y = (0..n)
+            .map(|i| {
+                let clean = 2.0 * x[i] + 1.0 + 0.1 * noise(i);
+                if disturbed.contains(&i) {
+                    clean + 30.0
+                } else {
+                    clean
+                }
+            })
+            .collect();
+        Line { x, y }
+    }
+
+    #[test]
+    fn a_disturbance_over_45_percent_of_the_samples_cannot_capture_the_fit() {
+        let p = line(2000, 500..1400);
+        let r = fit(&p).unwrap();
+        assert!(
+            (r.fit.0 - 2.0).abs() < 0.01 && (r.fit.1 - 1.0).abs() < 0.05,
+            "{:?}",
+            r.fit
+        );
+        assert_eq!(r.excluded(), 900);
+        assert!(r.kept[..500].iter().all(|k| *k) && r.kept[500..1400].iter().all(|k| !*k));
+    }
+
+    #[test]
+    fn without_disturbances_it_is_least_squares() {
+        let p = line(2000, 0..0);
+        let r = fit(&p).unwrap();
+        assert_eq!(r.excluded(), 0);
+        assert_eq!(r.fit, p.quick_fit(&vec![1.0; 2000]).unwrap());
+    }
+}
