@@ -46,6 +46,8 @@
 
 mod error;
 mod layout;
+pub mod limits;
+mod line_ends;
 mod metadata;
 mod read;
 mod recording;
@@ -58,6 +60,6 @@ pub use metadata::{Date, DateError, Location, Metadata};
 pub use recording::{Channel, MissingCounts, Recording, Row, TextColumn};
 pub use sample::{Sample, SampleError};
 pub use write::{
-    CURRENT_DECIMALS, DEFAULT_FLUSH_INTERVAL, GYRO_DECIMALS, QUAT_DECIMALS, RecordingWriter,
-    T_DECIMALS, TEMP_DECIMALS, UT_DECIMALS,
+    CURRENT_DECIMALS, CreateOptions, DEFAULT_FLUSH_INTERVAL, GYRO_DECIMALS, Note, QUAT_DECIMALS,
+    RecordingWriter, T_DECIMALS, TEMP_DECIMALS, UT_DECIMALS,
 };
