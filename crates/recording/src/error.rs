@@ -166,6 +166,14 @@ pub enum ReadErrorKind {
         /// The separator seen.
         separator: char,
     },
+    /// The header row has more columns than a recording can have ([`crate::limits::MAX_COLUMNS`]).
+    #[error("the header row has {found} columns; a recording has at most {max}")]
+    TooManyColumns {
+        /// Columns in the header row.
+        found: usize,
+        /// The most a recording may have.
+        max: usize,
+    },
     /// Two columns of the header have the same name.
     #[error("duplicate column name {0:?}")]
     DuplicateColumn(String),

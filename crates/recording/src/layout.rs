@@ -231,11 +231,19 @@ impl Layout {
     /// known columns or currents, no name is empty, repeats or has surrounding blanks.
     pub(crate) fn check(&self) -> Result<(), String> {
         let names = self.column_names();
-        for (i, name) in names.iter().enumerate() {
+        if names.len() > crate::limits::MAX_COLUMNS {
+            return Err(format!(
+                "{} columns; a recording has at most {}",
+                names.len(),
+                crate::limits::MAX_COLUMNS
+            ));
+        }
+        let mut seen = HashSet::with_capacity(names.len());
+        for name in &names {
             if name.is_empty() || name.trim_ascii() != *name {
                 return Err(format!("column name {name:?} cannot be written"));
             }
-            if names[..i].contains(name) {
+            if !seen.insert(*name) {
                 return Err(format!("column name {name:?} repeated"));
             }
         }

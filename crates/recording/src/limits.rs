@@ -15,6 +15,10 @@ pub const MAX_CURRENT_A: f64 = 1e6;
 /// The `sample_rate_hz` metadata value, Hz.
 pub const MAX_SAMPLE_RATE_HZ: f64 = 1e9;
 
+/// Columns in the header row: a recording has a few dozen; a file with more is something else, and is refused
+/// before its names take memory.
+pub const MAX_COLUMNS: usize = 10_000;
+
 /// A limit and the unit it is in, for messages.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Limit {

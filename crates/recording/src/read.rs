@@ -48,6 +48,15 @@ impl Recording {
         let (meta, header_text, header_line) = read_metadata(name, &mut input)?;
         let separator = separator(&header_text)
             .map_err(|kind| ReadError::new(name, Some(header_line), None, kind))?;
+        // Counted before the csv reader splits the row, which would take memory for every name.
+        let columns = column_count(&header_text, separator);
+        if columns > limits::MAX_COLUMNS {
+            let kind = ReadErrorKind::TooManyColumns {
+                found: columns,
+                max: limits::MAX_COLUMNS,
+            };
+            return Err(ReadError::new(name, Some(header_line), None, kind));
+        }
         let column_ref = |names: &[String], i: usize| ColumnRef {
             index: i + 1,
             name: names[i].clone(),
@@ -231,6 +240,20 @@ fn separator(header: &[u8]) -> Result<u8, ReadErrorKind> {
     Ok(b',')
 }
 
+/// The number of fields of a CSV line: separators outside quotes, plus one.
+fn column_count(line: &[u8], separator: u8) -> usize {
+    let mut quoted = false;
+    let mut n = 1;
+    for &b in line {
+        if b == b'"' {
+            quoted = !quoted;
+        } else if b == separator && !quoted {
+            n += 1;
+        }
+    }
+    n
+}
+
 /// Parses data rows into the columns of a recording.
 struct RowParser<'h> {
     roles: &'h [Role],
@@ -383,5 +406,32 @@ impl RowParser<'_> {
             g.push(group_or_nan(gyro_rad_s));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn columns_are_counted_outside_quotes() {
+        assert_eq!(column_count(b"mx,my,mz", b','), 3);
+        assert_eq!(column_count(b"mx,\"a,b\",mz,\"say \"\"x,y\"\"\"", b','), 4);
+        assert_eq!(column_count(b"mx;my;mz,x", b';'), 3);
+    }
+
+    #[test]
+    fn a_header_of_more_columns_than_a_recording_has_is_refused() {
+        let mut text = b"mx,my,mz".repeat(1);
+        for i in 0..limits::MAX_COLUMNS {
+            text.extend(format!(",c{i}").as_bytes());
+        }
+        text.extend(b"\n1,2,3\n");
+        let err = Recording::from_reader("wide.csv", &text[..]).unwrap_err();
+        assert!(matches!(
+            err.kind(),
+            ReadErrorKind::TooManyColumns { found, .. } if *found == limits::MAX_COLUMNS + 3
+        ));
+        assert_eq!(err.line(), Some(1));
     }
 }
