@@ -422,7 +422,7 @@ mod tests {
 
     #[test]
     fn a_header_of_more_columns_than_a_recording_has_is_refused() {
-        let mut text = b"mx,my,mz".repeat(1);
+        let mut text = b"mx,my,mz".to_vec();
         for i in 0..limits::MAX_COLUMNS {
             text.extend(format!(",c{i}").as_bytes());
         }

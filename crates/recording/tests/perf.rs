@@ -117,11 +117,31 @@ fn child_reads_one_file() {
     );
 }
 
-/// Writes `lines()` to a file, streamed.
-fn write_lines(path: &std::path::Path, lines: impl Iterator<Item = String>) -> u64 {
+/// Writes the pathological file `what` of size `n` to `path`, streamed; returns its size in bytes.
+fn write_pathological(path: &std::path::Path, what: &str, n: usize) -> u64 {
     let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    for line in lines {
-        file.write_all(line.as_bytes()).unwrap();
+    match what {
+        "metadata keys" => {
+            for i in 0..n {
+                writeln!(file, "# key_{i}: value {i}").unwrap();
+            }
+            writeln!(file, "t,mx,my,mz\n0,1,2,3").unwrap();
+        }
+        "header columns" => {
+            write!(file, "t,mx,my,mz").unwrap();
+            for i in 0..n {
+                write!(file, ",c{i}").unwrap();
+            }
+            writeln!(file).unwrap();
+        }
+        _ => {
+            write!(file, "# note: ").unwrap();
+            let block = "a".repeat(64);
+            for _ in 0..n / 64 {
+                file.write_all(block.as_bytes()).unwrap();
+            }
+            writeln!(file, "\nt,mx,my,mz\n0,1,2,3").unwrap();
+        }
     }
     file.flush().unwrap();
     std::fs::metadata(path).unwrap().len()
@@ -131,45 +151,15 @@ fn write_lines(path: &std::path::Path, lines: impl Iterator<Item = String>) -> u
 #[ignore = "timing and memory; run in release with --ignored --nocapture"]
 fn pathological_headers_read_in_linear_time_and_bounded_memory() {
     let dir = tempfile::tempdir().unwrap();
-    let rows = "t,mx,my,mz\n0,1,2,3\n".to_owned();
-    let cases: Vec<(&str, Box<dyn Fn(usize) -> Box<dyn Iterator<Item = String>>>)> = vec![
-        (
-            "metadata keys",
-            Box::new(move |n| {
-                let rows = rows.clone();
-                Box::new(
-                    (0..n)
-                        .map(|i| format!("# key_{i}: value {i}\n"))
-                        .chain(std::iter::once(rows)),
-                )
-            }),
-        ),
-        (
-            "header columns",
-            Box::new(|n| {
-                Box::new(
-                    std::iter::once("t,mx,my,mz".to_owned())
-                        .chain((0..n).map(|i| format!(",c{i}")))
-                        .chain(std::iter::once("\n".to_owned())),
-                )
-            }),
-        ),
-        (
-            "bytes of one metadata value",
-            Box::new(|n| {
-                Box::new(
-                    std::iter::once("# note: ".to_owned())
-                        .chain((0..n / 64).map(|_| "a".repeat(64)))
-                        .chain(std::iter::once("\nt,mx,my,mz\n0,1,2,3\n".to_owned())),
-                )
-            }),
-        ),
-    ];
-    for (what, make) in &cases {
+    for what in [
+        "metadata keys",
+        "header columns",
+        "bytes of one metadata value",
+    ] {
         let mut per_unit = Vec::new();
         for n in [what_size(what) / 4, what_size(what)] {
             let path = dir.path().join("big.csv");
-            let bytes = write_lines(&path, make(n));
+            let bytes = write_pathological(&path, what, n);
             let out = std::process::Command::new(std::env::current_exe().unwrap())
                 .args([
                     "--exact",
