@@ -261,6 +261,8 @@ pub struct RecordingWriter {
     rows: u64,
     /// Rows whole in the file.
     rows_in_file: u64,
+    /// Where each buffered row ends in the buffer (a row may span lines: quoted line breaks).
+    row_ends: Vec<usize>,
     /// Bytes whole in the file (header and rows): where a failed write is cut back to.
     file_len: u64,
     /// Each note's key, the offset of its value in the file, and its width.
@@ -375,6 +377,7 @@ impl RecordingWriter {
             previous_t_s: None,
             rows: 0,
             rows_in_file: 0,
+            row_ends: Vec::new(),
             file_len: header.len() as u64,
             notes: opts
                 .notes
@@ -467,6 +470,7 @@ impl RecordingWriter {
             s.currents_a.iter().copied(),
             s.extra.iter().map(String::as_str),
         );
+        self.row_ends.push(self.buf.len());
         self.rows += 1;
         if self.buf.len() >= MAX_BUFFERED_BYTES {
             self.flush()
@@ -484,20 +488,34 @@ impl RecordingWriter {
         Ok(())
     }
 
-    /// Writes all buffered rows (whole lines) to the file. If that fails, what part of them reached the file is cut
-    /// off again.
+    /// Writes all buffered rows to the file. If that fails, the file is cut back to the last whole row that
+    /// reached it.
     pub fn flush(&mut self) -> io::Result<()> {
         self.check_not_failed()?;
-        if !self.buf.is_empty() {
-            if let Err(e) = self.file.write_all(self.buf.as_bytes()) {
-                self.failed = true;
-                let _ = self.file.set_len(self.file_len);
-                return Err(e);
-            }
-            self.file_len += self.buf.len() as u64;
-            self.rows_in_file = self.rows;
-            self.buf.clear();
+        let bytes = self.buf.as_bytes();
+        let mut written = 0;
+        while written < bytes.len() {
+            let error = match self.file.write(&bytes[written..]) {
+                Ok(0) => io::Error::from(io::ErrorKind::WriteZero),
+                Ok(n) => {
+                    written += n;
+                    continue;
+                }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => e,
+            };
+            self.failed = true;
+            let whole_rows = self.row_ends.partition_point(|end| *end <= written);
+            let whole_bytes = whole_rows.checked_sub(1).map_or(0, |i| self.row_ends[i]);
+            self.file_len += whole_bytes as u64;
+            self.rows_in_file += whole_rows as u64;
+            let _ = self.file.set_len(self.file_len);
+            return Err(error);
         }
+        self.file_len += bytes.len() as u64;
+        self.rows_in_file = self.rows;
+        self.buf.clear();
+        self.row_ends.clear();
         self.last_flush = Instant::now();
         Ok(())
     }
