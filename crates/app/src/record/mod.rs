@@ -700,6 +700,8 @@ fn run(
                 }
             }
         }
+        // Rows taken a while ago reach the file even when no row follows them (between two cube poses).
+        out.flush_if_due()?;
         ui.progress(&progress(t_s, out, &map, opts, cube.then_some(jig.taken)));
     };
     Ok(RecordSummary {
