@@ -22,15 +22,30 @@ fn simulate(dir: &Path, name: &str, args: &[&str]) -> std::path::PathBuf {
 #[test]
 fn broken_recordings_exit_non_zero_naming_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
-    let cases = [
-        ("nan_mag.csv", "t,mx,my,mz\n0,1,2,3\n0.1,nan,2,3\n", ":3:2"),
-        ("text.csv", "t,mx,my,mz\n0,1,2,3\n0.1,1,x2,3\n", ":3:3"),
+    let cases: [(&str, &[u8], &str); 7] = [
+        ("nan_mag.csv", b"t,mx,my,mz\n0,1,2,3\n0.1,nan,2,3\n", ":3:2"),
+        ("text.csv", b"t,mx,my,mz\n0,1,2,3\n0.1,1,x2,3\n", ":3:3"),
         (
             "short.csv",
-            "# magcal-recording v1\nt,mx,my,mz\n0,1,2\n",
+            b"# magcal-recording v1\nt,mx,my,mz\n0,1,2\n",
             ":3",
         ),
-        ("backwards.csv", "t,mx,my,mz\n1,1,2,3\n0.5,1,2,3\n", ":3:1"),
+        ("backwards.csv", b"t,mx,my,mz\n1,1,2,3\n0.5,1,2,3\n", ":3:1"),
+        (
+            "huge.csv",
+            b"t,mx,my,mz\n0,1,2,3\n0.1,1,1e308,3\n",
+            ":3:3 (my): out of range",
+        ),
+        (
+            "cr-only.csv",
+            b"# magcal-recording v1\rt,mx,my,mz\r0,1,2,3\r0.1,1,x,3\r",
+            ":4:3 (my): not a number",
+        ),
+        (
+            "gzip.csv",
+            b"\x1f\x8b\x08\0\0\0",
+            ": a gzip file, not a recording",
+        ),
     ];
     for (name, text, position) in cases {
         let path = dir.path().join(name);
