@@ -19,6 +19,9 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
     };
     let s = &cal.samples;
     let _ = writeln!(out, "{recording}: {method}");
+    for w in &cal.warnings {
+        let _ = writeln!(out, "  WARNING: {w}");
+    }
     let _ = write!(out, "  samples: {} used of {}", s.used, s.total);
     if s.missing_reference > 0 {
         let _ = write!(
