@@ -34,10 +34,10 @@ fn replay(target: &str, f: fn(&[u8]), at_least: usize) {
 
 #[test]
 fn the_reader_corpus_stays_panic_free() {
-    replay("reader", targets::reader, 10);
+    replay("reader", targets::reader, 100);
 }
 
 #[test]
 fn the_pipeline_corpus_stays_panic_free() {
-    replay("pipeline", targets::pipeline, 2);
+    replay("pipeline", targets::pipeline, 100);
 }
