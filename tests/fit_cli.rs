@@ -22,15 +22,30 @@ fn simulate(dir: &Path, name: &str, args: &[&str]) -> std::path::PathBuf {
 #[test]
 fn broken_recordings_exit_non_zero_naming_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
-    let cases = [
-        ("nan_mag.csv", "t,mx,my,mz\n0,1,2,3\n0.1,nan,2,3\n", ":3:2"),
-        ("text.csv", "t,mx,my,mz\n0,1,2,3\n0.1,1,x2,3\n", ":3:3"),
+    let cases: [(&str, &[u8], &str); 7] = [
+        ("nan_mag.csv", b"t,mx,my,mz\n0,1,2,3\n0.1,nan,2,3\n", ":3:2"),
+        ("text.csv", b"t,mx,my,mz\n0,1,2,3\n0.1,1,x2,3\n", ":3:3"),
         (
             "short.csv",
-            "# magcal-recording v1\nt,mx,my,mz\n0,1,2\n",
+            b"# magcal-recording v1\nt,mx,my,mz\n0,1,2\n",
             ":3",
         ),
-        ("backwards.csv", "t,mx,my,mz\n1,1,2,3\n0.5,1,2,3\n", ":3:1"),
+        ("backwards.csv", b"t,mx,my,mz\n1,1,2,3\n0.5,1,2,3\n", ":3:1"),
+        (
+            "huge.csv",
+            b"t,mx,my,mz\n0,1,2,3\n0.1,1,1e308,3\n",
+            ":3:3 (my): out of range",
+        ),
+        (
+            "cr-only.csv",
+            b"# magcal-recording v1\rt,mx,my,mz\r0,1,2,3\r0.1,1,x,3\r",
+            ":4:3 (my): not a number",
+        ),
+        (
+            "gzip.csv",
+            b"\x1f\x8b\x08\0\0\0",
+            ": a gzip file, not a recording",
+        ),
     ];
     for (name, text, position) in cases {
         let path = dir.path().join(name);
@@ -165,4 +180,87 @@ fn exports_go_to_stdout_with_the_summary_on_stderr() {
             .unwrap()
             .contains("CAL_MAG0_XOFF")
     );
+}
+
+#[test]
+fn no_output_ever_overwrites_the_input_and_nothing_is_written_when_one_would() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(dir.path(), "rec.csv", &["--duration", "30", "--seed", "2"]);
+    let original = std::fs::read(&rec).unwrap();
+    let link = dir.path().join("link.csv");
+    std::os::unix::fs::symlink(&rec, &link).unwrap();
+    let rec_s = rec.to_str().unwrap();
+    let report = dir.path().join("report.json");
+    let report_s = report.to_str().unwrap();
+    let same_by_dots = format!("{}/./rec.csv", dir.path().display());
+    // (the options, what the message must say)
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--out", rec_s], "--out"),
+        (vec!["--report", rec_s], "--report"),
+        (
+            vec!["--export", "json", "--export-out", rec_s],
+            "--export-out",
+        ),
+        (vec!["--plots", rec_s], "--plots"),
+        (vec!["--report", report_s, "--out", &same_by_dots], "--out"),
+        (
+            vec!["--report", report_s, "--out", link.to_str().unwrap()],
+            "--out",
+        ),
+        (
+            vec!["--report", report_s, "--out", report_s],
+            "--out and --report both name",
+        ),
+    ];
+    for (options, says) in cases {
+        let mut args = vec![rec_s];
+        args.extend(&options);
+        let out = magcal_fit(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{options:?} was accepted");
+        assert!(
+            err.contains(says) && err.contains("nothing was written"),
+            "{options:?}: {err}"
+        );
+        assert_eq!(
+            std::fs::read(&rec).unwrap(),
+            original,
+            "{options:?}: the input changed"
+        );
+        assert!(
+            !report.exists(),
+            "{options:?}: the report was written before the refusal"
+        );
+    }
+    // Plots into the place of another file (not the input): refused before the report is written.
+    let note = dir.path().join("notes.txt");
+    std::fs::write(&note, "mine").unwrap();
+    let out = magcal_fit(&[
+        rec_s,
+        "--report",
+        report_s,
+        "--plots",
+        note.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("names a directory"),
+        "{err}"
+    );
+    assert!(!report.exists());
+    assert_eq!(std::fs::read_to_string(&note).unwrap(), "mine");
+    // The same outputs elsewhere are written.
+    let out = magcal_fit(&[
+        rec_s,
+        "--report",
+        report_s,
+        "--out",
+        dir.path().join("p.toml").to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(report.exists());
 }

@@ -1,4 +1,6 @@
-//! Acceptance: faults while recording, each a test, through `magcal-record` on simulated chips with injected faults.
+//! Acceptance: faults while recording, each a test, through `magcal-record` on simulated chips with injected faults
+//! (bus errors, stuck outputs, magnets that saturate each chip or only change the field, an unwritable path, kill -9,
+//! Ctrl-C).
 //! Whatever happens, the file parses and keeps what was recorded.
 
 use std::io::{BufRead, BufReader};
@@ -115,42 +117,6 @@ fn stuck_outputs_stop_the_recording_naming_the_device() {
 }
 
 #[test]
-fn a_magnet_saturating_the_chip_is_counted_and_not_recorded() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("rec.csv");
-    let out = record(&[
-        "--device",
-        "sim:hmc5883l",
-        "--routine",
-        "free",
-        "--sim-fault",
-        "magnet@10:2:3000,0,0",
-        "--out",
-        path.to_str().unwrap(),
-    ]);
-    let (stdout, stderr) = text(&out);
-    assert!(out.status.success(), "{stderr}");
-    assert!(
-        stdout.contains("saturated so far (field out of the chip's range"),
-        "{stdout}"
-    );
-    // 2 s at the HMC5883L's 75 Hz.
-    let n: u64 = stdout
-        .lines()
-        .find_map(|l| l.strip_prefix("saturated samples (not recorded): "))
-        .expect("a count of saturated samples")
-        .parse()
-        .unwrap();
-    assert!((145..=155).contains(&n), "{n} saturated samples");
-    let rec = Recording::read(&path).unwrap();
-    let t = rec.t_s.as_ref().unwrap();
-    assert!(
-        t.windows(2).any(|w| w[1] - w[0] > 1.9),
-        "the saturated stretch is a gap in the file"
-    );
-}
-
-#[test]
 fn an_unwritable_out_path_fails_before_recording_starts() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("a-file");
@@ -250,4 +216,162 @@ fn ctrl_c_stops_cleanly_and_keeps_the_file() {
         "{} < {reported_s}",
         last_t_s(&rec)
     );
+}
+
+#[test]
+fn a_magnet_saturating_any_chip_is_detected_flagged_and_kept_out_of_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    // (chip, a field past its largest range, its output data rate at the default --rate 100)
+    let cases = [
+        ("lis3mdl", "magnet@10:2:3000,0,0", 80.0),
+        ("lis2mdl", "magnet@10:2:0,-6000,0", 100.0),
+        ("mmc5983ma", "magnet@10:2:0,0,1500", 100.0),
+        ("qmc5883l", "magnet@10:2:1500,0,0", 100.0),
+        ("hmc5883l", "magnet@10:2:3000,0,0", 75.0),
+    ];
+    for (chip, fault, rate_hz) in cases {
+        let path = dir.path().join(format!("{chip}.csv"));
+        let out = record(&[
+            "--device",
+            &format!("sim:{chip}"),
+            "--routine",
+            "free",
+            "--sim-fault",
+            fault,
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        let (stdout, stderr) = text(&out);
+        assert!(out.status.success(), "{chip}: no false 'stuck': {stderr}");
+        assert!(
+            stdout.contains("saturated so far (field out of the chip's range"),
+            "{chip}: said live: {stdout}"
+        );
+        let n: f64 = stdout
+            .lines()
+            .find_map(|l| l.strip_prefix("saturated samples (not recorded): "))
+            .unwrap_or_else(|| panic!("{chip}: a count of saturated samples: {stdout}"))
+            .parse()
+            .unwrap();
+        assert!(
+            (n - 2.0 * rate_hz).abs() <= 0.05 * 2.0 * rate_hz,
+            "{chip}: {n} saturated samples"
+        );
+        let rec = Recording::read(&path).unwrap();
+        let t = rec.t_s.as_ref().unwrap();
+        assert!(
+            t.windows(2).any(|w| w[1] - w[0] > 1.9),
+            "{chip}: the saturated stretch is a gap in the file"
+        );
+        let largest = rec
+            .mag_ut
+            .iter()
+            .map(|m| m.iter().fold(0.0f64, |a, v| a.max(v.abs())))
+            .fold(0.0, f64::max);
+        assert!(
+            largest < 200.0,
+            "{chip}: a clipped value reached the file: {largest} µT"
+        );
+    }
+}
+
+#[test]
+fn a_magnet_that_does_not_saturate_is_said_live_and_kept_out_of_the_coverage() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.csv");
+    let clean = dir.path().join("clean.csv");
+    let run = |path: &Path, faults: &[&str]| {
+        let mut args = vec![
+            "--device",
+            "sim:lis3mdl",
+            "--routine",
+            "free",
+            "--out",
+            path.to_str().unwrap(),
+        ];
+        for f in faults {
+            args.extend(["--sim-fault", f]);
+        }
+        record(&args)
+    };
+    let out = run(&path, &["magnet@20:5:150,0,0"]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    // Said when it happens, between the progress lines of its seconds, and when it ends.
+    let lines: Vec<&str> = stdout.lines().collect();
+    let said = lines
+        .iter()
+        .position(|l| {
+            l.starts_with("t = 20.")
+                && l.contains("the field magnitude is")
+                && l.contains("a magnet")
+        })
+        .unwrap_or_else(|| panic!("no live notice: {stdout}"));
+    assert!(
+        lines[said - 1].starts_with("recording: t=20."),
+        "{}",
+        lines[said - 1]
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with("t = 25.")
+                && l.contains("back to the rest's (disturbed for 5.0 s)")),
+        "{stdout}"
+    );
+    let n: u64 = stdout
+        .lines()
+        .find_map(|l| {
+            l.rsplit_once("kept out of the coverage map): ")
+                .map(|(_, n)| n)
+        })
+        .expect("the summary counts them")
+        .parse()
+        .unwrap();
+    assert!(
+        (390..=400).contains(&n),
+        "{n} disturbed samples (5 s at 80 Hz)"
+    );
+    // Nothing lost: the disturbed samples are in the file; and the coverage was not spoiled: the run stops where
+    // an undisturbed one does, give or take the 5 s kept out.
+    let rec = Recording::read(&path).unwrap();
+    assert!(run(&clean, &[]).status.success());
+    let undisturbed = Recording::read(&clean).unwrap();
+    let duration = |r: &Recording| *r.t_s.as_ref().unwrap().last().unwrap();
+    assert!(
+        duration(&rec) < duration(&undisturbed) + 6.0,
+        "{} s with the magnet, {} s without",
+        duration(&rec),
+        duration(&undisturbed)
+    );
+    let magnitudes_in_file = rec
+        .mag_ut
+        .iter()
+        .filter(|m| m.iter().map(|v| v * v).sum::<f64>().sqrt() > 110.0)
+        .count();
+    assert!(
+        magnitudes_in_file > 100,
+        "the disturbed samples are recorded: {magnitudes_in_file}"
+    );
+    // No false alarm on an undisturbed bench, whatever the chip and the sensor's errors.
+    for chip in ["lis3mdl", "lis2mdl", "qmc5883l", "hmc5883l", "mmc5983ma"] {
+        for seed in ["1", "2", "3"] {
+            let path = dir.path().join(format!("{chip}-{seed}.csv"));
+            let out = record(&[
+                "--device",
+                &format!("sim:{chip}"),
+                "--sim-seed",
+                seed,
+                "--routine",
+                "free",
+                "--out",
+                path.to_str().unwrap(),
+            ]);
+            let (stdout, _) = text(&out);
+            assert!(
+                out.status.success() && !stdout.contains("the field magnitude is"),
+                "{chip} {seed}: {stdout}"
+            );
+        }
+    }
 }

@@ -1,6 +1,8 @@
-//! Acceptance, over a pseudo-terminal: a simulated MotionCal-style board streams `Raw:` lines with garbage mixed in,
-//! then is unplugged; `magcal-record --device serial:…` records every sample, counts the garbage, and leaves a
-//! valid file.
+//! Acceptance, over a pseudo-terminal: a simulated MotionCal-style board streams `Raw:` lines (or native CSV) with
+//! garbage mixed in, then is unplugged; `magcal-record --device serial:…` records every sample, counts the garbage,
+//! and leaves a valid file. A board that goes silent, runs at another baud rate or speaks the other protocol is a
+//! clear error after `--idle-timeout`; Ctrl-C always ends the recording; a board that resets starts a new segment
+//! of true time, noted in the metadata, whatever header it prints.
 
 mod pty;
 
@@ -75,6 +77,257 @@ fn every_raw_line_is_recorded_garbage_is_counted_and_an_unplug_leaves_a_valid_fi
             m.iter()
                 .all(|v| ((v * 10.0) - (v * 10.0).round()).abs() < 1e-6),
             "{m:?}"
+        );
+    }
+}
+
+/// What a recording from the simulated board gave.
+struct SerialRun {
+    success: bool,
+    stdout: String,
+    stderr: String,
+    report: magcal_mockhw::firmware::FirmwareReport,
+    path: std::path::PathBuf,
+    /// How long the recorder ran after the board started, s.
+    ran_s: f64,
+    _dir: tempfile::TempDir,
+}
+
+/// Records `device_protocol` lines from a board running `config` (its port opened first, as a board is plugged in
+/// before recording), with `options`; Ctrl-C after `interrupt_after_s` if given. The board is stopped once the
+/// recorder is done.
+fn serial_run(
+    device_protocol: &str,
+    config: FirmwareConfig,
+    options: &[&str],
+    interrupt_after_s: Option<f64>,
+) -> SerialRun {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("serial.csv");
+    let pty = pty::open();
+    let device = format!("serial:{}:115200:{device_protocol}", pty.slave_path);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
+        .args([
+            "--device",
+            &device,
+            "--routine",
+            "free",
+            "--coverage",
+            "1",
+            "--out",
+        ])
+        .arg(&path)
+        .args(options)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = stdout.next().unwrap().unwrap();
+    assert!(first.starts_with(&format!("recording {device}")), "{first}");
+    let drain = std::thread::spawn(move || stdout.map(Result::unwrap).collect::<Vec<String>>());
+    let stop = Arc::new(AtomicBool::new(false));
+    let started = std::time::Instant::now();
+    let board = pty::firmware(pty.master, config, stop.clone());
+    if let Some(after_s) = interrupt_after_s {
+        std::thread::sleep(std::time::Duration::from_secs_f64(after_s));
+        let status = Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+    }
+    let out = child.wait_with_output().unwrap();
+    let ran_s = started.elapsed().as_secs_f64();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    SerialRun {
+        success: out.status.success(),
+        stdout: drain.join().unwrap().join("\n"),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+        report: board.join().unwrap(),
+        path,
+        ran_s,
+        _dir: dir,
+    }
+}
+
+fn board(f: impl FnOnce(&mut FirmwareConfig)) -> FirmwareConfig {
+    let mut config = FirmwareConfig::new(bench_config(ChipKind::Lis3mdl, 5));
+    config.lines_per_wall_s = 1000.0;
+    f(&mut config);
+    config
+}
+
+#[test]
+fn a_silent_misconfigured_or_mute_board_is_a_clear_error_after_the_idle_timeout() {
+    use magcal_mockhw::firmware::{BoardFault, Output};
+    // (what, the device's protocol, the board, the samples the file keeps, what the error says)
+    let cases: Vec<(&str, &str, FirmwareConfig, usize, &str)> = vec![
+        (
+            "goes silent",
+            "motioncal",
+            board(|c| c.fault = Some(BoardFault::SilentAfter(300))),
+            300,
+            "no sample for 1.0 s after 300 samples: the board stopped sending samples",
+        ),
+        (
+            "says nothing",
+            "motioncal",
+            board(|c| c.fault = Some(BoardFault::SilentAfter(0))),
+            0,
+            "nothing at all was received: is the board running and streaming, on this port?",
+        ),
+        (
+            "wrong baud rate",
+            "motioncal",
+            board(|c| c.fault = Some(BoardFault::WrongBaud)),
+            0,
+            "bytes received but no readable line: wrong baud rate?",
+        ),
+        (
+            "wrong protocol (CSV read as MotionCal)",
+            "motioncal",
+            board(|c| c.output = Output::Csv),
+            0,
+            "none a motioncal sample (the last: \"",
+        ),
+        (
+            "wrong protocol (MotionCal read as CSV)",
+            "csv",
+            board(|_| {}),
+            0,
+            "none a csv sample (the last: \"Raw:",
+        ),
+    ];
+    let runs: Vec<_> = cases
+        .into_iter()
+        .map(|(what, protocol, config, kept, says)| {
+            let handle = std::thread::spawn(move || {
+                serial_run(protocol, config, &["--idle-timeout", "1"], None)
+            });
+            (what, kept, says, handle)
+        })
+        .collect();
+    for (what, kept, says, handle) in runs {
+        let run = handle.join().unwrap();
+        assert!(!run.success, "{what}: {}", run.stdout);
+        assert!(run.stderr.contains(says), "{what}: {}", run.stderr);
+        assert!(
+            run.stderr
+                .contains(&format!("keeps the {kept} samples recorded before")),
+            "{what}: {}",
+            run.stderr
+        );
+        assert!(run.ran_s < 4.0, "{what}: gave up after {:.1} s", run.ran_s);
+        match Recording::read(&run.path) {
+            Ok(rec) => assert_eq!(rec.len(), kept, "{what}"),
+            Err(e) => assert!(
+                kept == 0 && e.to_string().ends_with("no data rows"),
+                "{what}: {e}"
+            ),
+        }
+    }
+}
+
+#[test]
+fn ctrl_c_ends_the_recording_with_the_data_saved_whatever_the_board_does() {
+    use magcal_mockhw::firmware::BoardFault;
+    let cases = [
+        ("silent after 200 lines", BoardFault::SilentAfter(200), 200),
+        ("wrong baud rate", BoardFault::WrongBaud, 0),
+    ];
+    for (what, fault, kept) in cases {
+        let run = serial_run(
+            "motioncal",
+            board(|c| c.fault = Some(fault)),
+            &["--idle-timeout", "60"],
+            Some(1.5),
+        );
+        assert!(
+            run.success,
+            "{what}: an interrupt is a clean stop: {}",
+            run.stderr
+        );
+        assert!(
+            run.ran_s < 3.0,
+            "{what}: Ctrl-C took effect after {:.1} s",
+            run.ran_s
+        );
+        assert!(
+            run.stdout.contains(&format!("recorded {kept} samples")),
+            "{what}: {}",
+            run.stdout
+        );
+        assert!(
+            run.stdout.contains("(interrupted)"),
+            "{what}: {}",
+            run.stdout
+        );
+        if kept > 0 {
+            assert_eq!(Recording::read(&run.path).unwrap().len(), kept, "{what}");
+        }
+    }
+}
+
+#[test]
+fn a_board_reset_starts_a_noted_segment_and_time_stays_true_whatever_header_it_prints() {
+    use magcal_mockhw::firmware::{BOOT_S, BoardFault, Output};
+    for new_header in [false, true] {
+        // Real time: the board's clock and the host's agree, so the bridge over the reset can be checked.
+        let config = board(|c| {
+            c.output = Output::Csv;
+            c.lines_per_wall_s = 100.0;
+            c.raw_lines = Some(500);
+            c.fault = Some(BoardFault::ResetAfter {
+                lines: 250,
+                new_header,
+            });
+        });
+        let run = serial_run("csv", config, &[], None);
+        let what = format!("new header {new_header}");
+        assert!(
+            run.stderr.contains("disconnected after 500 samples"),
+            "{what}: every line understood: {}",
+            run.stderr
+        );
+        assert!(
+            run.stdout
+                .contains("the device's clock restarted (a reset?) at t = 3.0"),
+            "{what}: said live: {}",
+            run.stdout
+        );
+        let rec = Recording::read(&run.path).unwrap();
+        assert_eq!(rec.len(), 500, "{what}");
+        let t = rec.t_s.as_ref().unwrap();
+        assert!(
+            t.windows(2).all(|w| w[1] > w[0]),
+            "{what}: time never stands still"
+        );
+        // True: each row's time is the board's bench time, to the host's timing of the reset.
+        let truth = &run.report.sample_times_s;
+        let worst = t
+            .iter()
+            .zip(truth)
+            .map(|(t, truth)| (t - truth).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.1, "{what}: {worst} s off the board's time");
+        assert!(
+            truth[250] - truth[249] > BOOT_S,
+            "the board took its boot time"
+        );
+        let segments = rec
+            .meta
+            .other
+            .iter()
+            .find(|(k, _)| k == "segments")
+            .map(|(_, v)| v.as_str());
+        assert!(
+            segments.is_some_and(|s| s.starts_with("2 (the device's clock restarted at t = 3.")),
+            "{what}: {segments:?}"
+        );
+        assert!(
+            rec.temp_c.as_ref().unwrap().iter().all(|c| c.is_finite()),
+            "{what}: the temperature column is read by name"
         );
     }
 }

@@ -11,7 +11,7 @@ use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export};
 use magcal_app::field::resolve;
-use magcal_app::files::write_atomic;
+use magcal_app::files::{check_outputs, write_atomic};
 use magcal_app::params::ParamsFile;
 use magcal_app::plots::write_plots;
 use magcal_app::report::Report;
@@ -67,8 +67,8 @@ struct Args {
     /// Skip the diagnosis (what physics the 12-parameter model leaves out).
     #[arg(long)]
     no_diagnose: bool,
-    /// Write SVG plots of the diagnosis here: residual against time before and after, against the blamed channel,
-    /// and over the sphere of field directions.
+    /// Write SVG plots of the diagnosis into this directory (created if needed): residual against time before and
+    /// after, against the blamed channel, and over the sphere of field directions.
     #[arg(long, value_name = "DIR", conflicts_with = "no_diagnose")]
     plots: Option<PathBuf>,
 }
@@ -77,7 +77,37 @@ fn main() -> ExitCode {
     exit("magcal-fit", run(Args::parse()))
 }
 
+/// Refuses outputs that would overwrite the recording or each other, or plots into a file's place, before anything
+/// is read or written.
+fn check_paths(args: &Args) -> anyhow::Result<()> {
+    let mut outputs: Vec<(&str, &std::path::Path)> = Vec::new();
+    let named = [
+        ("--out", &args.out),
+        ("--report", &args.report),
+        ("--export-out", &args.export_out),
+        ("--plots", &args.plots),
+    ];
+    for (flag, path) in named {
+        if let Some(path) = path {
+            outputs.push((flag, path));
+        }
+    }
+    check_outputs(&args.recording, &outputs)?;
+    if let Some(dir) = &args.plots
+        && dir.exists()
+        && !dir.is_dir()
+    {
+        bail!(
+            "--plots {}: a file is there, and --plots names a directory (the plots are written into it); nothing \
+             was written",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
 fn run(args: Args) -> anyhow::Result<()> {
+    check_paths(&args)?;
     let rec = Recording::read(&args.recording)?;
     let name = args.recording.display().to_string();
     if let Some(f) = args.field_ut

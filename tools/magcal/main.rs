@@ -2,18 +2,16 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, bail};
 use clap::Parser;
 use magcal_app::calibrate::{Calibration, Fit, Method, calibrate};
-use magcal_app::cli::{WorldFieldOpts, exit};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::params::ParamsFile;
 use magcal_app::record::sim::TruthFile;
-use magcal_app::record::{RecordOptions, Routine, Stop, device_metadata, record, ui};
+use magcal_app::record::{RecordOptions, Routine, Stop, check_out, device_metadata, record, ui};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_recording::Recording;
@@ -42,6 +40,9 @@ struct Args {
     /// Where the recording, parameters and report go.
     #[arg(long, default_value = "magcal-out", value_name = "DIR")]
     out_dir: PathBuf,
+    /// Replace a recording already in the output directory (otherwise it is refused, and kept).
+    #[arg(long)]
+    force: bool,
     /// The local field (for real devices; a simulated bench knows its own).
     #[command(flatten)]
     field: WorldFieldOpts,
@@ -55,25 +56,24 @@ fn main() -> ExitCode {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    std::fs::create_dir_all(&args.out_dir)
-        .with_context(|| format!("creating {}", args.out_dir.display()))?;
     let rec_path = args.out_dir.join("recording.csv");
     let routine = args.routine;
+    let mut opts = RecordOptions::new(routine, rec_path.clone());
+    opts.force = args.force;
+    opts.auto = args.device.is_sim();
+    check_out(&rec_path, args.force)?;
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("creating {}", args.out_dir.display()))?;
 
     // Record.
-    let mut opts = RecordOptions::new(routine, rec_path.clone());
-    opts.auto = args.device.is_sim();
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&args.device, args.sim_seed, opts.meta);
     let open = OpenOptions {
         sim_seed: args.sim_seed,
         ..OpenOptions::default()
     };
+    let interrupt = interrupt_flag("magcal")?;
     let mut source = device::open(&args.device, &open)?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    let flag = interrupt.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
     println!(
         "magcal: recording {} ({} routine) to {}",

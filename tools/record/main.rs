@@ -2,16 +2,14 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
-    RecordOptions, RecordSummary, Routine, Stop, device_metadata, record, ui,
+    RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record, ui,
 };
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
@@ -40,10 +38,12 @@ use magcal_app::record::{
 ///   magcal-fit rec.csv --out params.toml --report report.json
 ///   (or `magcal` for both in one command)
 ///
-/// The file is written as you go (metadata first, rows at least every 0.5 s): if the recorder is killed, the file
-/// still parses and holds all but the last moment. A device that fails (a bus that stays down after retries, a
-/// board that is unplugged, outputs that stop changing) ends the recording with an error; the file keeps what was
-/// recorded.
+/// The file is written as you go (metadata first, rows as they are taken, at least every 0.25 s): if the recorder
+/// is killed, the file still parses and holds all but the last moment; if the disk fills up, it holds whole lines
+/// and parses. An existing file is never replaced without --force, and a file another recorder is writing is
+/// refused. A device that fails (a bus that stays down after retries, a board that is unplugged or goes silent for
+/// --idle-timeout, outputs that stop changing) ends the recording with an error; the file keeps what was recorded.
+/// Ctrl-C ends the recording and keeps the file.
 #[derive(Parser, Debug)]
 #[command(version, about, long_about, verbatim_doc_comment)]
 struct Args {
@@ -53,9 +53,12 @@ struct Args {
     /// The routine.
     #[arg(long, value_enum)]
     routine: Routine,
-    /// The recording to write (created or overwritten).
+    /// The recording to write (a new file: an existing one is refused unless --force).
     #[arg(long, short, default_value = "recording.csv", value_name = "REC.csv")]
     out: PathBuf,
+    /// Replace --out if it exists (its old content is lost once the device is open and recording starts).
+    #[arg(long)]
+    force: bool,
     /// The local field, written to the recording for the fit.
     #[command(flatten)]
     field: WorldFieldOpts,
@@ -81,6 +84,10 @@ struct Args {
     /// Full-scale range to ask the chip for, ± µT (the smallest that holds it).
     #[arg(long, value_name = "UT")]
     range_ut: Option<f64>,
+    /// serial: no sample for this long ends the recording with an error naming the likely cause (a silent board,
+    /// a wrong baud rate, a wrong protocol), s.
+    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    idle_timeout: f64,
     /// sim: seed of the simulated sensor (its errors) and of the noise.
     #[arg(long, default_value_t = 1, value_name = "N")]
     sim_seed: u64,
@@ -103,21 +110,28 @@ fn main() -> ExitCode {
 fn run(args: Args) -> anyhow::Result<()> {
     let spec: DeviceSpec = args.device.parse()?;
     let routine = args.routine;
-    if !(args.coverage > 0.0 && args.coverage <= 1.0) {
-        bail!(
-            "--coverage must be a fraction in (0, 1], got {}",
-            args.coverage
-        );
-    }
     if !spec.is_sim() && (args.truth.is_some() || !args.sim_fault.is_empty() || args.realtime) {
         bail!("--truth, --sim-fault and --realtime are for sim devices, not {spec}");
     }
     let mut opts = RecordOptions::new(routine, args.out.clone());
+    opts.force = args.force;
     opts.auto = args.auto || spec.is_sim();
     opts.target_coverage = args.coverage;
     opts.max_duration_s = args.max_duration;
     opts.dwell_s = args.dwell;
     opts.still_ut = args.still_ut;
+    let open = OpenOptions {
+        rate_hz: args.rate,
+        range_ut: args.range_ut,
+        sim_seed: args.sim_seed,
+        sim_faults: args.sim_fault.clone(),
+        sim_paced: args.realtime,
+        idle_timeout_s: args.idle_timeout,
+    };
+    // Everything is checked before anything is opened or written.
+    opts.check()?;
+    open.check(&spec)?;
+    check_out(&args.out, args.force)?;
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     if let DeviceSpec::Sim { chip } = spec {
@@ -137,18 +151,17 @@ fn run(args: Args) -> anyhow::Result<()> {
             }
         );
     }
-    let open = OpenOptions {
-        rate_hz: args.rate,
-        range_ut: args.range_ut,
-        sim_seed: args.sim_seed,
-        sim_faults: args.sim_fault.clone(),
-        sim_paced: args.realtime,
-    };
+    let interrupt = interrupt_flag("magcal-record")?;
     let mut source = device::open(&spec, &open)?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    let flag = interrupt.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
+    if let Some(rate_hz) = source.rate_hz()
+        && (rate_hz - args.rate).abs() > 0.01 * args.rate
+    {
+        eprintln!(
+            "note: asked for {} Hz; the nearest the {} offers is {rate_hz} Hz",
+            args.rate,
+            source.sensor()
+        );
+    }
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
     println!("recording {spec} to {}", args.out.display());
     let summary = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
@@ -177,6 +190,19 @@ fn print_summary(s: &RecordSummary) {
     );
     if s.saturated > 0 {
         println!("saturated samples (not recorded): {}", s.saturated);
+    }
+    if s.disturbed > 0 {
+        println!(
+            "samples whose field magnitude departed from the rest's (a magnet or iron nearby? recorded, kept out of \
+             the coverage map): {}",
+            s.disturbed
+        );
+    }
+    if !s.clock_restarts.is_empty() {
+        println!(
+            "the device's clock restarted {} times; the file's metadata lists the segments",
+            s.clock_restarts.len()
+        );
     }
     if let Some(g) = &s.garbage {
         println!("garbage lines skipped: {} ({g})", g.total());

@@ -1,6 +1,8 @@
-//! Command-line pieces the tools share: lists of numbers, the world-field options, the exit.
+//! Command-line pieces the tools share: lists of numbers, the world-field options, Ctrl-C, the exit.
 
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use magcal_recording::{Date, Location, Metadata};
 
@@ -62,6 +64,22 @@ impl WorldFieldOpts {
             meta.date = Some(date);
         }
     }
+}
+
+/// Installs the Ctrl-C handler of a recording tool and returns the flag it sets. The first Ctrl-C sets it: the
+/// recording stops at the next sample or within a fraction of a second, and the file is finished. A second one, should
+/// the first go unheeded, exits at once with status 130 (the file keeps every row flushed so far, and parses).
+pub fn interrupt_flag(tool: &'static str) -> anyhow::Result<Arc<AtomicBool>> {
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let flag = interrupt.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::Relaxed) {
+            eprintln!("{tool}: interrupted again: stopping now (the file keeps what was written)");
+            std::process::exit(130);
+        }
+    })
+    .map_err(|e| anyhow::anyhow!("installing the Ctrl-C handler: {e}"))?;
+    Ok(interrupt)
 }
 
 /// The process exit for a tool's result: the error chain on stderr, prefixed with the tool's name.

@@ -8,6 +8,7 @@
 
 use std::fmt;
 use std::str::FromStr;
+use std::time::Duration;
 
 use magcal_driver::serial::DeviceSpec as SerialSpec;
 use magcal_driver::{AnyMagnetometer, ChipKind};
@@ -168,10 +169,12 @@ pub struct OpenOptions {
     pub sim_faults: Vec<Fault>,
     /// `sim`: keep virtual time to the wall clock instead of running as fast as possible.
     pub sim_paced: bool,
+    /// `serial`: no sample for this long is an error naming the likely cause, s.
+    pub idle_timeout_s: f64,
 }
 
 impl Default for OpenOptions {
-    /// 100 Hz, the driver's range, seed 1, no faults, as fast as possible.
+    /// 100 Hz, the driver's range, seed 1, no faults, as fast as possible, 5 s serial idle timeout.
     fn default() -> OpenOptions {
         OpenOptions {
             rate_hz: 100.0,
@@ -179,7 +182,59 @@ impl Default for OpenOptions {
             sim_seed: 1,
             sim_faults: Vec::new(),
             sim_paced: false,
+            idle_timeout_s: 5.0,
         }
+    }
+}
+
+/// The fastest output data rate one may ask for, Hz (the supported chips reach 1000 Hz).
+pub const MAX_RATE_HZ: f64 = 10_000.0;
+/// The largest full-scale range one may ask for, ± µT (the supported chips reach ±4915 µT).
+pub const MAX_RANGE_UT: f64 = 100_000.0;
+/// The longest serial idle timeout, s.
+pub const MAX_IDLE_TIMEOUT_S: f64 = 3600.0;
+
+/// An option out of its range, said before anything is opened.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct BadOption(pub String);
+
+/// `Ok` if `value` is a finite number in `(0, max]`; otherwise an error naming the option, what was given and the
+/// range.
+pub fn positive_at_most(option: &str, value: f64, max: f64, unit: &str) -> Result<(), BadOption> {
+    if value.is_finite() && value > 0.0 && value <= max {
+        return Ok(());
+    }
+    Err(BadOption(format!(
+        "{option} {value} {unit}: must be a number > 0 and at most {max} {unit}"
+    )))
+}
+
+impl OpenOptions {
+    /// Checks the options for `spec` before anything is opened: rate, range and idle timeout in their ranges, and
+    /// the rate within a factor of ten of what the chip offers.
+    pub fn check(&self, spec: &DeviceSpec) -> Result<(), BadOption> {
+        positive_at_most("--rate", self.rate_hz, MAX_RATE_HZ, "Hz")?;
+        if let Some(range) = self.range_ut {
+            positive_at_most("--range-ut", range, MAX_RANGE_UT, "µT")?;
+        }
+        positive_at_most(
+            "--idle-timeout",
+            self.idle_timeout_s,
+            MAX_IDLE_TIMEOUT_S,
+            "s",
+        )?;
+        if let Some(chip) = spec.chip() {
+            let rates = chip.info().rates_hz;
+            let (slowest, fastest) = (f64::from(rates[0]), f64::from(rates[rates.len() - 1]));
+            if self.rate_hz < slowest / 10.0 || self.rate_hz > fastest * 10.0 {
+                return Err(BadOption(format!(
+                    "--rate {} Hz: the {chip} runs at {slowest}–{fastest} Hz",
+                    self.rate_hz
+                )));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -223,7 +278,8 @@ pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, So
                 device: device.clone(),
                 error: e.to_string(),
             })?;
-            Ok(Box::new(LineSource::new(device, source)))
+            let idle = Duration::from_secs_f64(opts.idle_timeout_s);
+            Ok(Box::new(LineSource::new(device, source, idle)))
         }
     }
 }
@@ -285,6 +341,39 @@ mod tests {
         ] {
             assert_eq!(p(text).unwrap().to_string(), text);
         }
+    }
+
+    #[test]
+    fn options_out_of_range_are_refused_naming_the_option() {
+        let sim = DeviceSpec::default();
+        assert!(OpenOptions::default().check(&sim).is_ok());
+        let hmc = p("sim:hmc5883l").unwrap();
+        for (spec, rate_hz, says) in [
+            (
+                &sim,
+                1e12,
+                "--rate 1000000000000 Hz: must be a number > 0 and at most 10000 Hz",
+            ),
+            (&sim, f64::NAN, "--rate NaN Hz"),
+            (&sim, 0.0, "--rate 0 Hz"),
+            (
+                &hmc,
+                5000.0,
+                "--rate 5000 Hz: the hmc5883l runs at 0.75–75 Hz",
+            ),
+        ] {
+            let opts = OpenOptions {
+                rate_hz,
+                ..OpenOptions::default()
+            };
+            let e = opts.check(spec).unwrap_err().to_string();
+            assert!(e.contains(says), "{rate_hz}: {e}");
+        }
+        let opts = OpenOptions {
+            range_ut: Some(-1.0),
+            ..OpenOptions::default()
+        };
+        assert!(opts.check(&sim).unwrap_err().0.starts_with("--range-ut -1"));
     }
 
     #[test]

@@ -47,6 +47,15 @@ pub(crate) fn nearest<T: Copy>(options: &[T], value: impl Fn(T) -> f32, request:
     best
 }
 
+/// Whether any count is within 1 % of the output's extremes `min..=max` (1 % of half the span): the field is at or
+/// past the end of the chip's range, so the value is clipped, not measured. For chips without a saturation flag.
+pub(crate) fn near_full_scale(counts: [i32; 3], min: i32, max: i32) -> bool {
+    let margin = (max - min) / 200;
+    counts
+        .iter()
+        .any(|&c| c >= max - margin || c <= min + margin)
+}
+
 /// Multiplies three axis counts by the resolution.
 pub(crate) fn scale(counts: [i32; 3], lsb_ut: f32) -> [f32; 3] {
     counts.map(|c| c as f32 * lsb_ut)

@@ -2,11 +2,16 @@
 //! from their protocol (not their code).
 //!
 //! It streams `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines (accelerometer in 1/8192 g, gyro in 1/16 °/s, magnetometer in
-//! 0.1 µT) computed from a [`Bench`] whose hand tumbles the board, mixes in garbage lines if asked (line noise, half
-//! lines, other chatter), takes MotionCal's 68-byte calibration packet (signature 117, 84; CRC-16/MODBUS over all 68
-//! bytes must be zero), and prints what it holds as `Cal1:`/`Cal2:` echoes: right after taking a packet and every so
-//! many lines. It can echo faithfully, with a wrong value (a bad store), or not at all, and it can be unplugged after
-//! a number of lines (it returns, and dropping its port closes the line).
+//! 0.1 µT), or magcal's native CSV (`t,mx,my,mz,temp` after a header, `t` on the board's own clock), computed from a
+//! [`Bench`] whose hand tumbles the board, mixes in garbage lines if asked (line noise, half lines, other chatter),
+//! takes MotionCal's 68-byte calibration packet (signature 117, 84; CRC-16/MODBUS over all 68 bytes must be zero),
+//! and prints what it holds as `Cal1:`/`Cal2:` echoes: right after taking a packet and every so many lines. It can
+//! echo faithfully, with a wrong value (a bad store), or not at all, and it can be unplugged after a number of lines
+//! (it returns, and dropping its port closes the line).
+//!
+//! Board faults ([`BoardFault`]): it can fall silent while staying connected, reset (a boot banner, its header
+//! again, possibly another one, and its clock starting again from zero), or run at another baud rate than the port
+//! (every byte arrives garbled).
 //!
 //! It works on any byte port; tests give it the master side of a pseudo-terminal, and the tools open the slave side
 //! as they would open `/dev/ttyACM0`.
@@ -37,6 +42,41 @@ pub enum EchoMode {
     Never,
 }
 
+/// What the board prints.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Output {
+    /// MotionCal `Raw:` lines.
+    MotionCal,
+    /// magcal's native CSV: `# sensor:` and a header line, then `t,mx,my,mz,temp` (t on the board's clock, s).
+    Csv,
+}
+
+/// Something wrong with the board.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BoardFault {
+    /// After this many sample lines it sends nothing more, but stays connected (hung, or waiting for a command).
+    SilentAfter(u64),
+    /// After this many sample lines it resets: [`BOOT_S`] of bench time without output, a boot banner, its header
+    /// again (CSV), and its clock starting again from zero. With `new_header` the header after the reset names other
+    /// columns in another order (`temp,mz,my,mx,t,i_coil`), as new firmware would.
+    ResetAfter {
+        /// Sample lines before the reset.
+        lines: u64,
+        /// Print another header after the reset.
+        new_header: bool,
+    },
+    /// The port runs at another baud rate than the board: every byte arrives garbled (high bit set, so no line
+    /// ever ends).
+    WrongBaud,
+}
+
+/// How long a reset board takes to boot, s of bench time.
+pub const BOOT_S: f64 = 0.5;
+
+/// The header of the CSV output, and the one after a reset with a new header.
+const CSV_HEADER: &str = "t,mx,my,mz,temp";
+const NEW_CSV_HEADER: &str = "temp,mz,my,mx,t,i_coil";
+
 /// What the firmware does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FirmwareConfig {
@@ -54,6 +94,10 @@ pub struct FirmwareConfig {
     pub echo: EchoMode,
     /// `Raw:` lines between two periodic echoes.
     pub echo_every: u64,
+    /// What it prints.
+    pub output: Output,
+    /// What is wrong with it, if anything.
+    pub fault: Option<BoardFault>,
 }
 
 impl FirmwareConfig {
@@ -68,6 +112,8 @@ impl FirmwareConfig {
             raw_lines: None,
             echo: EchoMode::Faithful,
             echo_every: 100,
+            output: Output::MotionCal,
+            fault: None,
         }
     }
 }
@@ -88,6 +134,8 @@ pub struct FirmwareReport {
     pub calibration: [f32; 16],
     /// Why it stopped: unplugged after its lines, told to stop, or the other side went away.
     pub stopped: String,
+    /// Bench time of every sample line sent, s (the truth a recording's `t` is compared with).
+    pub sample_times_s: Vec<f64>,
 }
 
 /// The firmware; see the [module docs](self).
@@ -98,6 +146,10 @@ pub struct MotionCalFirmware<P> {
     rx: Vec<u8>,
     report: FirmwareReport,
     alive: bool,
+    /// Bench time of the board's boot: its clock `t` counts from here.
+    boot_s: f64,
+    /// The CSV header in use.
+    header: &'static str,
 }
 
 /// CRC-16/MODBUS: reflected polynomial 0xA001, initial value 0xFFFF.
@@ -136,6 +188,8 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 ..FirmwareReport::default()
             },
             alive: true,
+            boot_s: 0.0,
+            header: CSV_HEADER,
         })
     }
 
@@ -143,7 +197,12 @@ impl<P: Read + Write> MotionCalFirmware<P> {
     /// is gone; returns what it did. The port is dropped on return: that is the unplug.
     pub fn run(mut self, stop: impl Fn() -> bool) -> FirmwareReport {
         let start = Instant::now();
+        let wall_per_bench_s = self.config.sample_rate_hz / self.config.lines_per_wall_s;
         let mut i: u64 = 0;
+        let mut bench_t_s = 0.0;
+        if self.config.output == Output::Csv {
+            self.banner();
+        }
         self.report.stopped = loop {
             if !self.alive {
                 break "the other side went away".to_owned();
@@ -157,15 +216,36 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 thread::sleep(UNPLUG_SETTLE);
                 break format!("unplugged after {i} Raw: lines");
             }
-            let due = Duration::from_secs_f64(i as f64 / self.config.lines_per_wall_s);
+            let due = Duration::from_secs_f64(bench_t_s * wall_per_bench_s);
             if let Some(wait) = due.checked_sub(start.elapsed()) {
                 thread::sleep(wait);
             }
             self.receive();
-            let line = self.raw_line(i as f64 / self.config.sample_rate_hz);
+            match self.config.fault {
+                Some(BoardFault::SilentAfter(n)) if i >= n => {
+                    thread::sleep(Duration::from_millis(5));
+                    continue;
+                }
+                Some(BoardFault::ResetAfter { lines, new_header })
+                    if i == lines && self.boot_s == 0.0 =>
+                {
+                    bench_t_s += BOOT_S;
+                    self.boot_s = bench_t_s;
+                    if new_header {
+                        self.header = NEW_CSV_HEADER;
+                    }
+                    let wait = Duration::from_secs_f64(BOOT_S * wall_per_bench_s);
+                    thread::sleep(wait);
+                    self.banner();
+                }
+                _ => {}
+            }
+            let line = self.sample_line(bench_t_s);
             self.send(line.as_bytes());
+            self.report.sample_times_s.push(bench_t_s);
             self.report.raw_lines += 1;
             i += 1;
+            bench_t_s += 1.0 / self.config.sample_rate_hz;
             if let Some(every) = self.config.garbage_every
                 && i.is_multiple_of(every)
             {
@@ -178,6 +258,38 @@ impl<P: Read + Write> MotionCalFirmware<P> {
             }
         };
         self.report
+    }
+
+    /// What the board prints when it boots (for CSV, also when it starts; a MotionCal board only after a reset, as
+    /// its first boot happened before the port was opened): a line of chatter, and for CSV its metadata and header.
+    fn banner(&mut self) {
+        let text = match self.config.output {
+            Output::MotionCal => "MotionCal-compatible sketch: streaming\r\n".to_owned(),
+            Output::Csv => format!(
+                "booting magcal CSV sketch\r\n# sensor: simulated board\r\n{}\r\n",
+                self.header
+            ),
+        };
+        self.send(text.as_bytes());
+    }
+
+    /// The line of the bench at `t_s` in the board's output format.
+    fn sample_line(&mut self, t_s: f64) -> String {
+        match self.config.output {
+            Output::MotionCal => self.raw_line(t_s),
+            Output::Csv => {
+                let s = self.bench.sample(t_s);
+                let t = format!("{:.3}", t_s - self.boot_s);
+                let [x, y, z] = s.raw_ut.map(|v| format!("{v:.2}"));
+                let temp = format!("{:.2}", s.temp_c);
+                let fields = if self.header == CSV_HEADER {
+                    [t, x, y, z, temp].join(",")
+                } else {
+                    [temp, z, y, x, t, "0.000".to_owned()].join(",")
+                };
+                fields + "\r\n"
+            }
+        }
     }
 
     /// The `Raw:` line of the bench at `t_s`.
@@ -264,9 +376,14 @@ impl<P: Read + Write> MotionCalFirmware<P> {
         }
     }
 
-    /// Writes all of `bytes`, waiting while the port's buffer is full.
+    /// Writes all of `bytes`, waiting while the port's buffer is full. At a wrong baud rate they arrive garbled.
     fn send(&mut self, bytes: &[u8]) {
+        let garbled: Vec<u8>;
         let mut rest = bytes;
+        if self.config.fault == Some(BoardFault::WrongBaud) {
+            garbled = bytes.iter().map(|b| b.rotate_left(3) | 0x80).collect();
+            rest = &garbled;
+        }
         while self.alive && !rest.is_empty() {
             match self.port.write(rest) {
                 Ok(0) => self.alive = false,
@@ -396,6 +513,52 @@ mod tests {
         assert!(
             (norm - (20f64 * 20.0 + 45.0 * 45.0).sqrt()).abs() < 0.2,
             "{norm}"
+        );
+    }
+
+    #[test]
+    fn a_csv_board_resets_with_a_new_header_and_its_clock_restarts() {
+        let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+        config.raw_lines = Some(6);
+        config.output = Output::Csv;
+        config.fault = Some(BoardFault::ResetAfter {
+            lines: 3,
+            new_header: true,
+        });
+        config.lines_per_wall_s = 1e6;
+        let (report, text) = run(Vec::new(), config);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[1..3], ["# sensor: simulated board", CSV_HEADER]);
+        assert!(lines[3].starts_with("0.000,") && lines[5].starts_with("0.020,"));
+        assert_eq!(lines[8], NEW_CSV_HEADER);
+        let t_after: Vec<&str> = lines[9..12]
+            .iter()
+            .map(|l| l.split(',').nth(4).unwrap())
+            .collect();
+        assert_eq!(t_after, ["0.000", "0.010", "0.020"]);
+        assert_eq!(report.sample_times_s[3], 0.03 + BOOT_S);
+    }
+
+    #[test]
+    fn silent_and_wrong_baud_boards() {
+        let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+        config.fault = Some(BoardFault::WrongBaud);
+        config.raw_lines = Some(5);
+        config.lines_per_wall_s = 1e6;
+        let (_, text) = run(Vec::new(), config.clone());
+        assert!(!text.is_empty() && !text.contains('\n') && !text.contains("Raw:"));
+        config.fault = Some(BoardFault::SilentAfter(2));
+        let stop_at = Instant::now() + Duration::from_millis(50);
+        let mut port = Loopback {
+            input: Cursor::new(Vec::new()),
+            output: Vec::new(),
+        };
+        let report = MotionCalFirmware::new(&mut port, config)
+            .unwrap()
+            .run(|| Instant::now() > stop_at);
+        assert_eq!(
+            (report.raw_lines, report.stopped.as_str()),
+            (2, "told to stop")
         );
     }
 

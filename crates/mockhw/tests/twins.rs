@@ -271,23 +271,10 @@ fn a_magnet_saturates_each_chip_in_its_own_way() {
             field_ut: [3.0 * f64::from(range), 0.0, 0.0],
         });
         let mut mag = AnyMagnetometer::new(kind, chip);
+        // QMC5883L and HMC5883L flag it; the others clip their outputs at the end of the scale, which the drivers
+        // take as saturation: the sample is refused either way.
         let r = next(&mut mag, &mut clock);
-        match kind {
-            // A saturation flag: the sample is refused.
-            ChipKind::Qmc5883l | ChipKind::Hmc5883l => {
-                assert_eq!(r, Err(Error::Saturated), "{kind}")
-            }
-            // No flag in the data path: the output sticks at the end of its scale.
-            _ => {
-                let x = f64::from(r.unwrap()[0]);
-                let full_scale = match kind {
-                    ChipKind::Lis2mdl => 32767.0 * 0.15,
-                    ChipKind::Mmc5983ma => 131071.0 * 100.0 / 16384.0,
-                    _ => 32767.0 * f64::from(mag.lsb_ut()),
-                };
-                assert!((x - full_scale).abs() < 0.01, "{kind}: {x} vs {full_scale}");
-            }
-        }
+        assert_eq!(r, Err(Error::Saturated), "{kind}");
         clock.delay_ms(1200);
         next(&mut mag, &mut clock).ok();
         assert!(

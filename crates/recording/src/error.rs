@@ -63,13 +63,26 @@ impl ReadError {
     }
 }
 
+/// At most this many characters of a file's text are quoted in an error.
+pub(crate) const EXCERPT_CHARS: usize = 40;
+
+/// The first [`EXCERPT_CHARS`] characters of `text`, with `…` when there were more. Errors show it with `{:?}`, which
+/// escapes control characters, so that a broken file never prints raw bytes (escape sequences) to a terminal.
+pub(crate) fn excerpt(text: &str) -> String {
+    match text.char_indices().nth(EXCERPT_CHARS) {
+        Some((end, _)) => format!("{}…", &text[..end]),
+        None => text.to_owned(),
+    }
+}
+
 impl fmt::Display for ReadError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.file())?;
         if let Some(line) = self.line() {
             write!(f, ":{line}")?;
             if let Some(col) = self.column() {
-                write!(f, ":{} ({})", col.index, col.name)?;
+                let name = excerpt(&col.name);
+                write!(f, ":{} ({})", col.index, name.escape_debug())?;
             }
         }
         write!(f, ": {}", self.kind())
@@ -85,7 +98,8 @@ impl std::error::Error for ReadError {
     }
 }
 
-/// What went wrong while reading a recording. One variant per kind of failure.
+/// What went wrong while reading a recording. One variant per kind of failure. Text quoted from the file is at most
+/// a short excerpt, shown escaped.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ReadErrorKind {
@@ -95,6 +109,21 @@ pub enum ReadErrorKind {
     /// The file holds nothing but blank lines (or nothing at all).
     #[error("empty file")]
     Empty,
+    /// The file is compressed (its first bytes are a compressor's signature).
+    #[error("a {format} file, not a recording: decompress it first")]
+    Compressed {
+        /// The compression format: `gzip`, `bzip2`, `xz`, `zstd` or `zip`.
+        format: &'static str,
+    },
+    /// The file is UTF-16 text (it starts with a UTF-16 byte order mark).
+    #[error("UTF-16 text: save the recording as UTF-8 (or plain ASCII) text")]
+    Utf16,
+    /// The file holds binary data (a NUL byte near its start), not text.
+    #[error("binary data (a NUL byte at byte {offset}), not a text recording")]
+    Binary {
+        /// 0-based offset of the first NUL byte.
+        offset: u64,
+    },
     /// The magic line names a version of the format other than v1.
     #[error("unsupported format version {found:?} (this reader understands magcal-recording v1)")]
     UnsupportedVersion {
@@ -126,6 +155,25 @@ pub enum ReadErrorKind {
     /// One of the required columns `mx`, `my`, `mz` is not in the header.
     #[error("missing required column {0:?} (mx, my and mz are required)")]
     MissingColumn(&'static str),
+    /// The header row is separated by something other than commas (`;`, tab) and names no `mx,my,mz` that way
+    /// either.
+    #[error(
+        "the header row is separated by {} and does not name mx, my and mz (columns are separated by commas; ';' \
+         and tabs are read when the header names mx, my and mz)",
+        separator.escape_debug()
+    )]
+    Separator {
+        /// The separator seen.
+        separator: char,
+    },
+    /// The header row has more columns than a recording can have ([`crate::limits::MAX_COLUMNS`]).
+    #[error("the header row has {found} columns; a recording has at most {max}")]
+    TooManyColumns {
+        /// Columns in the header row.
+        found: usize,
+        /// The most a recording may have.
+        max: usize,
+    },
     /// Two columns of the header have the same name.
     #[error("duplicate column name {0:?}")]
     DuplicateColumn(String),
@@ -143,6 +191,19 @@ pub enum ReadErrorKind {
     /// A numeric field is neither a number, empty, nor `nan`.
     #[error("not a number: {0:?}")]
     NotANumber(String),
+    /// A numeric field written with a decimal comma (`1,5`), in a file whose columns are separated by `;` or tabs.
+    #[error("not a number: {0:?} (a decimal comma? write numbers with a decimal point)")]
+    DecimalComma(String),
+    /// A finite number beyond what the column can hold (see [`crate::limits`]).
+    #[error("out of range: {value:?} (this column holds at most ±{limit:e} {unit})")]
+    OutOfRange {
+        /// The number as written.
+        value: String,
+        /// The largest magnitude the column accepts.
+        limit: f64,
+        /// The column's unit.
+        unit: &'static str,
+    },
     /// `mx`, `my` or `mz` is NaN or infinite.
     #[error("magnetic field must be finite, got {0:?}")]
     NonFiniteMag(String),

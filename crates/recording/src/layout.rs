@@ -2,7 +2,7 @@
 
 use std::collections::HashSet;
 
-use crate::error::ReadErrorKind;
+use crate::error::{ReadErrorKind, excerpt};
 
 /// Names of the magnetic field columns (required), in order x, y, z.
 pub(crate) const MAG: [&str; 3] = ["mx", "my", "mz"];
@@ -55,11 +55,13 @@ enum NameKind {
     Extra,
 }
 
+/// What a column name means. Known names are matched whatever their case (`MX` is `mx`).
 fn classify(name: &str) -> NameKind {
-    let position = |group: &[&str]| group.iter().position(|g| *g == name);
-    if name == "t" {
+    let position = |group: &[&str]| group.iter().position(|g| g.eq_ignore_ascii_case(name));
+    let prefix = CURRENT_PREFIX.len();
+    if name.eq_ignore_ascii_case("t") {
         NameKind::Known(Role::Time)
-    } else if name == "temp" {
+    } else if name.eq_ignore_ascii_case("temp") {
         NameKind::Known(Role::Temp)
     } else if let Some(k) = position(&MAG) {
         NameKind::Known(Role::Mag(k))
@@ -69,10 +71,25 @@ fn classify(name: &str) -> NameKind {
         NameKind::Known(Role::Ref(k))
     } else if let Some(k) = position(&GYRO) {
         NameKind::Known(Role::Gyro(k))
-    } else if name.len() > CURRENT_PREFIX.len() && name.starts_with(CURRENT_PREFIX) {
+    } else if name.len() > prefix
+        && name.as_bytes()[..prefix].eq_ignore_ascii_case(CURRENT_PREFIX.as_bytes())
+    {
         NameKind::Current
     } else {
         NameKind::Extra
+    }
+}
+
+/// The canonical name of a known role's column, for finding repeats whatever the case.
+fn canonical(role: Role) -> Option<&'static str> {
+    match role {
+        Role::Time => Some("t"),
+        Role::Temp => Some("temp"),
+        Role::Mag(k) => Some(MAG[k]),
+        Role::Quat(k) => Some(QUAT[k]),
+        Role::Ref(k) => Some(REF[k]),
+        Role::Gyro(k) => Some(GYRO[k]),
+        Role::Current(_) | Role::Extra(_) => None,
     }
 }
 
@@ -83,6 +100,9 @@ pub(crate) struct Header {
     pub roles: Vec<Role>,
     /// The channels found.
     pub layout: Layout,
+    /// Empty names after the last column (a spreadsheet pads rows with commas): rows may have as many empty fields
+    /// after their last one.
+    pub padding: usize,
 }
 
 /// A header problem and the 0-based column it is in, if any.
@@ -91,17 +111,29 @@ pub(crate) type ColumnProblem = (Option<usize>, ReadErrorKind);
 impl Header {
     /// Understands a header row (names already trimmed). Errors name the 0-based column where one applies.
     pub(crate) fn parse(names: &[String]) -> Result<Header, ColumnProblem> {
+        let mut padding = names.iter().rev().take_while(|n| n.is_empty()).count();
+        if padding == names.len() {
+            padding = 0;
+        }
+        let names = &names[..names.len() - padding];
         if names.iter().all(|n| n.parse::<f64>().is_ok()) {
             return Err((None, ReadErrorKind::MissingHeader { data_first: true }));
         }
-        let mut seen = HashSet::new();
+        let mut seen = HashSet::with_capacity(names.len());
+        let mut kinds = Vec::with_capacity(names.len());
         for (i, name) in names.iter().enumerate() {
             if name.is_empty() {
                 return Err((Some(i), ReadErrorKind::EmptyColumnName));
             }
-            if !seen.insert(name.as_str()) {
-                return Err((Some(i), ReadErrorKind::DuplicateColumn(name.clone())));
+            let kind = classify(name);
+            let key = match kind {
+                NameKind::Known(role) => canonical(role).unwrap_or(name),
+                NameKind::Current | NameKind::Extra => name,
+            };
+            if !seen.insert(key) {
+                return Err((Some(i), ReadErrorKind::DuplicateColumn(excerpt(name))));
             }
+            kinds.push(kind);
         }
         if let Some(missing) = MAG.iter().find(|m| !seen.contains(**m)) {
             return Err((None, ReadErrorKind::MissingColumn(missing)));
@@ -117,7 +149,8 @@ impl Header {
         let mut layout = Layout::default();
         let roles = names
             .iter()
-            .map(|name| match classify(name) {
+            .zip(kinds)
+            .map(|(name, kind)| match kind {
                 NameKind::Known(role) => {
                     match role {
                         Role::Time => layout.t = true,
@@ -139,7 +172,11 @@ impl Header {
                 }
             })
             .collect();
-        Ok(Header { roles, layout })
+        Ok(Header {
+            roles,
+            layout,
+            padding,
+        })
     }
 }
 
@@ -194,11 +231,19 @@ impl Layout {
     /// known columns or currents, no name is empty, repeats or has surrounding blanks.
     pub(crate) fn check(&self) -> Result<(), String> {
         let names = self.column_names();
-        for (i, name) in names.iter().enumerate() {
+        if names.len() > crate::limits::MAX_COLUMNS {
+            return Err(format!(
+                "{} columns; a recording has at most {}",
+                names.len(),
+                crate::limits::MAX_COLUMNS
+            ));
+        }
+        let mut seen = HashSet::with_capacity(names.len());
+        for name in &names {
             if name.is_empty() || name.trim_ascii() != *name {
                 return Err(format!("column name {name:?} cannot be written"));
             }
-            if names[..i].contains(name) {
+            if !seen.insert(*name) {
                 return Err(format!("column name {name:?} repeated"));
             }
         }
@@ -237,6 +282,27 @@ mod tests {
         assert!(h.layout.t && h.layout.quat && !h.layout.temp && !h.layout.gyro);
         assert_eq!(h.layout.currents, ["i_motor", "i_coil"]);
         assert_eq!(h.layout.extra, ["note", "i_"]);
+        assert_eq!(h.padding, 0);
+    }
+
+    #[test]
+    fn known_names_in_any_case_and_spreadsheet_padding() {
+        let h = Header::parse(&names("T,MX,My,mZ,TEMP,I_Coil,Note,,,")).unwrap();
+        assert_eq!(
+            h.roles[..4],
+            [Role::Time, Role::Mag(0), Role::Mag(1), Role::Mag(2)]
+        );
+        assert!(h.layout.t && h.layout.temp);
+        assert_eq!(h.layout.currents, ["I_Coil"]);
+        assert_eq!(h.layout.extra, ["Note"]);
+        assert_eq!((h.roles.len(), h.padding), (7, 3));
+        let (column, kind) = Header::parse(&names("mx,my,mz,MX")).unwrap_err();
+        assert_eq!(column, Some(3));
+        assert!(matches!(kind, ReadErrorKind::DuplicateColumn(n) if n == "MX"));
+        assert!(matches!(
+            Header::parse(&names("mx,,mz,my")),
+            Err((Some(1), ReadErrorKind::EmptyColumnName))
+        ));
     }
 
     #[test]

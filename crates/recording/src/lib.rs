@@ -18,11 +18,17 @@
 //!   (unit quaternion, scalar first, Hamilton, rotating sensor-frame vectors into NED), `rx,ry,rz` (expected
 //!   field, µT), `gx,gy,gz` (rad/s), any number of currents `i_<name>` (A). Other columns are carried as text.
 //! - Then data rows. An empty field or `nan` marks a missing value of an optional channel; a group (`q`, `r`,
-//!   `g`) with a missing field is missing as a whole. Blank lines are skipped, CRLF is accepted.
+//!   `g`) with a missing field is missing as a whole. Values beyond what a column holds ([`limits`]) are refused.
+//!   Blank lines are skipped.
+//! - Files as other programs write them are read: `\r\n` and `\r` line ends, `;` or tab separators (when the
+//!   header names `mx,my,mz` that way), known column names in any case, a spreadsheet's padding (trailing commas on
+//!   metadata lines, empty trailing columns, rows of empty fields). Compressed, UTF-16 and binary files are named as
+//!   such.
 //!
 //! [`Recording::read`] checks all of it and reports the first problem with file, line and column
-//! ([`ReadError`], one [`ReadErrorKind`] per kind of failure). [`Recording::write`] writes a whole recording
-//! atomically; [`RecordingWriter`] writes one row at a time so that a killed recorder leaves a readable file.
+//! ([`ReadError`], one [`ReadErrorKind`] per kind of failure), quoting at most a short escaped excerpt of the file.
+//! [`Recording::write`] writes a whole recording atomically; [`RecordingWriter`] writes one row at a time, locked,
+//! so that a killed recorder leaves a readable file and a second writer is refused.
 //!
 //! ```
 //! use magcal_recording::{Layout, Metadata, ReadErrorKind, Recording, RecordingWriter, Sample};
@@ -46,6 +52,8 @@
 
 mod error;
 mod layout;
+pub mod limits;
+mod line_ends;
 mod metadata;
 mod read;
 mod recording;
@@ -58,6 +66,6 @@ pub use metadata::{Date, DateError, Location, Metadata};
 pub use recording::{Channel, MissingCounts, Recording, Row, TextColumn};
 pub use sample::{Sample, SampleError};
 pub use write::{
-    CURRENT_DECIMALS, DEFAULT_FLUSH_INTERVAL, GYRO_DECIMALS, QUAT_DECIMALS, RecordingWriter,
-    T_DECIMALS, TEMP_DECIMALS, UT_DECIMALS,
+    CURRENT_DECIMALS, CreateOptions, DEFAULT_FLUSH_INTERVAL, GYRO_DECIMALS, Note, QUAT_DECIMALS,
+    RecordingWriter, T_DECIMALS, TEMP_DECIMALS, UT_DECIMALS,
 };

@@ -1,9 +1,11 @@
 //! The metadata block: `# key: value` lines before the header row.
 
+use std::collections::HashSet;
 use std::fmt;
 use std::str::FromStr;
 
-use crate::error::ReadErrorKind;
+use crate::error::{ReadErrorKind, excerpt};
+use crate::limits::{MAX_FIELD_UT, MAX_SAMPLE_RATE_HZ};
 
 /// First line of every file this crate writes; files without it are accepted.
 pub(crate) const MAGIC: &str = "# magcal-recording v1";
@@ -152,9 +154,15 @@ pub(crate) enum MetaLine<'a> {
     Comment,
 }
 
-/// Splits a `#` line (without its line terminator) into what it holds.
+/// Characters a spreadsheet pads a line with when it saves a file as CSV (`# sensor: x,,,,`): stripped from the end
+/// of metadata lines, so a value never ends with one.
+pub(crate) const PADDING: [char; 3] = [',', ';', '\t'];
+
+/// Splits a `#` line (without its line terminator) into what it holds. Trailing [`PADDING`] is no part of it.
 pub(crate) fn classify_line(line: &str) -> MetaLine<'_> {
-    let body = line.trim_start().strip_prefix('#').unwrap_or(line).trim();
+    let body = line.trim_start().strip_prefix('#').unwrap_or(line);
+    let body = body.trim_end_matches(|c: char| PADDING.contains(&c) || c.is_whitespace());
+    let body = body.trim();
     if let Some(version) = body.strip_prefix(MAGIC_WORD) {
         return MetaLine::Magic(version.trim());
     }
@@ -164,17 +172,38 @@ pub(crate) fn classify_line(line: &str) -> MetaLine<'_> {
     }
 }
 
-impl Metadata {
-    /// Stores one `key: value` pair, validating typed keys.
+/// Metadata as the reader collects it: with the unknown keys seen so far in a set, so that a file with very many
+/// keys is read in linear time.
+#[derive(Debug, Default)]
+pub(crate) struct MetadataBuilder {
+    meta: Metadata,
+    other_keys: HashSet<String>,
+}
+
+impl MetadataBuilder {
+    /// Stores one `key: value` pair, validating typed keys and refusing repeated ones.
     pub(crate) fn set(&mut self, key: &str, value: &str) -> Result<(), ReadErrorKind> {
+        if !KNOWN_KEYS.contains(&key) && !self.other_keys.insert(key.to_owned()) {
+            return Err(ReadErrorKind::DuplicateMetadata { key: excerpt(key) });
+        }
+        self.meta.set(key, value)
+    }
+
+    /// The metadata read.
+    pub(crate) fn finish(self) -> Metadata {
+        self.meta
+    }
+}
+
+impl Metadata {
+    /// Stores one `key: value` pair, validating typed keys. Repeats of unknown keys are the caller's to find.
+    fn set(&mut self, key: &str, value: &str) -> Result<(), ReadErrorKind> {
         let bad = |reason: String| ReadErrorKind::BadMetadata {
-            key: key.to_owned(),
-            value: value.to_owned(),
+            key: excerpt(key),
+            value: excerpt(value),
             reason,
         };
-        let duplicate = || ReadErrorKind::DuplicateMetadata {
-            key: key.to_owned(),
-        };
+        let duplicate = || ReadErrorKind::DuplicateMetadata { key: excerpt(key) };
         if has_control(key) || has_control(value) {
             return Err(bad("control character in a metadata line".into()));
         }
@@ -184,13 +213,18 @@ impl Metadata {
             "started" => put(&mut self.started, value.to_owned()).ok_or_else(duplicate),
             "sample_rate_hz" => {
                 let rate: f64 = value.parse().map_err(|_| bad("not a number".into()))?;
-                if !(rate.is_finite() && rate > 0.0) {
-                    return Err(bad("must be a finite number > 0".into()));
+                if !(rate.is_finite() && rate > 0.0 && rate <= MAX_SAMPLE_RATE_HZ) {
+                    return Err(bad(format!(
+                        "must be a number > 0 and at most {MAX_SAMPLE_RATE_HZ:e}"
+                    )));
                 }
                 put(&mut self.sample_rate_hz, rate).ok_or_else(duplicate)
             }
             "field_ned_ut" => {
                 let field = parse_triple(value).map_err(bad)?;
+                if field.iter().any(|v| v.abs() > MAX_FIELD_UT) {
+                    return Err(bad(format!("out of range (at most {MAX_FIELD_UT:e} µT)")));
+                }
                 put(&mut self.field_ned_ut, field).ok_or_else(duplicate)
             }
             "location" => {
@@ -208,9 +242,6 @@ impl Metadata {
                 put(&mut self.date, date).ok_or_else(duplicate)
             }
             _ => {
-                if self.other.iter().any(|(k, _)| k == key) {
-                    return Err(duplicate());
-                }
                 self.other.push((key.to_owned(), value.to_owned()));
                 Ok(())
             }
@@ -249,16 +280,20 @@ impl Metadata {
     /// and not repeated.
     pub(crate) fn check(&self) -> Result<(), String> {
         if let Some(rate) = self.sample_rate_hz
-            && !(rate.is_finite() && rate > 0.0)
+            && !(rate.is_finite() && rate > 0.0 && rate <= MAX_SAMPLE_RATE_HZ)
         {
             return Err(format!(
-                "sample_rate_hz must be a finite number > 0, got {rate}"
+                "sample_rate_hz must be a number > 0 and at most {MAX_SAMPLE_RATE_HZ:e}, got {rate}"
             ));
         }
         if let Some(field) = self.field_ned_ut
-            && !field.iter().all(|v| v.is_finite())
+            && !field
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= MAX_FIELD_UT)
         {
-            return Err(format!("field_ned_ut must be finite, got {field:?}"));
+            return Err(format!(
+                "field_ned_ut must be finite and at most {MAX_FIELD_UT:e} µT, got {field:?}"
+            ));
         }
         if let Some(location) = self.location {
             location.check().map_err(str::to_owned)?;
@@ -276,7 +311,8 @@ impl Metadata {
                 check_text(key, value)?;
             }
         }
-        for (i, (key, value)) in self.other.iter().enumerate() {
+        let mut seen = HashSet::with_capacity(self.other.len());
+        for (key, value) in &self.other {
             let plain =
                 !key.is_empty() && key.trim() == key && !key.contains(':') && !has_control(key);
             if !plain || key.starts_with(MAGIC_WORD) || KNOWN_KEYS.contains(&key.as_str()) {
@@ -284,7 +320,7 @@ impl Metadata {
                     "metadata key {key:?} cannot be written as an unknown key"
                 ));
             }
-            if self.other[..i].iter().any(|(k, _)| k == key) {
+            if !seen.insert(key.as_str()) {
                 return Err(format!("metadata key {key:?} repeated"));
             }
             check_text(key, value)?;
@@ -293,11 +329,12 @@ impl Metadata {
     }
 }
 
-/// Text values are trimmed when read, and a line break would end the line.
+/// Text values are trimmed when read, trailing [`PADDING`] is stripped, and a line break would end the line.
 fn check_text(key: &str, value: &str) -> Result<(), String> {
-    if has_control(value) || value.trim() != value {
+    if has_control(value) || value.trim() != value || value.ends_with(PADDING) {
         return Err(format!(
-            "metadata value of {key:?} has a control character or surrounding blanks: {value:?}"
+            "metadata value of {key:?} has a control character, surrounding blanks or a trailing ',' or ';': \
+             {value:?}"
         ));
     }
     Ok(())
@@ -347,7 +384,7 @@ fn parse_triple(value: &str) -> Result<[f64; 3], String> {
     for (slot, part) in out.iter_mut().zip(&parts) {
         *slot = part
             .parse()
-            .map_err(|_| format!("{part:?} is not a number"))?;
+            .map_err(|_| format!("{:?} is not a number", excerpt(part)))?;
         if !slot.is_finite() {
             return Err(format!("{part:?} is not finite"));
         }
@@ -427,8 +464,29 @@ mod tests {
     }
 
     #[test]
+    fn spreadsheet_padding_is_stripped() {
+        assert!(matches!(
+            classify_line("# magcal-recording v1,,,,,,"),
+            MetaLine::Magic("v1")
+        ));
+        assert!(matches!(
+            classify_line("# field_ned_ut: 19.8, 1.2, 45.3,,, "),
+            MetaLine::Pair("field_ned_ut", "19.8, 1.2, 45.3")
+        ));
+        assert!(matches!(
+            classify_line("# sensor: lis3mdl;;;\t"),
+            MetaLine::Pair("sensor", "lis3mdl")
+        ));
+        let m = Metadata {
+            routine: Some("a,".into()),
+            ..Metadata::default()
+        };
+        assert!(m.check().is_err(), "would not read back");
+    }
+
+    #[test]
     fn typed_values_are_validated() {
-        let mut m = Metadata::default();
+        let mut m = MetadataBuilder::default();
         assert!(m.set("field_ned_ut", "1,2").is_err());
         assert!(m.set("field_ned_ut", "1,2,x").is_err());
         assert!(m.set("field_ned_ut", "1,2,inf").is_err());
@@ -439,9 +497,11 @@ mod tests {
         assert!(m.set("location", "0, 181, 0").is_err());
         assert!(m.set("s\rensor", "x").is_err());
         assert!(m.set("routine", "a\u{7}b").is_err());
+        assert!(m.set("field_ned_ut", "1,2,1e308").is_err());
+        assert!(m.set("sample_rate_hz", "1e300").is_err());
         m.set("location", "52.5, 13.3, 50").unwrap();
         m.set("field_ned_ut", " 19.8, 1.2 ,45.3").unwrap();
-        assert_eq!(m.field_ned_ut, Some([19.8, 1.2, 45.3]));
+        assert_eq!(m.meta.field_ned_ut, Some([19.8, 1.2, 45.3]));
         assert!(matches!(
             m.set("location", "1,2,3"),
             Err(ReadErrorKind::DuplicateMetadata { .. })
@@ -451,7 +511,11 @@ mod tests {
             m.set("units", "nT"),
             Err(ReadErrorKind::DuplicateMetadata { .. })
         ));
+        let mut m = m.finish();
         assert!(m.check().is_ok());
+        m.other.push(("units".into(), "x".into()));
+        assert!(m.check().is_err(), "repeated");
+        m.other.pop();
         m.other.push(("sensor".into(), "x".into()));
         assert!(m.check().is_err());
     }

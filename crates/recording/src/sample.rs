@@ -1,6 +1,7 @@
 //! One row of a recording as owned values ([`Sample`]) and the rules every row obeys.
 
 use crate::layout::Flags;
+use crate::limits::{self, Limit};
 
 /// How far from 1 the norm of a quaternion may be before it is rejected.
 pub(crate) const QUAT_NORM_TOLERANCE: f64 = 0.01;
@@ -70,6 +71,18 @@ pub enum SampleError {
     /// An optional channel holds an infinite value (NaN is how a missing value is written).
     #[error("infinite value in {0}")]
     Infinite(String),
+    /// A finite value beyond what its column holds (see [`crate::limits`]).
+    #[error("{what} = {value:e} is out of range (at most ±{limit:e} {unit})")]
+    OutOfRange {
+        /// The column or group.
+        what: String,
+        /// The value.
+        value: f64,
+        /// The largest magnitude allowed.
+        limit: f64,
+        /// Its unit.
+        unit: &'static str,
+    },
     /// The number of currents differs from the layout's.
     #[error("{found} currents for a layout with {expected}")]
     CurrentCount {
@@ -147,6 +160,19 @@ pub(crate) fn check_row<'n>(
     if !core.mag_ut.iter().all(|v| v.is_finite()) {
         return Err(SampleError::NonFiniteMag(core.mag_ut));
     }
+    let in_range = |what: &str, values: &[f64], limit: Limit| match values
+        .iter()
+        .find(|v| limit.exceeded_by(**v))
+    {
+        Some(&value) => Err(SampleError::OutOfRange {
+            what: what.to_owned(),
+            value,
+            limit: limit.max,
+            unit: limit.unit,
+        }),
+        None => Ok(()),
+    };
+    in_range("mx,my,mz", &core.mag_ut, limits::FIELD)?;
     let mut out = Core {
         t_s: f64::NAN,
         mag_ut: core.mag_ut,
@@ -167,6 +193,7 @@ pub(crate) fn check_row<'n>(
                 t_s: core.t_s,
             });
         }
+        in_range("t", &[core.t_s], limits::TIME)?;
         out.t_s = core.t_s;
     }
     let infinite = |name: &str| SampleError::Infinite(name.to_owned());
@@ -174,6 +201,7 @@ pub(crate) fn check_row<'n>(
         if core.temp_c.is_infinite() {
             return Err(infinite("temp"));
         }
+        in_range("temp", &[core.temp_c], limits::TEMP)?;
         out.temp_c = core.temp_c;
     }
     if layout.quat {
@@ -186,12 +214,14 @@ pub(crate) fn check_row<'n>(
         if core.ref_ut.iter().any(|v| v.is_infinite()) {
             return Err(infinite("rx,ry,rz"));
         }
+        in_range("rx,ry,rz", &core.ref_ut, limits::FIELD)?;
         out.ref_ut = group_or_nan(core.ref_ut);
     }
     if layout.gyro {
         if core.gyro_rad_s.iter().any(|v| v.is_infinite()) {
             return Err(infinite("gx,gy,gz"));
         }
+        in_range("gx,gy,gz", &core.gyro_rad_s, limits::GYRO)?;
         out.gyro_rad_s = group_or_nan(core.gyro_rad_s);
     }
     if currents_a.len() != current_names.len() {
@@ -204,6 +234,7 @@ pub(crate) fn check_row<'n>(
         if value.is_infinite() {
             return Err(infinite(name));
         }
+        in_range(name, &[value], limits::CURRENT)?;
     }
     if extra_len != n_extra {
         return Err(SampleError::ExtraCount {
@@ -288,6 +319,18 @@ mod tests {
         let mut s = sample();
         s.temp_c = f64::NEG_INFINITY;
         assert!(matches!(check(&s, None), Err(SampleError::Infinite(_))));
+        let mut s = sample();
+        s.mag_ut[2] = 1e308;
+        let e = check(&s, None).unwrap_err();
+        assert!(
+            matches!(e, SampleError::OutOfRange { ref what, .. } if what == "mx,my,mz"),
+            "{e}"
+        );
+        let mut s = sample();
+        s.currents_a[0] = -2e6;
+        assert!(
+            matches!(check(&s, None), Err(SampleError::OutOfRange { ref what, .. }) if what == "i_a")
+        );
         let mut s = sample();
         s.currents_a.push(1.0);
         assert!(matches!(

@@ -7,8 +7,8 @@
 //! written in the shortest form that reads back exactly. Missing values are written as empty fields.
 
 use std::fmt::Write as _;
-use std::fs::{self, File, OpenOptions};
-use std::io::{self, Write as _};
+use std::fs::{self, File, OpenOptions, TryLockError};
+use std::io::{self, Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -37,8 +37,9 @@ pub const DEFAULT_FLUSH_INTERVAL: Duration = Duration::from_millis(500);
 /// Buffered rows are written out when they reach this size, whatever the flush interval.
 const MAX_BUFFERED_BYTES: usize = 1 << 20;
 
-/// Appends the metadata block and the header row.
-fn push_header(out: &mut String, meta: &Metadata, layout: &Layout) {
+/// Appends the metadata block and the header row. Each note's value is padded with blanks to its width; the byte
+/// offset of each note's value in `out` is returned, in order.
+fn push_header(out: &mut String, meta: &Metadata, layout: &Layout, notes: &[Note]) -> Vec<u64> {
     out.push_str(MAGIC);
     out.push('\n');
     for (key, value) in meta.pairs() {
@@ -48,6 +49,12 @@ fn push_header(out: &mut String, meta: &Metadata, layout: &Layout) {
             let _ = writeln!(out, "# {key}: {value}");
         }
     }
+    let mut offsets = Vec::with_capacity(notes.len());
+    for note in notes {
+        let _ = write!(out, "# {}: ", note.key);
+        offsets.push(out.len() as u64);
+        let _ = writeln!(out, "{:<width$}", note.value, width = note.width);
+    }
     let header_start = out.len();
     for name in layout.column_names() {
         push_text(out, name);
@@ -55,6 +62,7 @@ fn push_header(out: &mut String, meta: &Metadata, layout: &Layout) {
     // Every name was pushed with a leading comma; the first one has none.
     out.remove(header_start);
     out.push('\n');
+    offsets
 }
 
 /// Appends `,` and a number with `decimals` decimals, or nothing after the comma when it is NaN (missing).
@@ -170,7 +178,7 @@ impl Recording {
     fn write_new(&self, path: &Path, layout: &Layout) -> io::Result<()> {
         let mut file = OpenOptions::new().write(true).create_new(true).open(path)?;
         let mut buf = String::with_capacity(2 * BLOCK_BYTES);
-        push_header(&mut buf, &self.meta, layout);
+        push_header(&mut buf, &self.meta, layout, &[]);
         let flags = self.flags();
         let mut previous_t_s = None;
         for row in self.rows() {
@@ -205,15 +213,41 @@ impl Recording {
 /// Size of the blocks [`Recording::write`] hands to the OS.
 const BLOCK_BYTES: usize = 256 * 1024;
 
+/// A metadata line the writer can rewrite while it records ([`RecordingWriter::set_note`]), e.g. how many segments
+/// the time of a recording has so far: the line is written with its value padded with blanks to `width` bytes, and
+/// later values are written over it in place.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Note {
+    /// The metadata key (an unknown key: not one of the typed ones, not in the metadata already).
+    pub key: String,
+    /// The value written at creation.
+    pub value: String,
+    /// Room for values, bytes.
+    pub width: usize,
+}
+
+/// How [`RecordingWriter::create_with`] creates its file.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CreateOptions {
+    /// Replace an existing file (it is emptied once the writer holds its lock); otherwise an existing file is an
+    /// error of kind [`io::ErrorKind::AlreadyExists`] and is left alone.
+    pub overwrite: bool,
+    /// Metadata lines to rewrite while recording, written after the metadata.
+    pub notes: Vec<Note>,
+}
+
 /// Incremental, crash-safe writer of a recording.
 ///
-/// The metadata and header are written and flushed by [`RecordingWriter::create`]. Rows are checked (as
-/// [`Recording::push`] does) and buffered; whole lines are handed to the OS whenever a call to
-/// [`RecordingWriter::write_sample`] finds the last flush at least `flush_interval` ago (default
+/// The metadata and header are written and flushed when it is created; it holds an exclusive lock on the file
+/// ([`File::try_lock`]) as long as it lives, so a second writer on the same path is refused (with
+/// [`io::ErrorKind::WouldBlock`]) before it changes anything. Rows are checked (as [`Recording::push`] does) and
+/// buffered; whole lines are handed to the OS whenever a call to [`RecordingWriter::write_sample`] or
+/// [`RecordingWriter::flush_if_due`] finds the last flush at least `flush_interval` ago (default
 /// [`DEFAULT_FLUSH_INTERVAL`]), when 1 MiB is buffered, and on [`RecordingWriter::flush`],
 /// [`RecordingWriter::finish`] and drop. So if the process is killed, the file parses and holds every row written
-/// before the last flush. Flushing is driven by these calls: a caller that stops writing samples for a while
-/// should call [`RecordingWriter::flush`]. Only [`RecordingWriter::finish`] syncs to disk (power-loss safety).
+/// before the last flush. If a write fails (a full disk), the part of it that reached the file is cut off again, so
+/// the file still ends with a whole line and parses; [`RecordingWriter::rows_in_file`] says how many rows it holds.
+/// Only [`RecordingWriter::finish`] syncs to disk (power-loss safety).
 #[derive(Debug)]
 pub struct RecordingWriter {
     file: File,
@@ -223,26 +257,116 @@ pub struct RecordingWriter {
     flush_interval: Duration,
     last_flush: Instant,
     previous_t_s: Option<f64>,
+    /// Rows accepted.
     rows: u64,
+    /// Rows whole in the file.
+    rows_in_file: u64,
+    /// Where each buffered row ends in the buffer (a row may span lines: quoted line breaks).
+    row_ends: Vec<usize>,
+    /// Bytes whole in the file (header and rows): where a failed write is cut back to.
+    file_len: u64,
+    /// Each note's key, the offset of its value in the file, and its width.
+    notes: Vec<(String, u64, usize)>,
     /// Set when writing to the file failed: what is in the file is then unknown, so nothing more is written.
     failed: bool,
 }
 
+/// Opens `path` for a writer and locks it: a new file, or with `overwrite` an existing one, emptied once locked.
+fn open_locked(path: &Path, overwrite: bool) -> io::Result<File> {
+    let file = if overwrite {
+        OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)?
+    } else {
+        OpenOptions::new().write(true).create_new(true).open(path)?
+    };
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(TryLockError::WouldBlock) => {
+            return Err(io::Error::new(
+                io::ErrorKind::WouldBlock,
+                format!(
+                    "{} is being written by another process (it holds the file's lock)",
+                    path.display()
+                ),
+            ));
+        }
+        // Some file systems have no locks: write without one.
+        Err(TryLockError::Error(e)) if e.kind() == io::ErrorKind::Unsupported => {}
+        Err(TryLockError::Error(e)) => return Err(e),
+    }
+    if overwrite {
+        file.set_len(0)?;
+    }
+    Ok(file)
+}
+
 impl RecordingWriter {
-    /// Creates (or truncates) the file at `path` and writes the metadata and header row. Fails before anything is
-    /// recorded if the path cannot be written, or with [`io::ErrorKind::InvalidInput`] if the metadata or layout
-    /// would not read back as themselves (see [`crate::HeaderError`]).
+    /// Creates (or replaces) the file at `path`, locks it and writes the metadata and header row; the same as
+    /// [`RecordingWriter::create_with`] with `overwrite`.
     pub fn create(path: &Path, meta: &Metadata, layout: &Layout) -> io::Result<RecordingWriter> {
-        meta.check()
+        let opts = CreateOptions {
+            overwrite: true,
+            ..CreateOptions::default()
+        };
+        RecordingWriter::create_with(path, meta, layout, &opts)
+    }
+
+    /// Creates the file at `path`, which must not exist yet, locks it and writes the metadata and header row.
+    pub fn create_new(
+        path: &Path,
+        meta: &Metadata,
+        layout: &Layout,
+    ) -> io::Result<RecordingWriter> {
+        RecordingWriter::create_with(path, meta, layout, &CreateOptions::default())
+    }
+
+    /// Creates the file at `path` as `opts` say, locks it and writes the metadata, the notes and the header row.
+    /// Fails before anything is recorded if the path cannot be written, exists (without `overwrite`) or is locked by
+    /// another writer, or with [`io::ErrorKind::InvalidInput`] if the metadata, notes or layout would not read back
+    /// as themselves (see [`crate::HeaderError`]).
+    pub fn create_with(
+        path: &Path,
+        meta: &Metadata,
+        layout: &Layout,
+        opts: &CreateOptions,
+    ) -> io::Result<RecordingWriter> {
+        let mut with_notes = meta.clone();
+        for note in &opts.notes {
+            if note.value.len() > note.width {
+                return Err(invalid_input(crate::HeaderError(format!(
+                    "note {:?}: value {:?} is wider than its {} bytes",
+                    note.key, note.value, note.width
+                ))));
+            }
+            with_notes
+                .other
+                .push((note.key.clone(), note.value.clone()));
+        }
+        with_notes
+            .check()
             .map_err(|e| invalid_input(crate::HeaderError(e)))?;
         layout
             .check()
             .map_err(|e| invalid_input(crate::HeaderError(e)))?;
-        let mut file = File::create(path)?;
+        let mut file = open_locked(path, opts.overwrite)?;
         let mut header = String::new();
-        push_header(&mut header, meta, layout);
-        file.write_all(header.as_bytes())?;
-        file.flush()?;
+        let offsets = push_header(&mut header, meta, layout, &opts.notes);
+        if let Err(e) = file
+            .write_all(header.as_bytes())
+            .and_then(|()| file.flush())
+        {
+            // Nothing was recorded: leave no half header behind (a new file goes, a replaced one stays empty).
+            if opts.overwrite {
+                let _ = file.set_len(0);
+            } else {
+                drop(file);
+                let _ = fs::remove_file(path);
+            }
+            return Err(e);
+        }
         Ok(RecordingWriter {
             file,
             path: path.to_owned(),
@@ -252,6 +376,15 @@ impl RecordingWriter {
             last_flush: Instant::now(),
             previous_t_s: None,
             rows: 0,
+            rows_in_file: 0,
+            row_ends: Vec::new(),
+            file_len: header.len() as u64,
+            notes: opts
+                .notes
+                .iter()
+                .zip(offsets)
+                .map(|(n, at)| (n.key.clone(), at, n.width))
+                .collect(),
             failed: false,
         })
     }
@@ -270,6 +403,45 @@ impl RecordingWriter {
     /// Rows accepted so far (buffered or written).
     pub fn rows(&self) -> u64 {
         self.rows
+    }
+
+    /// Rows whole in the file so far: what a reader finds there now (after a failed write too).
+    pub fn rows_in_file(&self) -> u64 {
+        self.rows_in_file
+    }
+
+    /// Rewrites the value of a note given at creation, in place. The value must fit the note's width and be a valid
+    /// metadata value (no control characters, no surrounding blanks); `InvalidInput` otherwise, and for an unknown
+    /// key.
+    pub fn set_note(&mut self, key: &str, value: &str) -> io::Result<()> {
+        self.check_not_failed()?;
+        let Some(&(_, at, width)) = self.notes.iter().find(|(k, _, _)| k == key) else {
+            return Err(invalid_input(crate::HeaderError(format!(
+                "no note {key:?}"
+            ))));
+        };
+        let probe = Metadata {
+            other: vec![(key.to_owned(), value.to_owned())],
+            ..Metadata::default()
+        };
+        probe
+            .check()
+            .map_err(|e| invalid_input(crate::HeaderError(e)))?;
+        if value.len() > width {
+            return Err(invalid_input(crate::HeaderError(format!(
+                "note {key:?}: value {value:?} is wider than its {width} bytes"
+            ))));
+        }
+        let padded = format!("{value:<width$}");
+        let result = self
+            .file
+            .seek(SeekFrom::Start(at))
+            .and_then(|_| self.file.write_all(padded.as_bytes()))
+            .and_then(|()| self.file.seek(SeekFrom::Start(self.file_len)).map(drop));
+        if result.is_err() {
+            self.failed = true;
+        }
+        result
     }
 
     /// Checks and buffers one row; writes the buffer out if the flush interval has passed. A sample that breaks
@@ -298,24 +470,52 @@ impl RecordingWriter {
             s.currents_a.iter().copied(),
             s.extra.iter().map(String::as_str),
         );
+        self.row_ends.push(self.buf.len());
         self.rows += 1;
-        if self.last_flush.elapsed() >= self.flush_interval || self.buf.len() >= MAX_BUFFERED_BYTES
-        {
+        if self.buf.len() >= MAX_BUFFERED_BYTES {
+            self.flush()
+        } else {
+            self.flush_if_due()
+        }
+    }
+
+    /// Writes the buffered rows out if the last flush is at least the flush interval ago (for callers that may go
+    /// a while without a sample to write).
+    pub fn flush_if_due(&mut self) -> io::Result<()> {
+        if self.last_flush.elapsed() >= self.flush_interval {
             self.flush()?;
         }
         Ok(())
     }
 
-    /// Writes all buffered rows (whole lines) to the file.
+    /// Writes all buffered rows to the file. If that fails, the file is cut back to the last whole row that
+    /// reached it.
     pub fn flush(&mut self) -> io::Result<()> {
         self.check_not_failed()?;
-        if !self.buf.is_empty() {
-            if let Err(e) = self.file.write_all(self.buf.as_bytes()) {
-                self.failed = true;
-                return Err(e);
-            }
-            self.buf.clear();
+        let bytes = self.buf.as_bytes();
+        let mut written = 0;
+        while written < bytes.len() {
+            let error = match self.file.write(&bytes[written..]) {
+                Ok(0) => io::Error::from(io::ErrorKind::WriteZero),
+                Ok(n) => {
+                    written += n;
+                    continue;
+                }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => e,
+            };
+            self.failed = true;
+            let whole_rows = self.row_ends.partition_point(|end| *end <= written);
+            let whole_bytes = whole_rows.checked_sub(1).map_or(0, |i| self.row_ends[i]);
+            self.file_len += whole_bytes as u64;
+            self.rows_in_file += whole_rows as u64;
+            let _ = self.file.set_len(self.file_len);
+            return Err(error);
         }
+        self.file_len += bytes.len() as u64;
+        self.rows_in_file = self.rows;
+        self.buf.clear();
+        self.row_ends.clear();
         self.last_flush = Instant::now();
         Ok(())
     }

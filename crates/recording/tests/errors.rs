@@ -250,6 +250,62 @@ fn cases() -> Vec<Case> {
             prefix: "rec.csv:1:4 (",
             says: "invalid UTF-8",
         },
+        Case {
+            what: "a gzip-compressed recording",
+            input: b"\x1f\x8b\x08\x00\x00\x00\x00\x00\x00\x03\x4b\xcc\x2b\xa9\x00\x00",
+            kind: |k| matches!(k, K::Compressed { format: "gzip" }),
+            prefix: "rec.csv: ",
+            says: "a gzip file, not a recording: decompress it first",
+        },
+        Case {
+            what: "a zip archive",
+            input: b"PK\x03\x04\x14\x00\x00\x00rec.csv",
+            kind: |k| matches!(k, K::Compressed { format: "zip" }),
+            prefix: "rec.csv: ",
+            says: "zip file",
+        },
+        Case {
+            what: "binary data",
+            input: b"\x7fELF\x02\x01\x01\x00\x00\x00\x1b[2J",
+            kind: |k| matches!(k, K::Binary { offset: 7 }),
+            prefix: "rec.csv: ",
+            says: "binary data (a NUL byte at byte 7)",
+        },
+        Case {
+            what: "UTF-16 text",
+            input: b"\xff\xfem\x00x\x00,\x00",
+            kind: |k| matches!(k, K::Utf16),
+            prefix: "rec.csv: ",
+            says: "save the recording as UTF-8",
+        },
+        Case {
+            what: "1e308 in a row",
+            input: b"t,mx,my,mz\n0,1,2,3\n0.01,1,1e308,3\n",
+            kind: |k| matches!(k, K::OutOfRange { value, unit: "\u{b5}T", .. } if value == "1e308"),
+            prefix: "rec.csv:3:3 (my): ",
+            says: "out of range: \"1e308\"",
+        },
+        Case {
+            what: "a time far beyond any clock",
+            input: b"t,mx,my,mz\n1e300,1,2,3\n",
+            kind: |k| matches!(k, K::OutOfRange { unit: "s", .. }),
+            prefix: "rec.csv:2:1 (t): ",
+            says: "out of range",
+        },
+        Case {
+            what: "semicolons that name no mx,my,mz",
+            input: b"time;Bx;By;Bz\n0;1;2;3\n",
+            kind: |k| matches!(k, K::Separator { separator: ';' }),
+            prefix: "rec.csv:1: ",
+            says: "separated by ;",
+        },
+        Case {
+            what: "a decimal comma in a ;-separated file",
+            input: b"t;mx;my;mz\n0;1,5;2;3\n",
+            kind: |k| matches!(k, K::DecimalComma(t) if t == "1,5"),
+            prefix: "rec.csv:2:2 (mx): ",
+            says: "decimal comma",
+        },
     ]
 }
 
@@ -281,7 +337,37 @@ fn each_broken_recording_has_its_own_kind_and_location() {
         assert_eq!(err.file(), "rec.csv");
         kinds.insert(format!("{:?}", discriminant(err.kind())));
     }
-    assert!(kinds.len() >= 20, "only {} distinct kinds", kinds.len());
+    assert!(kinds.len() >= 26, "only {} distinct kinds", kinds.len());
+}
+
+#[test]
+fn errors_quote_a_short_escaped_excerpt_never_the_whole_file() {
+    // A CR-less, LF-less binary-ish text: one long "line" with escape sequences in it.
+    let mut text = b"# magcal-recording ".to_vec();
+    text.extend(b"\x1b[31m".repeat(2000));
+    let err = Recording::from_reader("rec.csv", &text[..]).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err.kind(), K::UnsupportedVersion { .. }), "{msg}");
+    assert!(!msg.contains('\x1b'), "raw escape bytes in {msg:?}");
+    assert!(msg.contains("\\u{1b}[31m") && msg.contains('…'), "{msg}");
+    assert!(msg.len() < 300, "{} bytes of message", msg.len());
+
+    let long_name = format!("mx,my,mz,{}\n1,2,3,4\n1,2,3\n", "\u{1b}x".repeat(500));
+    let err = Recording::from_reader("rec.csv", long_name.as_bytes()).unwrap_err();
+    assert!(matches!(err.kind(), K::ShortRow { .. }));
+    let long_field = format!("mx,my,mz\n1,2,{}\n", "9\u{7}".repeat(500));
+    let msg = Recording::from_reader("rec.csv", long_field.as_bytes())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.len() < 200 && !msg.contains('\u{7}'), "{msg:?}");
+    let column = format!("mx,my,mz,i_{}\n1,2,3,x\n", "\u{1b}".repeat(500));
+    let msg = Recording::from_reader("rec.csv", column.as_bytes())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.starts_with("rec.csv:2:4 (i_\\u{1b}") && !msg.contains('\u{1b}') && msg.len() < 400,
+        "{msg:?}"
+    );
 }
 
 #[test]

@@ -91,3 +91,119 @@ fn read_one_million_rows() {
     );
     assert_eq!(back.len(), rows);
 }
+
+/// Run in a child process by `pathological_headers_read_in_linear_time_and_bounded_memory`: reads the file named
+/// by `MAGCAL_PERF_FILE` and prints `CHILD <seconds> <peak MiB>`.
+#[test]
+#[ignore = "run by pathological_headers_read_in_linear_time_and_bounded_memory"]
+fn child_reads_one_file() {
+    let Ok(path) = std::env::var("MAGCAL_PERF_FILE") else {
+        return;
+    };
+    let start = Instant::now();
+    let result = Recording::read(std::path::Path::new(&path));
+    let seconds = start.elapsed().as_secs_f64();
+    let outcome = match result {
+        Ok(rec) => format!("{} rows", rec.len()),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.len() < 400, "a short message: {} bytes", msg.len());
+            msg
+        }
+    };
+    println!(
+        "CHILD {seconds} {} {outcome}",
+        peak_rss_mib().unwrap_or(f64::NAN)
+    );
+}
+
+/// Writes the pathological file `what` of size `n` to `path`, streamed; returns its size in bytes.
+fn write_pathological(path: &std::path::Path, what: &str, n: usize) -> u64 {
+    let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    match what {
+        "metadata keys" => {
+            for i in 0..n {
+                writeln!(file, "# key_{i}: value {i}").unwrap();
+            }
+            writeln!(file, "t,mx,my,mz\n0,1,2,3").unwrap();
+        }
+        "header columns" => {
+            write!(file, "t,mx,my,mz").unwrap();
+            for i in 0..n {
+                write!(file, ",c{i}").unwrap();
+            }
+            writeln!(file).unwrap();
+        }
+        _ => {
+            write!(file, "# note: ").unwrap();
+            let block = "a".repeat(64);
+            for _ in 0..n / 64 {
+                file.write_all(block.as_bytes()).unwrap();
+            }
+            writeln!(file, "\nt,mx,my,mz\n0,1,2,3").unwrap();
+        }
+    }
+    file.flush().unwrap();
+    std::fs::metadata(path).unwrap().len()
+}
+
+#[test]
+#[ignore = "timing and memory; run in release with --ignored --nocapture"]
+fn pathological_headers_read_in_linear_time_and_bounded_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    for what in [
+        "metadata keys",
+        "header columns",
+        "bytes of one metadata value",
+    ] {
+        let mut per_unit = Vec::new();
+        for n in [what_size(what) / 4, what_size(what)] {
+            let path = dir.path().join("big.csv");
+            let bytes = write_pathological(&path, what, n);
+            let out = std::process::Command::new(std::env::current_exe().unwrap())
+                .args([
+                    "--exact",
+                    "child_reads_one_file",
+                    "--ignored",
+                    "--nocapture",
+                ])
+                .env("MAGCAL_PERF_FILE", &path)
+                .output()
+                .unwrap();
+            let stdout = String::from_utf8_lossy(&out.stdout);
+            let line = stdout
+                .lines()
+                .find_map(|l| l.strip_prefix("CHILD "))
+                .unwrap_or_else(|| panic!("no result: {stdout}"));
+            let mut parts = line.splitn(3, ' ');
+            let seconds: f64 = parts.next().unwrap().parse().unwrap();
+            let peak_mib: f64 = parts.next().unwrap().parse().unwrap();
+            let file_mib = bytes as f64 / (1 << 20) as f64;
+            println!(
+                "{n} {what}: {file_mib:.1} MiB read in {seconds:.3} s, peak {peak_mib:.0} MiB ({})",
+                parts.next().unwrap()
+            );
+            assert!(
+                peak_mib < 40.0 + 6.0 * file_mib,
+                "{what}: peak {peak_mib:.0} MiB for a {file_mib:.1} MiB file"
+            );
+            per_unit.push(seconds / n as f64);
+        }
+        // Linear: four times the size takes about four times as long (quadratic would be sixteen).
+        assert!(
+            per_unit[1] < 2.5 * per_unit[0] + 1e-7,
+            "{what}: {:.3e} s per unit at n, {:.3e} at 4n",
+            per_unit[0],
+            per_unit[1]
+        );
+    }
+}
+
+/// The larger size of each pathological case: 160 000 keys, about 100 MB of header row or of one value.
+fn what_size(what: &str) -> usize {
+    match what {
+        "metadata keys" => 160_000,
+        "header columns" => 11_000_000,
+        _ => 100_000_000,
+    }
+}

@@ -4,7 +4,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use magcal_recording::{Layout, Metadata, Recording, RecordingWriter, Sample};
+use magcal_recording::{CreateOptions, Layout, Metadata, Note, Recording, RecordingWriter, Sample};
 
 fn layout() -> Layout {
     Layout {
@@ -262,4 +262,88 @@ fn a_killed_recorder_leaves_a_readable_file() {
             .all(|(i, t)| (t - i as f64 * 0.01).abs() < 1e-9),
         "rows in order, none lost"
     );
+}
+
+#[test]
+fn create_new_never_replaces_a_file_and_create_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.csv");
+    std::fs::write(&path, "precious").unwrap();
+    let err = RecordingWriter::create_new(&path, &meta(), &layout()).unwrap_err();
+    assert_eq!(err.kind(), std::io::ErrorKind::AlreadyExists);
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "precious");
+    let mut w = RecordingWriter::create(&path, &meta(), &layout()).unwrap();
+    w.write_sample(&sample(0)).unwrap();
+    w.finish().unwrap();
+    assert_eq!(read(&path).len(), 1);
+}
+
+#[test]
+fn a_second_writer_on_the_same_file_is_refused_before_it_changes_anything() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.csv");
+    let mut first = RecordingWriter::create_new(&path, &meta(), &layout()).unwrap();
+    for i in 0..5 {
+        first.write_sample(&sample(i)).unwrap();
+    }
+    first.flush().unwrap();
+    let err = RecordingWriter::create(&path, &meta(), &layout()).unwrap_err();
+    assert_eq!(err.kind(), std::io::ErrorKind::WouldBlock, "{err}");
+    assert!(
+        err.to_string().contains("being written by another process"),
+        "{err}"
+    );
+    first.write_sample(&sample(5)).unwrap();
+    first.finish().unwrap();
+    assert_eq!(read(&path).len(), 6, "the first writer's file is intact");
+    // The lock goes with the writer.
+    RecordingWriter::create(&path, &meta(), &layout()).unwrap();
+}
+
+#[test]
+fn notes_are_rewritten_in_place_and_read_as_metadata() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.csv");
+    let opts = CreateOptions {
+        overwrite: false,
+        notes: vec![Note {
+            key: "segments".into(),
+            value: "1".into(),
+            width: 40,
+        }],
+    };
+    let mut w = RecordingWriter::create_with(&path, &meta(), &layout(), &opts).unwrap();
+    for i in 0..3 {
+        w.write_sample(&sample(i)).unwrap();
+    }
+    w.flush().unwrap();
+    assert_eq!(
+        read(&path).meta.other.last(),
+        Some(&("segments".into(), "1".into()))
+    );
+    w.set_note("segments", "2 (a restart at t = 0.02 s)")
+        .unwrap();
+    assert!(w.set_note("segments", &"x".repeat(41)).is_err(), "too wide");
+    assert!(w.set_note("other", "1").is_err(), "not a note");
+    for i in 3..6 {
+        w.write_sample(&sample(i)).unwrap();
+    }
+    w.finish().unwrap();
+    let rec = read(&path);
+    assert_eq!(rec.len(), 6);
+    assert_eq!(
+        rec.meta.other.last(),
+        Some(&("segments".into(), "2 (a restart at t = 0.02 s)".into()))
+    );
+    let bad = CreateOptions {
+        overwrite: true,
+        notes: vec![Note {
+            key: "sensor".into(),
+            value: "x".into(),
+            width: 4,
+        }],
+    };
+    let err = RecordingWriter::create_with(&path, &meta(), &layout(), &bad).unwrap_err();
+    assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
+    assert_eq!(read(&path).len(), 6, "refused before the file was touched");
 }

@@ -6,35 +6,47 @@
 //!   on an interrupt (Ctrl-C).
 //! - **cube24**: the 24 static poses of a cube jig against a reference edge ([`magcal_sim::cube24_poses`]). Each
 //!   prompt names the face down and where the reference edge points. Once the sensor has left the last pose and has
-//!   stayed still for a dwell (every axis' spread below a threshold), it has settled; the next dwell is recorded if
-//!   it stays still too (Enter records the next dwell whatever it holds). The dwell's samples are written with the
-//!   pose's attitude quaternion, which gives the vector calibration its reference; the settling dwell keeps the end
-//!   of the move out of them.
+//!   stayed still for a dwell (every axis' spread below a threshold), it has settled; from then on each sample that
+//!   keeps it still (the last dwell's spread stays below the threshold, and the sample is within three thresholds
+//!   of where it settled) is written at once with the pose's attitude quaternion, which gives the vector
+//!   calibration its reference, until a dwell's worth is written and the pose is taken. A sample that moves ends
+//!   the take: the rows written stay (they were still, at the pose), and the pose is taken once the jig settles
+//!   again. Enter takes the next dwell whatever it holds. The settling dwell keeps the end of the move out.
 //!
-//! The file is created (metadata and header flushed) before the first sample, so an unwritable path fails before
-//! anything is recorded; rows reach the file at least every half second, so a killed recorder leaves a file that
-//! parses and holds all but the last moments. A device that fails (a bus that stays down after retries, a serial
-//! line that disconnects, outputs that stop changing) ends the recording with an error naming the device and how
-//! many samples the file keeps.
+//! Both routines watch the field magnitude ([`MagnitudeWatch`]): a magnet or iron near the sensor, which changes it,
+//! is said live; its samples are written but kept out of the coverage map. Saturated samples (counted by the
+//! source) are not written.
+//!
+//! An existing file is never replaced unless asked ([`RecordOptions::force`]; [`check_out`] says so before the
+//! device is opened), and the file is locked while it is written, so a second recorder on it is refused. The file
+//! is created (metadata and header flushed) before the first sample, so an unwritable path fails before anything
+//! is recorded; rows reach the file as they are taken, at least every [`FLUSH_INTERVAL`], so a killed recorder
+//! leaves a file that parses and holds all but the last moments, and a failed write (a full disk) leaves whole
+//! lines only. A device that fails (a bus that stays down after retries, a serial line that disconnects or goes
+//! silent, outputs that stop changing) ends the recording with an error naming the device and how many samples the
+//! file keeps.
 
 pub mod clock;
 pub mod coverage;
+pub mod magnitude;
 pub mod sim;
 pub mod source;
 pub mod still;
 pub mod ui;
 
+use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use magcal_driver::serial::GarbageCounts;
-use magcal_recording::{Layout, Metadata, RecordingWriter, Sample};
+use magcal_recording::{CreateOptions, Layout, Metadata, Note, RecordingWriter, Sample};
 use magcal_sim::{CubePose, cube24_poses};
 
-use crate::device::DeviceSpec;
+use crate::device::{BadOption, DeviceSpec, positive_at_most};
 
 pub use coverage::CoverageMap;
+pub use magnitude::{MagnitudeEvent, MagnitudeWatch};
 pub use source::{Reading, Source, SourceError};
 pub use still::StillWindow;
 pub use ui::{Progress, Ui};
@@ -63,8 +75,10 @@ impl Routine {
 pub struct RecordOptions {
     /// The routine.
     pub routine: Routine,
-    /// The recording to write (created or truncated).
+    /// The recording to write.
     pub out: PathBuf,
+    /// Replace `out` if it exists (otherwise an existing file is an error and is left alone).
+    pub force: bool,
     /// Metadata to write; the recorder fills in `sensor` (if absent), `sample_rate_hz`, `routine` and `started`.
     pub meta: Metadata,
     /// Unattended: never wait for Enter. A `sim` device's virtual hand performs the routine either way.
@@ -82,11 +96,13 @@ pub struct RecordOptions {
 }
 
 impl RecordOptions {
-    /// Defaults: 90 % coverage, at most 10 minutes, 1 s dwell, still below 0.5 µT, 1.5 s moves, attended.
+    /// Defaults: 90 % coverage, at most 10 minutes, 1 s dwell, still below 0.5 µT, 1.5 s moves, attended, never
+    /// replacing a file.
     pub fn new(routine: Routine, out: PathBuf) -> RecordOptions {
         RecordOptions {
             routine,
             out,
+            force: false,
             meta: Metadata::default(),
             auto: false,
             target_coverage: 0.9,
@@ -96,6 +112,57 @@ impl RecordOptions {
             transition_s: 1.5,
         }
     }
+}
+
+/// The longest dwell, s: a pose held for longer is no better measured.
+pub const MAX_DWELL_S: f64 = 60.0;
+/// The longest recording, s (a week).
+pub const MAX_DURATION_S: f64 = 604_800.0;
+/// The largest stillness threshold, µT.
+pub const MAX_STILL_UT: f64 = 1000.0;
+/// How often rows reach the file at least (half the half second a killed recorder may lose).
+pub const FLUSH_INTERVAL: Duration = Duration::from_millis(250);
+
+impl RecordOptions {
+    /// Checks the options before anything is opened: coverage a fraction in (0, 1], durations, dwell and stillness
+    /// positive and within their ranges.
+    pub fn check(&self) -> Result<(), BadOption> {
+        if !(self.target_coverage > 0.0 && self.target_coverage <= 1.0) {
+            return Err(BadOption(format!(
+                "--coverage {}: must be a fraction in (0, 1]",
+                self.target_coverage
+            )));
+        }
+        positive_at_most("--max-duration", self.max_duration_s, MAX_DURATION_S, "s")?;
+        positive_at_most("--dwell", self.dwell_s, MAX_DWELL_S, "s")?;
+        positive_at_most("--still-ut", self.still_ut, MAX_STILL_UT, "µT")?;
+        positive_at_most("transition", self.transition_s, MAX_DWELL_S, "s")
+    }
+}
+
+/// Checks, before the device is opened, that `path` can take a new recording: it does not exist, or `force` says
+/// to replace it; and no recorder is writing it now.
+pub fn check_out(path: &Path, force: bool) -> Result<(), RecordError> {
+    if path.is_dir() {
+        return Err(RecordError::Create {
+            path: path.to_owned(),
+            source: std::io::Error::other("it is a directory"),
+        });
+    }
+    let Ok(file) = File::open(path) else {
+        return Ok(());
+    };
+    if let Err(std::fs::TryLockError::WouldBlock) = file.try_lock() {
+        return Err(RecordError::Busy {
+            path: path.to_owned(),
+        });
+    }
+    if !force {
+        return Err(RecordError::Exists {
+            path: path.to_owned(),
+        });
+    }
+    Ok(())
 }
 
 /// Why a recording ended without an error.
@@ -124,8 +191,13 @@ pub struct RecordSummary {
     pub coverage: f64,
     /// Cube poses taken.
     pub poses: usize,
-    /// Samples the chip refused as saturated.
+    /// Samples the chip refused as saturated (not recorded).
     pub saturated: u64,
+    /// Samples whose field magnitude departed from the rest's (a magnet or iron nearby; recorded, kept out of the
+    /// coverage map).
+    pub disturbed: u64,
+    /// Times at which the device's clock restarted and a new segment of time began, s of recording time.
+    pub clock_restarts: Vec<f64>,
     /// Garbage lines skipped (line streams).
     pub garbage: Option<GarbageCounts>,
     /// Why it stopped.
@@ -135,6 +207,26 @@ pub struct RecordSummary {
 /// Why a recording failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
+    /// The file exists, and replacing it was not asked for: nothing was recorded, the file is untouched.
+    #[error(
+        "{} exists: magcal-record never replaces a recording; choose another --out, or add --force to replace it \
+         (nothing was recorded)",
+        path.display()
+    )]
+    Exists {
+        /// The path.
+        path: PathBuf,
+    },
+    /// Another process holds the file's lock (another recorder is writing it): nothing was recorded.
+    #[error(
+        "{} is being written by another recorder (it holds the file's lock): choose another --out (nothing was \
+         recorded)",
+        path.display()
+    )]
+    Busy {
+        /// The path.
+        path: PathBuf,
+    },
     /// The file could not be created: nothing was recorded.
     #[error("cannot create the recording {}: {source}; nothing was recorded", path.display())]
     Create {
@@ -143,12 +235,15 @@ pub enum RecordError {
         /// What the system said.
         source: std::io::Error,
     },
-    /// Writing a row failed.
-    #[error("writing {} failed after {kept} samples: {source}", path.display())]
+    /// Writing rows failed (a full disk, say); the file holds whole lines only, and parses.
+    #[error(
+        "writing {} failed: {source}; the file keeps the {kept} samples written before (whole lines: it parses)",
+        path.display()
+    )]
     Write {
         /// The path.
         path: PathBuf,
-        /// Rows accepted before.
+        /// Rows in the file.
         kept: u64,
         /// What the system said.
         source: std::io::Error,
@@ -203,7 +298,7 @@ enum PoseState {
     AwaitMove,
     /// Waiting for a dwell of stillness (the jig settles in the new pose).
     AwaitStill,
-    /// Settled: the next dwell is recorded, if it stays still (or Enter was pressed).
+    /// Settled: samples are taken while they keep it still (or whatever they hold, after Enter).
     Hold,
 }
 
@@ -236,6 +331,37 @@ struct Out {
     t0_s: f64,
 }
 
+/// The metadata note that lists the segments of a recording's time.
+pub const SEGMENTS_NOTE: &str = "segments";
+/// Room for the segments note, bytes.
+const SEGMENTS_WIDTH: usize = 160;
+
+/// The segments note's value: how many, and where the later ones begin.
+fn segments_note(restarts_s: &[f64]) -> String {
+    if restarts_s.is_empty() {
+        return "1".to_owned();
+    }
+    let times: Vec<String> = restarts_s.iter().map(|t| format!("{t:.3}")).collect();
+    let mut note = String::new();
+    for shown in (1..=times.len()).rev() {
+        let more = times.len() - shown;
+        let list = times[..shown].join(", ");
+        let tail = if more > 0 {
+            format!(" and {more} more")
+        } else {
+            String::new()
+        };
+        note = format!(
+            "{} (the device's clock restarted at t = {list}{tail} s; each new segment continues from the host's clock)",
+            restarts_s.len() + 1
+        );
+        if note.len() <= SEGMENTS_WIDTH {
+            break;
+        }
+    }
+    note
+}
+
 impl Out {
     fn write(&mut self, r: &Reading, quat: Option<[f64; 4]>) -> Result<(), RecordError> {
         let sample = Sample {
@@ -251,11 +377,30 @@ impl Out {
         };
         self.writer
             .write_sample(&sample)
-            .map_err(|source| RecordError::Write {
-                path: self.writer.path().to_owned(),
-                kept: self.writer.rows(),
-                source,
-            })
+            .map_err(|source| self.write_failed(source))
+    }
+
+    /// Writes buffered rows out if they have waited long enough (when no sample came).
+    fn flush_if_due(&mut self) -> Result<(), RecordError> {
+        self.writer
+            .flush_if_due()
+            .map_err(|source| self.write_failed(source))
+    }
+
+    /// Notes the segments of time after a restart of the device's clock.
+    fn note_segments(&mut self, restarts_s: &[f64]) -> Result<(), RecordError> {
+        let relative: Vec<f64> = restarts_s.iter().map(|t| t - self.t0_s).collect();
+        self.writer
+            .set_note(SEGMENTS_NOTE, &segments_note(&relative))
+            .map_err(|source| self.write_failed(source))
+    }
+
+    fn write_failed(&self, source: std::io::Error) -> RecordError {
+        RecordError::Write {
+            path: self.writer.path().to_owned(),
+            kept: self.writer.rows_in_file(),
+            source,
+        }
     }
 
     fn rows(&self) -> u64 {
@@ -266,12 +411,19 @@ impl Out {
         self.writer.path()
     }
 
-    fn finish(self) -> Result<(), RecordError> {
-        let path = self.writer.path().to_owned();
-        let kept = self.writer.rows();
-        self.writer
-            .finish()
-            .map_err(|source| RecordError::Write { path, kept, source })
+    /// Writes what is buffered and syncs; returns the rows the file holds, and the error if that failed.
+    fn finish(mut self) -> (u64, Result<(), RecordError>) {
+        let flushed = self.writer.flush();
+        let kept = self.writer.rows_in_file();
+        let path = self.path().to_owned();
+        let result = match flushed {
+            Ok(()) => self.writer.finish(),
+            Err(e) => Err(e),
+        };
+        (
+            kept,
+            result.map_err(|source| RecordError::Write { path, kept, source }),
+        )
     }
 }
 
@@ -325,12 +477,32 @@ pub fn record(
     meta.sample_rate_hz = source.rate_hz();
     meta.routine = Some(opts.routine.name().to_owned());
     meta.started = Some(utc_rfc3339(SystemTime::now()));
-    let writer = RecordingWriter::create(&opts.out, &meta, &layout).map_err(|source| {
-        RecordError::Create {
-            path: opts.out.clone(),
-            source,
-        }
-    })?;
+    let create = CreateOptions {
+        overwrite: opts.force,
+        notes: source
+            .clock_may_restart()
+            .then(|| Note {
+                key: SEGMENTS_NOTE.to_owned(),
+                value: segments_note(&[]),
+                width: SEGMENTS_WIDTH,
+            })
+            .into_iter()
+            .collect(),
+    };
+    let writer = RecordingWriter::create_with(&opts.out, &meta, &layout, &create)
+        .map_err(|source| match source.kind() {
+            std::io::ErrorKind::AlreadyExists => RecordError::Exists {
+                path: opts.out.clone(),
+            },
+            std::io::ErrorKind::WouldBlock => RecordError::Busy {
+                path: opts.out.clone(),
+            },
+            _ => RecordError::Create {
+                path: opts.out.clone(),
+                source,
+            },
+        })?
+        .with_flush_interval(FLUSH_INTERVAL);
     let mut out = Out {
         writer,
         layout,
@@ -338,14 +510,66 @@ pub fn record(
     };
     let result = run(source, opts, ui, interrupt, &mut out);
     ui.finish();
-    let kept = out.rows();
-    let finished = out.finish();
+    let (kept, finished) = out.finish();
     match (result, finished) {
         (Ok(mut summary), Ok(())) => {
             summary.samples = kept;
             Ok(summary)
         }
-        (Err(e), _) | (Ok(_), Err(e)) => Err(e),
+        (Err(mut e), _) => {
+            // The file may have lost its last buffered rows with the error: count what it holds.
+            if let RecordError::Device { kept: k, .. } | RecordError::Stuck { kept: k, .. } = &mut e
+            {
+                *k = kept;
+            }
+            Err(e)
+        }
+        (Ok(_), Err(e)) => Err(e),
+    }
+}
+
+/// Where the cube routine is with the current pose.
+struct Cube {
+    poses: Vec<CubePose>,
+    window: StillWindow,
+    taken: usize,
+    state: PoseState,
+    /// Where the jig settled (the mean of the settling dwell), µT.
+    settled_ut: [f64; 3],
+    /// Rows written for the pose being taken: how many, and their sum (for the mean), µT.
+    held: usize,
+    held_sum_ut: [f64; 3],
+    last_pose_mean: Option<[f64; 3]>,
+    manual_take: bool,
+}
+
+impl Cube {
+    fn new(dwell_len: usize) -> Cube {
+        Cube {
+            poses: cube24_poses().to_vec(),
+            window: StillWindow::new(dwell_len),
+            taken: 0,
+            state: PoseState::AwaitStill,
+            settled_ut: [0.0; 3],
+            held: 0,
+            held_sum_ut: [0.0; 3],
+            last_pose_mean: None,
+            manual_take: false,
+        }
+    }
+
+    fn start_hold(&mut self) {
+        self.state = PoseState::Hold;
+        self.settled_ut = self.window.mean_ut();
+        self.held = 0;
+        self.held_sum_ut = [0.0; 3];
+    }
+
+    /// Whether reading `r` keeps the settled jig still: the last dwell's spread stays below the threshold, and `r`
+    /// is within three thresholds of where it settled.
+    fn steady(&self, r: &Reading, still_ut: f64) -> bool {
+        self.window.is_still(still_ut)
+            && (0..3).all(|k| (r.mag_ut[k] - self.settled_ut[k]).abs() <= 3.0 * still_ut)
     }
 }
 
@@ -367,13 +591,11 @@ fn run(
         limit: STUCK_REPEATS.max((2.0 * rate_hz) as u64),
     };
     let mut map = CoverageMap::new();
-    let poses = cube24_poses();
-    let mut window = StillWindow::new((opts.dwell_s * rate_hz).round() as usize);
-    let mut taken = 0usize;
-    let mut state = PoseState::AwaitStill;
-    let mut last_pose_mean: Option<[f64; 3]> = None;
-    let mut manual_take = false;
+    let mut magnitude = MagnitudeWatch::new();
+    let mut jig = Cube::new((opts.dwell_s * rate_hz).round() as usize);
+    let mut seen = 0u64;
     let mut saturated_told = 0;
+    let mut restarts_told = 0;
     let t0_s = out.t0_s;
     let device_failed = |error: SourceError, out: &Out, source: &dyn Source| RecordError::Device {
         error,
@@ -394,7 +616,7 @@ fn run(
                 bench.borrow_mut().hand_mut().tumble(source.now_s(), 1.0);
             }
         }
-        Routine::Cube24 => prompt_pose(source, opts, ui, 0, &poses[0]),
+        Routine::Cube24 => prompt_pose(source, opts, ui, 0, &jig.poses[0]),
     }
 
     let stop = loop {
@@ -402,7 +624,11 @@ fn run(
             break Stop::Interrupted;
         }
         let r = match source.next_reading() {
-            Ok(r) => r,
+            Ok(Some(r)) => r,
+            Ok(None) => {
+                out.flush_if_due()?;
+                continue;
+            }
             Err(e) => return Err(device_failed(e, out, source)),
         };
         let t_s = r.t_s - t0_s;
@@ -417,8 +643,20 @@ fn run(
             ));
             saturated_told = source.saturated();
         }
-        let n = map.len() as u64;
-        if stuck.stuck(r.mag_ut, n) {
+        let restarts = source.clock_restarts();
+        if restarts.len() > restarts_told {
+            ui.message(&format!(
+                "{device}: the device's clock restarted (a reset?) at t = {:.3} s: time goes on from the host's \
+                 clock, as segment {} (noted in the file's metadata)",
+                restarts[restarts.len() - 1] - t0_s,
+                restarts.len() + 1
+            ));
+            restarts_told = restarts.len();
+            let restarts = restarts.to_vec();
+            out.note_segments(&restarts)?;
+        }
+        seen += 1;
+        if stuck.stuck(r.mag_ut, seen - 1) {
             return Err(RecordError::Stuck {
                 device,
                 value: r.mag_ut,
@@ -428,7 +666,25 @@ fn run(
                 kept: out.rows(),
             });
         }
-        map.add(r.mag_ut);
+        let (disturbed, event) = magnitude.add(t_s, r.mag_ut, map.fraction());
+        match event {
+            Some(MagnitudeEvent::Departed {
+                t_s,
+                magnitude_ut,
+                usual_ut,
+            }) => ui.message(&format!(
+                "t = {t_s:.1} s: the field magnitude is {magnitude_ut:.1} µT, not the {usual_ut:.1} µT of the rest: a \
+                 magnet or iron near the sensor? Move it away; these samples are recorded but kept out of the \
+                 coverage map"
+            )),
+            Some(MagnitudeEvent::Returned { t_s, lasted_s }) => ui.message(&format!(
+                "t = {t_s:.1} s: the field magnitude is back to the rest's (disturbed for {lasted_s:.1} s)"
+            )),
+            None => {}
+        }
+        if !disturbed {
+            map.add(r.mag_ut);
+        }
         match opts.routine {
             Routine::Free => {
                 out.write(&r, None)?;
@@ -438,76 +694,104 @@ fn run(
                 }
             }
             Routine::Cube24 => {
-                if !manual_take && ui.enter_pressed() {
-                    manual_take = true;
-                    state = PoseState::Hold;
-                    window.clear();
-                }
-                window.push(r);
-                let full = window.is_full();
-                let still = window.is_still(opts.still_ut);
-                match state {
-                    PoseState::AwaitMove if full => {
-                        let mean = window.mean_ut();
-                        let away = last_pose_mean.is_none_or(|m| {
-                            (0..3).map(|k| (mean[k] - m[k]).powi(2)).sum::<f64>().sqrt() > MOVED_UT
-                        });
-                        if away || !still {
-                            state = PoseState::AwaitStill;
-                        }
-                    }
-                    PoseState::AwaitStill if still => {
-                        // Still for a dwell: the jig has settled. Record the next dwell.
-                        state = PoseState::Hold;
-                        window.clear();
-                    }
-                    PoseState::Hold if full && !(still || manual_take) => {
-                        state = PoseState::AwaitStill
-                    }
-                    _ => {}
-                }
-                if state == PoseState::Hold
-                    && window.is_full()
-                    && (manual_take || window.is_still(opts.still_ut))
-                {
-                    let pose = &poses[taken];
-                    let mean = window.mean_ut();
-                    let held = window.take();
-                    for w in &held {
-                        out.write(w, Some(pose.quat))?;
-                    }
-                    ui.message(&format!(
-                        "  taken: {} samples, mean [{:.2}, {:.2}, {:.2}] µT{}",
-                        held.len(),
-                        mean[0],
-                        mean[1],
-                        mean[2],
-                        if manual_take { " (Enter)" } else { "" }
-                    ));
-                    taken += 1;
-                    last_pose_mean = Some(mean);
-                    state = PoseState::AwaitMove;
-                    manual_take = false;
-                    if taken == poses.len() {
-                        ui.progress(&progress(t_s, out, &map, opts, Some(taken)));
-                        break Stop::AllPoses;
-                    }
-                    prompt_pose(source, opts, ui, taken, &poses[taken]);
+                if cube_step(&mut jig, &r, source, opts, ui, out)? {
+                    ui.progress(&progress(t_s, out, &map, opts, Some(jig.taken)));
+                    break Stop::AllPoses;
                 }
             }
         }
-        ui.progress(&progress(t_s, out, &map, opts, cube.then_some(taken)));
+        // Rows taken a while ago reach the file even when no row follows them (between two cube poses).
+        out.flush_if_due()?;
+        ui.progress(&progress(t_s, out, &map, opts, cube.then_some(jig.taken)));
     };
     Ok(RecordSummary {
         path: out.path().to_owned(),
         samples: out.rows(),
         duration_s: source.now_s() - t0_s,
         coverage: map.fraction(),
-        poses: taken,
+        poses: jig.taken,
         saturated: source.saturated(),
+        disturbed: magnitude.departed(),
+        clock_restarts: source.clock_restarts().iter().map(|t| t - t0_s).collect(),
         garbage: source.garbage(),
         stop,
     })
+}
+
+/// One reading of the cube routine: moves the pose state on and writes the reading if it is taken. Returns whether
+/// all poses are taken.
+fn cube_step(
+    jig: &mut Cube,
+    r: &Reading,
+    source: &mut dyn Source,
+    opts: &RecordOptions,
+    ui: &mut dyn Ui,
+    out: &mut Out,
+) -> Result<bool, RecordError> {
+    if !jig.manual_take && ui.enter_pressed() {
+        jig.manual_take = true;
+        jig.start_hold();
+    }
+    jig.window.push(*r);
+    let full = jig.window.is_full();
+    let still = jig.window.is_still(opts.still_ut);
+    match jig.state {
+        PoseState::AwaitMove if full => {
+            let mean = jig.window.mean_ut();
+            let away = jig.last_pose_mean.is_none_or(|m| {
+                (0..3).map(|k| (mean[k] - m[k]).powi(2)).sum::<f64>().sqrt() > MOVED_UT
+            });
+            if away || !still {
+                jig.state = PoseState::AwaitStill;
+            }
+        }
+        // Still for a dwell: the jig has settled. Take the samples that keep it still.
+        PoseState::AwaitStill if still => {
+            jig.start_hold();
+            return Ok(false);
+        }
+        _ => {}
+    }
+    if jig.state != PoseState::Hold {
+        return Ok(false);
+    }
+    if !(jig.manual_take || jig.steady(r, opts.still_ut)) {
+        jig.state = PoseState::AwaitStill;
+        if jig.held > 0 {
+            ui.message(&format!(
+                "  moved after {} samples of the pose: hold it still against the edge",
+                jig.held
+            ));
+        }
+        return Ok(false);
+    }
+    let pose = &jig.poses[jig.taken];
+    out.write(r, Some(pose.quat))?;
+    jig.held += 1;
+    (0..3).for_each(|k| jig.held_sum_ut[k] += r.mag_ut[k]);
+    if jig.held < jig.window.capacity() {
+        return Ok(false);
+    }
+    let mean = jig.held_sum_ut.map(|s| s / jig.held as f64);
+    ui.message(&format!(
+        "  taken: {} samples, mean [{:.2}, {:.2}, {:.2}] µT{}",
+        jig.held,
+        mean[0],
+        mean[1],
+        mean[2],
+        if jig.manual_take { " (Enter)" } else { "" }
+    ));
+    jig.taken += 1;
+    jig.last_pose_mean = Some(mean);
+    jig.state = PoseState::AwaitMove;
+    jig.manual_take = false;
+    jig.window.clear();
+    if jig.taken == jig.poses.len() {
+        return Ok(true);
+    }
+    let next = jig.poses[jig.taken];
+    prompt_pose(source, opts, ui, jig.taken, &next);
+    Ok(false)
 }
 
 /// Prompts for pose `k`; a `sim` device's virtual hand starts moving the jig there.
@@ -568,7 +852,6 @@ pub fn utc_rfc3339(t: SystemTime) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Duration;
 
     #[test]
     fn timestamps_are_utc_civil_dates() {
@@ -576,6 +859,70 @@ mod tests {
         assert_eq!(at(0), "1970-01-01T00:00:00Z");
         assert_eq!(at(951_782_400), "2000-02-29T00:00:00Z");
         assert_eq!(at(1_763_700_000), "2025-11-21T04:40:00Z");
+    }
+
+    #[test]
+    fn the_segments_note_fits_its_room() {
+        assert_eq!(segments_note(&[]), "1");
+        assert_eq!(
+            segments_note(&[12.5]),
+            "2 (the device's clock restarted at t = 12.500 s; each new segment continues from the host's clock)"
+        );
+        let many: Vec<f64> = (0..50).map(|i| 10.0 * f64::from(i)).collect();
+        let note = segments_note(&many);
+        assert!(
+            note.len() <= SEGMENTS_WIDTH && note.starts_with("51 (") && note.contains("more s;"),
+            "{note}"
+        );
+    }
+
+    #[test]
+    fn options_out_of_range_are_refused_before_anything_is_opened() {
+        let ok = RecordOptions::new(Routine::Cube24, "x.csv".into());
+        assert!(ok.check().is_ok());
+        for (edit, says) in [
+            (
+                (|o: &mut RecordOptions| o.dwell_s = 1e30) as fn(&mut RecordOptions),
+                "--dwell 1000000000000000000000000000000 s",
+            ),
+            (
+                |o| o.dwell_s = 1e7,
+                "--dwell 10000000 s: must be a number > 0 and at most 60 s",
+            ),
+            (|o| o.dwell_s = f64::NAN, "--dwell NaN"),
+            (|o| o.max_duration_s = -1.0, "--max-duration -1"),
+            (|o| o.still_ut = 0.0, "--still-ut 0"),
+            (|o| o.target_coverage = 1.5, "--coverage 1.5"),
+        ] {
+            let mut o = ok.clone();
+            edit(&mut o);
+            let e = o.check().unwrap_err().to_string();
+            assert!(e.starts_with(says), "{e}");
+        }
+    }
+
+    #[test]
+    fn an_existing_or_busy_out_is_refused_before_the_device_opens() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rec.csv");
+        assert!(check_out(&path, false).is_ok());
+        std::fs::write(&path, "precious").unwrap();
+        assert!(matches!(
+            check_out(&path, false),
+            Err(RecordError::Exists { .. })
+        ));
+        assert!(check_out(&path, true).is_ok());
+        let holder = File::open(&path).unwrap();
+        holder.lock().unwrap();
+        assert!(matches!(
+            check_out(&path, true),
+            Err(RecordError::Busy { .. })
+        ));
+        drop(holder);
+        assert!(matches!(
+            check_out(dir.path(), true),
+            Err(RecordError::Create { .. })
+        ));
     }
 
     #[test]

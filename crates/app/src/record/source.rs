@@ -1,8 +1,9 @@
 //! Where samples come from: a chip driver polled over I2C (real or simulated), or a serial line stream.
 
 use std::fmt::Debug;
+use std::time::{Duration, Instant};
 
-use magcal_driver::serial::{GarbageCounts, Protocol, SerialSource, StreamStop};
+use magcal_driver::serial::{GarbageCounts, GarbageKind, Protocol, SerialSource, StreamStop};
 use magcal_driver::{Error as ChipError, Magnetometer};
 
 use magcal_mockhw::SharedBench;
@@ -17,6 +18,8 @@ pub const FIRST_BACKOFF_S: f64 = 0.005;
 pub const TEMPERATURE_PERIOD_S: f64 = 1.0;
 /// A chip with no new sample for this many sample periods (and at least 1 s) is reported as not measuring.
 const SILENT_PERIODS: f64 = 20.0;
+/// How long a serial source waits for a line before it lets the recorder look at Ctrl-C and the clock.
+const SERIAL_POLL: Duration = Duration::from_millis(100);
 
 /// One sample from a device.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,6 +77,18 @@ pub enum SourceError {
         /// What the driver said.
         error: String,
     },
+    /// A serial device sent no sample for the idle timeout.
+    #[error("{device}: no sample for {waited_s:.1} s after {samples} samples: {cause}")]
+    NoSamples {
+        /// The device string.
+        device: String,
+        /// Samples read before.
+        samples: u64,
+        /// How long was waited, s.
+        waited_s: f64,
+        /// What the line showed, and the likely cause.
+        cause: String,
+    },
     /// A serial device disconnected.
     #[error("{device}: disconnected after {samples} samples: {reason}")]
     Disconnected {
@@ -96,9 +111,10 @@ pub trait Source {
     fn rate_hz(&self) -> Option<f64>;
     /// Whether readings carry a temperature.
     fn has_temperature(&self) -> bool;
-    /// The next sample, waiting for it on the device's clock. A saturated sample is not a field value: it is
-    /// counted ([`Source::saturated`]) and skipped.
-    fn next_reading(&mut self) -> Result<Reading, SourceError>;
+    /// The next sample, waiting for it on the device's clock; `None` when none came within a short wait (call
+    /// again: the caller meanwhile looks at Ctrl-C). A saturated sample is not a field value: it is counted
+    /// ([`Source::saturated`]) and skipped.
+    fn next_reading(&mut self) -> Result<Option<Reading>, SourceError>;
     /// The time on the device's clock, s.
     fn now_s(&self) -> f64;
     /// Samples refused as saturated so far.
@@ -107,6 +123,15 @@ pub trait Source {
     fn garbage(&self) -> Option<GarbageCounts>;
     /// The simulated bench, for `sim` devices: its virtual hand performs the routine.
     fn bench(&self) -> Option<&SharedBench>;
+    /// Whether the device's own clock may restart (a board that resets): the recording then notes its segments.
+    fn clock_may_restart(&self) -> bool {
+        false
+    }
+    /// Times (on the source's clock, s) at which the device's clock restarted and a new segment of time began,
+    /// bridged by the host's clock.
+    fn clock_restarts(&self) -> &[f64] {
+        &[]
+    }
 }
 
 /// A chip driver polled for data-ready on a clock, with retries, temperature and saturation counting.
@@ -225,7 +250,7 @@ where
         self.has_temperature
     }
 
-    fn next_reading(&mut self) -> Result<Reading, SourceError> {
+    fn next_reading(&mut self) -> Result<Option<Reading>, SourceError> {
         let period_s = 1.0 / self.rate_hz;
         let poll_s = period_s / 4.0;
         let give_up_s = (SILENT_PERIODS * period_s).max(1.0);
@@ -242,11 +267,11 @@ where
                         self.temp_read_s = t_s;
                     }
                     self.samples += 1;
-                    return Ok(Reading {
+                    return Ok(Some(Reading {
                         t_s,
                         mag_ut: m.map(f64::from),
                         temp_c: self.temp_c,
-                    });
+                    }));
                 }
                 Err(ChipError::NotReady) => {}
                 Err(ChipError::Saturated) => {
@@ -285,22 +310,139 @@ where
     }
 }
 
+/// Which clock a serial sample's time came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ClockKind {
+    /// The board's `t` column.
+    Device,
+    /// The host's reception time.
+    Host,
+}
+
+/// The last sample's time, as the clocks gave it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LastTime {
+    kind: ClockKind,
+    /// On the clock it came from, s.
+    clock_s: f64,
+    /// On the host's clock, s.
+    host_s: f64,
+}
+
 /// Samples from a serial line stream (MotionCal `Raw:` lines or native CSV).
+///
+/// Time is the board's `t` where the stream has one, the host's reception time otherwise, and never runs backwards
+/// or stands still: when the board's clock restarts (it reset), a new segment begins, continued from the last
+/// sample's time by the gap the host saw, and is listed in [`Source::clock_restarts`]. No sample for the idle
+/// timeout is an error naming the likely cause (silence, wrong baud rate, wrong protocol).
 pub struct LineSource {
     device: String,
     source: SerialSource,
     samples: u64,
     last_t_s: f64,
+    last: Option<LastTime>,
+    /// Added to the current clock's time to make the recording's.
+    offset_s: f64,
+    restarts: Vec<f64>,
+    idle_timeout: Duration,
+    last_sample_at: Instant,
 }
 
 impl LineSource {
-    /// Reads from an open serial source.
-    pub fn new(device: String, source: SerialSource) -> LineSource {
+    /// Reads from an open serial source; no sample for `idle_timeout` is an error.
+    pub fn new(device: String, mut source: SerialSource, idle_timeout: Duration) -> LineSource {
+        source.set_idle_timeout(SERIAL_POLL.min(idle_timeout));
         LineSource {
             device,
             source,
             samples: 0,
             last_t_s: 0.0,
+            last: None,
+            offset_s: 0.0,
+            restarts: Vec::new(),
+            idle_timeout,
+            last_sample_at: Instant::now(),
+        }
+    }
+
+    /// The recording time of a sample with device time `device_t_s` (if finite) received at `host_s`.
+    fn time_of(&mut self, device_t_s: Option<f64>, host_s: f64) -> f64 {
+        let (kind, clock_s) = match device_t_s.filter(|t| t.is_finite()) {
+            Some(t) => (ClockKind::Device, t),
+            None => (ClockKind::Host, host_s),
+        };
+        let t_s = match self.last {
+            None => clock_s,
+            Some(last) if last.kind != kind || clock_s < last.clock_s => {
+                // The board's clock restarted (or the stream lost its t): a new segment, bridged by the host.
+                let t_s = self.last_t_s + (host_s - last.host_s).max(0.0);
+                self.offset_s = t_s - clock_s;
+                self.restarts.push(t_s);
+                t_s
+            }
+            Some(_) => clock_s + self.offset_s,
+        };
+        self.last = Some(LastTime {
+            kind,
+            clock_s,
+            host_s,
+        });
+        t_s.max(self.last_t_s)
+    }
+
+    /// Why no sample came for `waited_s`: what the line showed, and its likely cause.
+    fn silence(&self, waited_s: f64) -> SourceError {
+        let counts = self.source.counts();
+        let garbage = &counts.garbage;
+        let bytes = self.source.bytes_received();
+        let noise = garbage.get(GarbageKind::Binary) + garbage.get(GarbageKind::Overlong);
+        let protocol = self.source.protocol();
+        let last = self
+            .source
+            .last_garbage()
+            .map(|g| format!(" (the last: \"{g}\")"))
+            .unwrap_or_default();
+        let cause = if self.samples > 0 {
+            format!(
+                "the board stopped sending samples (hung, or reset and waiting?){}; check it and record again",
+                if garbage.total() > 0 {
+                    format!("; garbage lines so far: {}", garbage.total())
+                } else {
+                    String::new()
+                }
+            )
+        } else if bytes == 0 {
+            "nothing at all was received: is the board running and streaming, on this port? (some sketches wait \
+             for a command, or print only when the port is opened)"
+                .to_owned()
+        } else if noise * 2 >= counts.lines.max(1) {
+            format!(
+                "{bytes} bytes received but no readable line: wrong baud rate? give the board's rate in the \
+                 device string, serial:PATH:BAUD (this one: {})",
+                self.device
+            )
+        } else if protocol == Protocol::Csv && garbage.get(GarbageKind::NoHeader) > 0 {
+            format!(
+                "{} lines of numbers but no header line naming mx,my,mz: the board printed its header before the \
+                 port was opened; reset it while recording",
+                garbage.get(GarbageKind::NoHeader)
+            )
+        } else {
+            let other = match protocol {
+                Protocol::MotionCal => "csv",
+                Protocol::Csv => "motioncal",
+            };
+            format!(
+                "{} lines received, none a {protocol} sample{last}: wrong protocol? (…:{other} in the device string \
+                 reads the other one)",
+                counts.lines
+            )
+        };
+        SourceError::NoSamples {
+            device: self.device.clone(),
+            samples: self.samples,
+            waited_s,
+            cause,
         }
     }
 }
@@ -323,31 +465,33 @@ impl Source for LineSource {
         self.source.protocol() == Protocol::Csv
     }
 
-    /// The next sample; an idle line is waited on (the firmware may be paused), a disconnect ends the stream.
-    /// Device times (CSV `t`) are used when present, reception times otherwise.
-    fn next_reading(&mut self) -> Result<Reading, SourceError> {
-        loop {
-            match self.source.read_sample() {
-                Ok(r) => {
-                    self.samples += 1;
-                    // Time never runs backwards in a recording, whatever the device's clock did.
-                    let t_s = r.sample.t_s.unwrap_or(r.host_s).max(self.last_t_s);
-                    self.last_t_s = t_s;
-                    return Ok(Reading {
-                        t_s,
-                        mag_ut: r.sample.mag_ut,
-                        temp_c: r.sample.temp_c.filter(|t| t.is_finite()),
-                    });
-                }
-                Err(StreamStop::Idle { .. }) => {}
-                Err(StreamStop::Disconnected { reason }) => {
-                    return Err(SourceError::Disconnected {
-                        device: self.device.clone(),
-                        samples: self.samples,
-                        reason,
-                    });
-                }
+    /// The next sample, or `None` after a short wait; no sample for the idle timeout is an error, and so is a
+    /// disconnect.
+    fn next_reading(&mut self) -> Result<Option<Reading>, SourceError> {
+        match self.source.read_sample() {
+            Ok(r) => {
+                self.samples += 1;
+                self.last_sample_at = Instant::now();
+                let t_s = self.time_of(r.sample.t_s, r.host_s);
+                self.last_t_s = t_s;
+                Ok(Some(Reading {
+                    t_s,
+                    mag_ut: r.sample.mag_ut,
+                    temp_c: r.sample.temp_c.filter(|t| t.is_finite()),
+                }))
             }
+            Err(StreamStop::Idle { .. }) => {
+                let waited = self.last_sample_at.elapsed();
+                if waited >= self.idle_timeout {
+                    return Err(self.silence(waited.as_secs_f64()));
+                }
+                Ok(None)
+            }
+            Err(StreamStop::Disconnected { reason }) => Err(SourceError::Disconnected {
+                device: self.device.clone(),
+                samples: self.samples,
+                reason,
+            }),
         }
     }
 
@@ -365,5 +509,13 @@ impl Source for LineSource {
 
     fn bench(&self) -> Option<&SharedBench> {
         None
+    }
+
+    fn clock_may_restart(&self) -> bool {
+        true
+    }
+
+    fn clock_restarts(&self) -> &[f64] {
+        &self.restarts
     }
 }

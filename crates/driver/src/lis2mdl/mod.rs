@@ -21,7 +21,9 @@
 //! temperature compensation on and continuous mode. The chip auto-increments
 //! the sub-address on multi-byte access by itself (no MSB flag); the
 //! temperature is read in its own transaction. There is no saturation flag in
-//! the data path, so [`Magnetometer::read_ut`] never returns `Saturated`.
+//! the data path: [`Magnetometer::read_ut`] returns `Saturated` when an axis is
+//! within 1 % of the 16-bit output's ends (the field is past ±49 G, or past
+//! what the offset registers leave of the range, and the output clipped).
 
 pub mod regs;
 
@@ -31,7 +33,7 @@ mod tests;
 use embedded_hal::i2c::I2c;
 
 use crate::bus::Bus;
-use crate::choose::{nearest, round_to_i16, scale};
+use crate::choose::{near_full_scale, nearest, round_to_i16, scale};
 use crate::{ChipInfo, ChipKind, Error, HardIronOffset, Magnetometer};
 
 /// The one full-scale range, ± µT (±50 G).
@@ -260,7 +262,11 @@ impl<I2C: I2c> Magnetometer for Lis2mdl<I2C> {
         }
         let mut b = [0; 6];
         self.bus.read_regs(regs::OUTX_L_REG, &mut b)?;
-        Ok(scale(words(b).map(i32::from), regs::LSB_UT))
+        let counts = words(b).map(i32::from);
+        if near_full_scale(counts, i16::MIN.into(), i16::MAX.into()) {
+            return Err(Error::Saturated);
+        }
+        Ok(scale(counts, regs::LSB_UT))
     }
 
     fn temperature_c(&mut self) -> Result<Option<f32>, Self::Error> {

@@ -98,6 +98,17 @@ fn read_not_ready_then_scaled_sample() {
 }
 
 #[test]
+fn a_clipped_output_is_saturated() {
+    // y = 32767 (0x7FFF): past +49 G, or past what the offset registers leave of the range.
+    let mut mag = driver(&[
+        T::write_read(ADDR, vec![0x67], vec![0x08]),
+        T::write_read(ADDR, vec![0x68], vec![0xE8, 0x03, 0xFF, 0x7F, 0xFF, 0xFF]),
+    ]);
+    assert_eq!(mag.read_ut(), Err(Error::Saturated));
+    finish(mag);
+}
+
+#[test]
 fn temperature_is_8_lsb_per_degree_around_25() {
     let mut mag = driver(&[
         T::write_read(ADDR, vec![0x6E], vec![0x28, 0x00]),

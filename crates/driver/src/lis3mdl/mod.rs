@@ -14,7 +14,9 @@
 //! continuous conversion. Multi-byte reads set [`regs::AUTO_INCREMENT`]; the
 //! temperature is read in its own transaction because a burst from OUT_X_L
 //! wraps back to OUT_X_L after OUT_Z_H. The chip has no flag for a saturated
-//! field in the data path, so [`Magnetometer::read_ut`] never returns `Saturated`.
+//! field in the data path: [`Magnetometer::read_ut`] returns `Saturated` when an
+//! axis is within 1 % of the 16-bit output's ends (the field is past the range
+//! and the output clipped).
 
 pub mod regs;
 
@@ -24,7 +26,7 @@ mod tests;
 use embedded_hal::i2c::I2c;
 
 use crate::bus::Bus;
-use crate::choose::{nearest, range_at_least, scale};
+use crate::choose::{near_full_scale, nearest, range_at_least, scale};
 use crate::{ChipInfo, ChipKind, Error, Magnetometer, UT_PER_GAUSS};
 
 /// Full-scale range (CTRL_REG2 `FS[1:0]`).
@@ -376,6 +378,9 @@ impl<I2C: I2c> Magnetometer for Lis3mdl<I2C> {
             i16::from_le_bytes([b[2], b[3]]).into(),
             i16::from_le_bytes([b[4], b[5]]).into(),
         ];
+        if near_full_scale(counts, i16::MIN.into(), i16::MAX.into()) {
+            return Err(Error::Saturated);
+        }
         Ok(scale(counts, self.lsb_ut()))
     }
 

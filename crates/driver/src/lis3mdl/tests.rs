@@ -134,12 +134,33 @@ fn read_not_ready_consumes_nothing() {
 fn read_scales_signed_counts_at_4_gauss() {
     let mut mag = driver(&[
         T::write_read(ADDR, vec![0x27], vec![0x08]),
-        // x = 6842 (0x1ABA), y = -3421 (0xF2A3), z = -32768 (0x8000)
-        T::write_read(ADDR, vec![0xA8], vec![0xBA, 0x1A, 0xA3, 0xF2, 0x00, 0x80]),
+        // x = 6842 (0x1ABA), y = -3421 (0xF2A3), z = -27368 (0x9518)
+        T::write_read(ADDR, vec![0xA8], vec![0xBA, 0x1A, 0xA3, 0xF2, 0x18, 0x95]),
     ]);
-    // 6842 / 6842 G = 100 µT; -3421 / 6842 G = -50 µT; -32768 / 6842 G = -478.92429 µT
-    assert_close(mag.read_ut().unwrap(), [100.0, -50.0, -478.924_3], 1e-3);
+    // 6842 / 6842 G = 100 µT; -3421 / 6842 G = -50 µT; -27368 / 6842 G = -400 µT (the full scale)
+    assert_close(mag.read_ut().unwrap(), [100.0, -50.0, -400.0], 1e-3);
     finish(mag);
+}
+
+#[test]
+fn an_output_at_the_end_of_its_range_is_saturated() {
+    // The edges of "near full scale": 1 % of the half span (327 counts) from either end.
+    for (z, saturated) in [
+        ([0x00, 0x80], true),  // -32768: clipped
+        ([0x47, 0x81], true),  // -32441
+        ([0x48, 0x81], false), // -32440
+        ([0xFF, 0x7F], true),  // 32767: clipped
+        ([0xB8, 0x7E], true),  // 32440
+        ([0xB7, 0x7E], false), // 32439
+    ] {
+        let mut mag = driver(&[
+            T::write_read(ADDR, vec![0x27], vec![0x08]),
+            T::write_read(ADDR, vec![0xA8], vec![0, 0, 0, 0, z[0], z[1]]),
+        ]);
+        let read = mag.read_ut();
+        assert_eq!(read == Err(Error::Saturated), saturated, "{z:x?}: {read:?}");
+        finish(mag);
+    }
 }
 
 #[test]

@@ -31,7 +31,9 @@
 //! unclear; this is the driver's reading of it.) The driver keeps the chip in
 //! continuous mode: the temperature and the SET/RESET measurement stop it for
 //! their single measurements and restart it afterwards. The chip has no
-//! saturation flag in the data path, so `read_ut` never returns `Saturated`.
+//! saturation flag in the data path: `read_ut` returns `Saturated` when an axis
+//! is within 1 % of the output's ends (the field is past ±8 G and the output
+//! clipped).
 
 pub mod regs;
 
@@ -42,7 +44,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
 
 use crate::bus::Bus;
-use crate::choose::{nearest, scale};
+use crate::choose::{near_full_scale, nearest, scale};
 use crate::{ChipInfo, ChipKind, Error, Magnetometer, UT_PER_GAUSS};
 
 /// The one full-scale range, ± µT (±8 G).
@@ -533,6 +535,9 @@ impl<I2C: I2c> Magnetometer for Mmc5983ma<I2C> {
         }
         let null = self.resolution.null_field();
         let counts = self.read_counts()?.map(|c| c - null);
+        if near_full_scale(counts, -null, null - 1) {
+            return Err(Error::Saturated);
+        }
         Ok(scale(counts, self.lsb_ut()))
     }
 

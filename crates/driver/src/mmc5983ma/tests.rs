@@ -145,6 +145,22 @@ fn read_assembles_18_bit_counts_around_null() {
 }
 
 #[test]
+fn a_clipped_18_bit_output_is_saturated() {
+    // x = 0 (null - 131072: past -8 G), y and z at null.
+    let mut mag = driver(&[
+        T::write_read(ADDR, vec![0x08], vec![0x01]),
+        T::write_read(
+            ADDR,
+            vec![0x00],
+            vec![0x00, 0x00, 0x80, 0x00, 0x80, 0x00, 0x00],
+        ),
+        T::write(ADDR, vec![0x08, 0x01]),
+    ]);
+    assert_eq!(mag.read_ut(), Err(Error::Saturated));
+    finish(mag);
+}
+
+#[test]
 fn read_16_bit_counts_skip_xyzout2() {
     let mut mag = driver(&[
         T::write_read(ADDR, vec![0x08], vec![0x01]),

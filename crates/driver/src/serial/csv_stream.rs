@@ -15,11 +15,11 @@
 //! A missing value is an empty field or `nan` (NaN in the [`Sample`]); the field itself must
 //! not be missing.
 //!
-//! The first valid header is kept. The same header again (the firmware restarted) is accepted;
-//! a different one is [`GarbageKind::BadHeader`], and so is a header line that names `mx,my,mz`
-//! but breaks the rules above. After the header, a line of numbers with the wrong field count is
-//! [`GarbageKind::FieldCount`] (a half line), one with text in it [`GarbageKind::Unrecognized`]
-//! (other chatter).
+//! A valid header sets the columns; a later valid header (the board reset, perhaps with other
+//! firmware) replaces them, and the lines after it are read by the new one. A header line that
+//! names `mx,my,mz` but breaks the rules above is [`GarbageKind::BadHeader`] and changes nothing.
+//! After the header, a line of numbers with the wrong field count is [`GarbageKind::FieldCount`]
+//! (a half line), one with text in it [`GarbageKind::Unrecognized`] (other chatter).
 
 use super::counts::GarbageKind;
 use super::sample::Sample;
@@ -99,7 +99,7 @@ impl Columns {
 pub enum CsvLine {
     /// A data line.
     Sample(Sample),
-    /// The header (first, or an identical repeat).
+    /// A header (the first, a repeat, or a new one that replaces it).
     Header,
     /// A `#` comment; `# key: value` comments are also kept as [`CsvStream::metadata`].
     Comment,
@@ -160,15 +160,8 @@ impl CsvStream {
         }
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         if let Some(header) = Columns::parse(&fields) {
-            let header = header?;
-            return match &self.columns {
-                None => {
-                    self.columns = Some(header);
-                    Ok(CsvLine::Header)
-                }
-                Some(current) if *current == header => Ok(CsvLine::Header),
-                Some(_) => Err(GarbageKind::BadHeader),
-            };
+            self.columns = Some(header?);
+            return Ok(CsvLine::Header);
         }
         let numeric = fields.iter().all(|f| optional_value(f).is_some());
         let columns = match &self.columns {
@@ -278,11 +271,6 @@ mod tests {
             Ok(CsvLine::Header),
             "repeat after a reset"
         );
-        assert_eq!(
-            s.parse_line("mx,my,mz"),
-            Err(GarbageKind::BadHeader),
-            "different header"
-        );
         assert_eq!(s.parse_line("0.1,1,2"), Err(GarbageKind::FieldCount));
         assert_eq!(s.parse_line("0.1,1,2,3,4"), Err(GarbageKind::FieldCount));
         assert_eq!(
@@ -293,5 +281,29 @@ mod tests {
         assert_eq!(s.parse_line("0.1,1,nan,3"), Err(GarbageKind::BadNumber));
         assert_eq!(s.parse_line("0.1,1,inf,3"), Err(GarbageKind::BadNumber));
         assert_eq!(sample(&mut s, " 0.1 , 1 ,2,3").mag_ut, [1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn a_new_header_replaces_the_columns() {
+        let mut s = CsvStream::new();
+        s.parse_line("t,mx,my,mz").unwrap();
+        assert_eq!(sample(&mut s, "5,1,2,3").t_s, Some(5.0));
+        assert_eq!(
+            s.parse_line("mz,my,mx,i_coil"),
+            Ok(CsvLine::Header),
+            "a reset board's new firmware"
+        );
+        let x = sample(&mut s, "3,2,1,0.5");
+        assert_eq!(
+            (x.t_s, x.mag_ut, x.inputs),
+            (None, [1.0, 2.0, 3.0], vec![0.5])
+        );
+        assert_eq!(s.input_names(), ["coil"]);
+        assert_eq!(s.parse_line("mx,my,mz,qw"), Err(GarbageKind::BadHeader));
+        assert_eq!(
+            sample(&mut s, "3,2,1,0.25").inputs,
+            [0.25],
+            "a bad header changes nothing"
+        );
     }
 }

@@ -178,7 +178,14 @@ pub struct SerialSource<L: Link = Box<dyn SerialPort>> {
     last_stop: Option<StreamStop>,
     /// The last `Cal1:` and `Cal2:` echoes seen: the calibration the firmware last showed.
     last_echoes: [Option<Echo>; 2],
+    /// Bytes read from the link.
+    bytes_received: u64,
+    /// The start of the last garbage line, escaped.
+    last_garbage: Option<String>,
 }
+
+/// At most this many bytes of a garbage line are kept for messages.
+const GARBAGE_EXCERPT_BYTES: usize = 40;
 
 /// Opens the port at `path` (8N1, no flow control) and reads `protocol` lines from it.
 pub fn open(path: &str, baud: u32, protocol: Protocol) -> Result<SerialSource, OpenError> {
@@ -214,7 +221,20 @@ impl<L: Link> SerialSource<L> {
             disconnected: None,
             last_stop: None,
             last_echoes: [None; 2],
+            bytes_received: 0,
+            last_garbage: None,
         }
+    }
+
+    /// Bytes received so far (lines, garbage and all).
+    pub fn bytes_received(&self) -> u64 {
+        self.bytes_received
+    }
+
+    /// The start of the last garbage line received (at most 40 bytes, control characters and invalid UTF-8
+    /// escaped), for messages that say what the device sends.
+    pub fn last_garbage(&self) -> Option<&str> {
+        self.last_garbage.as_deref()
     }
 
     /// Sets how long [`read_sample`](Self::read_sample) waits for a sample.
@@ -355,8 +375,18 @@ impl<L: Link> SerialSource<L> {
         match piece {
             Piece::Line(line) => {
                 let parsed = self.parser.parse(&line);
-                if let Parsed::Echo(echo) = &parsed {
-                    self.last_echoes[echo.kind().index()] = Some(*echo);
+                match &parsed {
+                    Parsed::Echo(echo) => self.last_echoes[echo.kind().index()] = Some(*echo),
+                    Parsed::Garbage(_) | Parsed::BadEcho { .. } => {
+                        let start = &line[..line.len().min(GARBAGE_EXCERPT_BYTES)];
+                        let mut text: String =
+                            String::from_utf8_lossy(start).escape_debug().collect();
+                        if line.len() > start.len() {
+                            text.push('…');
+                        }
+                        self.last_garbage = Some(text);
+                    }
+                    _ => {}
                 }
                 Some((self.chunk_host_s, parsed))
             }
@@ -391,6 +421,7 @@ impl<L: Link> SerialSource<L> {
                 Ok(0) => self.disconnect("end of file".to_string()),
                 Ok(n) => {
                     self.chunk_host_s = self.opened.elapsed().as_secs_f64();
+                    self.bytes_received += n as u64;
                     self.splitter.push(&buf[..n]);
                 }
                 Err(e) if is_transient(e.kind()) => {}
@@ -581,6 +612,15 @@ mod tests {
         let samples: Vec<Received> = s.by_ref().collect();
         assert_eq!(samples.len(), 1);
         assert!(matches!(s.last_stop(), Some(StreamStop::Idle { .. })));
+    }
+
+    #[test]
+    fn bytes_and_the_last_garbage_line_are_kept_for_messages() {
+        let (mut s, link) = source(Protocol::MotionCal);
+        link.push(b"Uni:1,2\n\x1b[2Jhello\xff\n");
+        assert!(s.read_sample().is_err());
+        assert_eq!(s.bytes_received(), 19);
+        assert_eq!(s.last_garbage(), Some("\\u{1b}[2Jhello\u{fffd}"));
     }
 
     #[test]
