@@ -17,7 +17,7 @@ use crate::calibrate::expected_field;
 use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
 use crate::params::ParamsFile;
-use crate::verdict::{Hints, Verdict, judge, judge_without_direction};
+use crate::verdict::{Grade, Hints, Verdict, judge, judge_without_direction};
 
 /// What the residual is measured against.
 #[derive(Clone, Debug, PartialEq)]
@@ -240,8 +240,9 @@ pub fn check(
         vector: against == Against::Vector,
         spans_s: Vec::new(),
         coverage: 1.0,
+        diagnosis_skipped: false,
     };
-    let (heading, verdict) = match field.vector() {
+    let (heading, mut verdict) = match field.vector() {
         Some(f) => {
             let (_, inclination_deg, _) = frames::field_angles(f);
             let h = heading_errors(&input(LocalField::new(inclination_deg, magnitude_ut)));
@@ -253,6 +254,9 @@ pub fn check(
             (None, judge_without_direction(lower.left.worst_deg, &hints))
         }
     };
+    if verdict.grade == Grade::Good {
+        "use them: they hold on this recording too".clone_into(&mut verdict.todo);
+    }
     Ok(Check {
         calibrated_ut,
         against,
@@ -328,7 +332,7 @@ mod tests {
             simulate(&s).unwrap().recording
         };
         let params = ParamsFile::new("vector", &Model::linear(truth.a, truth.b_ut), &[]);
-        let second = record(8, truth.clone());
+        let second = record(8, truth);
         let field = ReferenceField::Vector {
             field_ned_ut: second.meta.field_ned_ut.unwrap(),
             source: "test".into(),
@@ -343,12 +347,7 @@ mod tests {
         );
         let m = c.measured.unwrap();
         assert!(m.rms_deg < 1.0 && m.raw_rms_deg > 10.0, "{m:?}");
-        assert_eq!(
-            c.verdict.grade,
-            crate::verdict::Grade::Good,
-            "{:?}",
-            c.verdict
-        );
+        assert_eq!(c.verdict.grade, Grade::Good, "{:?}", c.verdict);
 
         let other = record(
             9,
@@ -356,6 +355,6 @@ mod tests {
         );
         let c = check(&params, &other, &field).unwrap();
         assert!(c.residual_rms_ut > 10.0 * c.noise_floor_ut, "{c:?}");
-        assert_eq!(c.verdict.grade, crate::verdict::Grade::Redo);
+        assert_eq!(c.verdict.grade, Grade::Redo);
     }
 }

@@ -16,6 +16,7 @@
 //!   `u = √(max(r² − f², 0))` is the part of the residual RMS `r` (per axis, or of |B|) that the measured noise
 //!   floor `f` does not account for: what the model leaves unexplained, taken as an error of that size in any
 //!   direction.
+//!   Figures above [`MAX_ERROR_DEG`] are capped there.
 //! - **Noise**: `f / H`, the jitter of a single reading. It is not a calibration error (averaging readings reduces
 //!   it), so it is stated beside the figures, not in them.
 
@@ -26,6 +27,8 @@ use crate::uncertainty::FieldUncertainty;
 
 /// Headings the figures are computed over (one per degree).
 pub const HEADINGS: usize = 360;
+/// A compass cannot be further off than this: larger linearised figures are capped (they mean "no heading").
+pub const MAX_ERROR_DEG: f64 = 180.0;
 
 /// The local field as the compass sees it, in the calibrated units of the model.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -31,8 +31,10 @@ use crate::verdict::Assessment;
 
 /// Time bins of the residual-against-time plot.
 const TIME_BINS: usize = 400;
-/// Most points drawn in a scatter plot.
-const SCATTER_POINTS: usize = 2000;
+/// Most points drawn in a scatter plot (each is an SVG element: this keeps a file well under a megabyte).
+const SCATTER_POINTS: usize = 1000;
+/// Most points drawn in one projection of the readings.
+const PROJECTION_POINTS: usize = 700;
 /// Bins of the binned means drawn over a scatter plot.
 const CHANNEL_BINS: usize = 24;
 /// Fewest samples for a cell of the orientation map to be drawn.
@@ -302,7 +304,7 @@ fn readings(path: &Path, rec: &Recording, cal: Option<&Calibration>) -> PlotResu
     let panel_h = PANEL_PX + 36 + 16 + 24;
     let rows = if cal.is_some() { 2 } else { 1 };
     let root = SVGBackend::new(path, (3 * panel_w, LEGEND_PX + rows * panel_h)).into_drawing_area();
-    let raw = thin(&rec.mag_ut, SCATTER_POINTS);
+    let raw = thin(&rec.mag_ut, PROJECTION_POINTS);
     let field_ut = cal.map(|c| match &c.fit {
         Fit::Scalar(s) => s.field_ut,
         Fit::Vector(_) => c.field.magnitude().unwrap_or(f64::NAN),
@@ -341,7 +343,7 @@ fn readings(path: &Path, rec: &Recording, cal: Option<&Calibration>) -> PlotResu
         )?;
     }
     if let (Some(c), Some(f)) = (cal, field_ut) {
-        let calibrated = thin(&calibrate_rows(&c.model(), rec), SCATTER_POINTS);
+        let calibrated = thin(&calibrate_rows(&c.model(), rec), PROJECTION_POINTS);
         for (k, &(i, j, xi, xj)) in PLANES.iter().enumerate() {
             let points: Vec<(f64, f64)> = calibrated
                 .iter()
@@ -502,7 +504,7 @@ where
         }
         Face::ZUp => {
             chart.draw_series(std::iter::once(DashedPathElement::new(
-                pts.into_iter(),
+                pts,
                 6,
                 4,
                 color.stroke_width(2),
@@ -708,7 +710,7 @@ fn residual_time(path: &Path, s: &Series) -> PlotResult<()> {
     for e in &s.events {
         for t in std::iter::once(e.t0_s).chain(e.t1_s) {
             chart.draw_series(std::iter::once(DashedPathElement::new(
-                vec![(t, 0.0), (t, top)].into_iter(),
+                vec![(t, 0.0), (t, top)],
                 6,
                 4,
                 EVENT.stroke_width(2),

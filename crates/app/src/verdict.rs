@@ -79,6 +79,8 @@ pub struct Hints {
     pub spans_s: Vec<(f64, f64)>,
     /// Fraction of the sphere of directions covered.
     pub coverage: f64,
+    /// The diagnosis was skipped (`--no-diagnose`): running it would say what the model leaves out.
+    pub diagnosis_skipped: bool,
 }
 
 /// Degrees in two significant figures below 10, whole degrees above.
@@ -128,6 +130,9 @@ pub fn judge(h: &HeadingErrors, hints: &Hints) -> Verdict {
             h.unexplained_ut
         );
         let todo = match hints.spans_s.first() {
+            _ if hints.diagnosis_skipped => {
+                "run the fit without --no-diagnose: the diagnosis finds what the model leaves out".to_owned()
+            }
             Some(&(t0, t1)) => format!(
                 "record again with magnets, metal and cables away from the sensor (the misfit is worst at {t0:.0}–{t1:.0} s{})",
                 if hints.spans_s.len() > 1 {
@@ -258,6 +263,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
             Vec::new()
         },
         coverage: cal.sphere_coverage,
+        diagnosis_skipped: cal.diagnosis.is_none(),
     };
     let magnitude_ut = model_field_ut(cal, rec).unwrap_or(f64::NAN);
     let direction = cal.field.vector().map(|f| frames::field_angles(f).1);
