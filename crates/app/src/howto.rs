@@ -104,9 +104,9 @@ pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, corrections: usiz
                     new recording through it can be checked\n";
         }
         Target::Device(_) => {
-            out += "the chip now subtracts the hard-iron offset itself, until it is reset or powered off: firmware \
-                    must write the offset registers at start-up and apply A itself; record the check after a power \
-                    cycle, or the offset is removed twice\n";
+            out += "the chip now subtracts the hard-iron offset itself until it is reset or powered off: firmware \
+                    must write the offset registers at start-up and apply A itself (magcal-record resets the chip, so \
+                    a recording to check with is raw again)\n";
         }
     }
     if corrections > 0 && !matches!(target, Target::None) {
