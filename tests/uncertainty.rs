@@ -40,7 +40,7 @@ fn standard_errors_and_the_least_squares_bound_hold_over_200_simulations() {
             .iter()
             .map(|q| frames::expected_sensor_field(*q, s.field_ned_ut))
             .collect();
-        let floor = noise::estimate(&rec.mag_ut);
+        let floor = noise::estimate(&rec.mag_ut, Some(&expected));
         let fit = vector::fit(
             &rec.mag_ut,
             &expected,

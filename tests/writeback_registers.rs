@@ -43,19 +43,17 @@ fn the_lis2mdl_offset_registers_get_the_fitted_offset_and_read_it_back() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
             .unwrap();
-    // The device holds A and b only: the final model's when it has no body-fixed corrections, the base fit's
-    // (fitted without them) when it has.
-    let offset: Vec<f64> = if report["calibration"]["corrections"]
+    // The device holds A and b only: the final model's when it has no body-fixed corrections, the fit without them
+    // (what `--no-diagnose` gives) when it has.
+    let offset = if report["calibration"]["corrections"]
         .as_array()
         .unwrap()
         .is_empty()
     {
         common::floats(&report["calibration"]["offset_ut"])
     } else {
-        let a = nalgebra::Matrix3::from(common::matrix(&report["base"]["A"])).transpose();
-        let b = common::floats(&report["base"]["b_ut"]);
-        let c = -(a.try_inverse().unwrap() * nalgebra::Vector3::new(b[0], b[1], b[2]));
-        vec![c.x, c.y, c.z]
+        let base = common::fit_report(&dir.path().join("rec.csv"), &["--no-diagnose"]);
+        common::floats(&base["calibration"]["offset_ut"])
     };
     let line = stdout
         .lines()

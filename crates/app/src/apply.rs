@@ -211,7 +211,8 @@ pub fn check(
         raw_residual_rms_ut,
         samples_used,
     } = misfit(&calibrated_ut, rec, expected.as_deref(), field.magnitude());
-    let noise_floor_ut = noise::estimate(&rec.mag_ut).calibrated_rms_ut(&model.a);
+    let noise_floor_ut =
+        noise::estimate(&rec.mag_ut, expected.as_deref()).calibrated_rms_ut(&model.a);
     let measured = match (&rec.quat, field.vector()) {
         (Some(q), Some(f)) => measured_heading(q, f, &rec.mag_ut, &calibrated_ut),
         _ => None,

@@ -3,12 +3,13 @@
 use magcal_calib::coverage::sphere_fraction;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::frames;
-use magcal_calib::noise::{self, NoiseFloor, rms3};
+use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
 use magcal_calib::scalar::{self, ScalarFit, ScalarOptions};
 use magcal_calib::vector::{self, VectorFit, VectorOptions};
 use magcal_calib::{FitError, Inputs, Model};
 use magcal_recording::Recording;
 
+use crate::checks;
 use crate::field::ReferenceField;
 
 /// Which calibration method to use.
@@ -77,6 +78,8 @@ pub struct Calibration {
     pub samples: SampleCounts,
     /// Things the user should know (coverage warnings, what the method cannot see).
     pub notes: Vec<String>,
+    /// Things the user must not miss: the calibration may be wrong or unusable as it stands, and what to do.
+    pub warnings: Vec<String>,
     /// What the base model leaves out, when diagnosed.
     pub diagnosis: Option<Diagnosis>,
 }
@@ -111,6 +114,40 @@ impl Calibration {
         self.diagnosis
             .as_ref()
             .map_or(self.residual_rms_ut, |d| d.extended.rms_ut)
+    }
+
+    /// Standard errors of the offset `−A⁻¹·b` of the final model, µT: from the scalar fit's centre covariance, or
+    /// propagated through `dc = −A⁻¹·(dA·c + db)` from the vector fit's covariance (rows independent); for a model
+    /// extended by the diagnosis, from its standard errors with the entries' covariances neglected.
+    pub fn offset_se_ut(&self) -> [f64; 3] {
+        let model = self.model();
+        let c = scalar::centre(&model.a, model.b_ut);
+        let row_var: [f64; 3] = match (
+            &self.fit,
+            self.diagnosis.as_ref().and_then(|d| d.extended.se),
+        ) {
+            (Fit::Scalar(s), None) => {
+                return std::array::from_fn(|k| s.centre_cov_ut2[k][k].sqrt());
+            }
+            (_, Some((a_se, b_se))) => std::array::from_fn(|j| {
+                (0..3).map(|k| (c[k] * a_se[j][k]).powi(2)).sum::<f64>() + b_se[j].powi(2)
+            }),
+            (Fit::Vector(v), None) => std::array::from_fn(|j| {
+                let g = [c[0], c[1], c[2], 1.0];
+                (0..4)
+                    .flat_map(|r| (0..4).map(move |s| (r, s)))
+                    .map(|(r, s)| g[r] * v.covariance[j][r][s] * g[s])
+                    .sum::<f64>()
+            }),
+        };
+        let a = nalgebra::Matrix3::from_fn(|j, k| model.a[j][k]);
+        let inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix3::zeros);
+        std::array::from_fn(|k| {
+            (0..3)
+                .map(|j| (inv[(k, j)].powi(2)) * row_var[j])
+                .sum::<f64>()
+                .sqrt()
+        })
     }
 
     /// Standard errors of the final model's `A` and `b`.
@@ -169,34 +206,46 @@ pub fn calibrate(
     diagnose: bool,
 ) -> Result<Calibration, CalibrateError> {
     let has_reference = rec.ref_ut.is_some() || (rec.quat.is_some() && field.vector().is_some());
+    let mut warnings = Vec::new();
     let method = match method {
         Method::Auto if has_reference => Method::Vector,
-        Method::Auto => Method::Scalar,
+        Method::Auto => {
+            if rec.quat.is_some() {
+                warnings.push(
+                    "the recording has attitude quaternions but no world field vector, so only the magnitude was \
+                     fitted (scalar method: misalignment unobserved). Give the field with --field-ned N,E,D (µT), or \
+                     --location LAT,LON,ALT --date YYYY-MM-DD, or a field_ned_ut line in the recording's metadata, \
+                     to fit every component (vector method)"
+                        .to_owned(),
+                );
+            }
+            Method::Scalar
+        }
         m => m,
     };
-    let noise = noise::estimate(&rec.mag_ut);
-    let raw_noise_var_ut2 = noise.floor_ut.map(|f| f * f);
     let mut notes = Vec::new();
-    let (fit, residual_rms_ut, used) = match method {
+    let (fit, mut noise, used) = match method {
         Method::Vector => {
             let expected = expected_field(rec, &field)?;
+            let noise = noise::estimate(&rec.mag_ut, Some(&expected));
             let v = vector::fit(
                 &rec.mag_ut,
                 &expected,
                 &VectorOptions {
-                    raw_noise_var_ut2,
+                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
                     ..Default::default()
                 },
             )?;
-            let rms = rms3(v.residual_rms_ut);
             let n = v.n;
-            (Fit::Vector(v), rms, n)
+            (Fit::Vector(v), noise, n)
         }
         _ => {
+            let noise = noise::estimate(&rec.mag_ut, None);
             let s = scalar::fit(
                 &rec.mag_ut,
                 &ScalarOptions {
                     field_ut: field.magnitude(),
+                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
                     ..Default::default()
                 },
             )?;
@@ -211,22 +260,50 @@ pub fn calibrate(
                     s.field_ut
                 ));
             }
-            let rms = s.residual_rms_ut;
+            warnings.extend(s.warning());
             let n = s.n;
-            (Fit::Scalar(s), rms, n)
+            (Fit::Scalar(s), noise, n)
         }
     };
-    let coverage = match &fit {
-        Fit::Vector(v) => v.coverage,
-        Fit::Scalar(s) => s.coverage,
+    let (coverage, residual_rms_ut) = match &fit {
+        Fit::Vector(v) => (v.coverage, rms3(v.residual_rms_ut)),
+        Fit::Scalar(s) => (s.coverage, s.residual_rms_ut),
     };
     notes.extend(coverage.warning());
+    let model = match &fit {
+        Fit::Vector(v) => v.model(),
+        Fit::Scalar(s) => s.model(),
+    };
+    // The sample-to-sample noise cannot exceed what the residual holds: rows that change pose every sample (or are
+    // shuffled) make the differences measure the rotation, not the noise.
+    let floor_now = match &fit {
+        Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
+        Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
+    };
+    if floor_now > 0.0 && residual_rms_ut < floor_now {
+        let bound = residual_rms_ut / floor_now;
+        if bound < 0.8 {
+            notes.push(format!(
+                "the sample-to-sample noise could not be measured ({:.3} µT from {}, more than the fit's residual \
+                 of {residual_rms_ut:.3} µT allows: the rows change orientation from one to the next); the residual \
+                 bounds it instead",
+                floor_now,
+                noise_source(&noise),
+            ));
+            noise = noise.scaled(bound);
+        }
+    }
+    warnings.extend(checks::check(&model, &fit, &field, &rec.mag_ut)?);
+    let noise_floor_ut = match &fit {
+        Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
+        Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
+    };
     let mut cal = Calibration {
         fit,
         field,
         noise,
         residual_rms_ut,
-        noise_floor_ut: 0.0,
+        noise_floor_ut,
         sphere_coverage: 0.0,
         samples: SampleCounts {
             total: rec.len(),
@@ -234,10 +311,9 @@ pub fn calibrate(
             missing_reference: rec.len() - used,
         },
         notes,
+        warnings,
         diagnosis: None,
     };
-    let model = cal.base_model();
-    cal.noise_floor_ut = cal.noise.calibrated_rms_ut(&model.a);
     // Sphere coverage from at most ~100 000 readings: the fraction of 100 cells needs no more.
     let stride = (rec.len() / 100_000).max(1);
     cal.sphere_coverage = sphere_fraction(
@@ -248,10 +324,48 @@ pub fn calibrate(
         100,
     );
     if diagnose {
-        let input = diagnosis_input(rec, &cal)?;
-        cal.diagnosis = Some(diagnosis::diagnose(&input, &model)?);
+        if used < diagnosis::MIN_SAMPLES {
+            cal.notes.push(format!(
+                "not diagnosed: the diagnosis needs at least {} samples and this recording has {used}; the \
+                 calibration above stands on its own",
+                diagnosis::MIN_SAMPLES
+            ));
+        } else {
+            let input = diagnosis_input(rec, &cal)?;
+            cal.diagnosis = Some(diagnosis::diagnose(&input, &model)?);
+        }
     }
     Ok(cal)
+}
+
+/// The noise of |B| in calibrated units: the calibrated noise along the field direction, averaged over the
+/// recording (at most ~10 000 readings looked at).
+pub fn radial_floor_ut(noise: &NoiseFloor, model: &Model, raw_ut: &[[f64; 3]]) -> f64 {
+    let f = noise.floor_ut;
+    let stride = (raw_ut.len() / 10_000).max(1);
+    let (sum, count) = raw_ut
+        .iter()
+        .step_by(stride)
+        .map(|m| model.apply(*m, &Inputs::NONE))
+        .filter(|b| b.iter().all(|v| v.is_finite()) && frames::norm(*b) > 0.0)
+        .map(|b| {
+            let u = frames::scale(b, 1.0 / frames::norm(b));
+            let au = frames::mat_t_vec(&model.a, u);
+            (0..3).map(|k| (au[k] * f[k]).powi(2)).sum::<f64>()
+        })
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    (sum / count.max(1) as f64).sqrt()
+}
+
+/// Where a noise figure came from, in words.
+pub fn noise_source(noise: &NoiseFloor) -> String {
+    match noise.source {
+        NoiseSource::Poses { runs, dof } => {
+            format!("the spread within {runs} poses ({dof} degrees of freedom)")
+        }
+        NoiseSource::Still { start, end } => format!("still segment, samples {start}–{end}"),
+        NoiseSource::Differences { order } => format!("differences of order {order}"),
+    }
 }
 
 /// What the diagnosis needs from a recording and its base calibration.

@@ -6,6 +6,7 @@
 
 pub mod apply;
 pub mod calibrate;
+pub mod checks;
 pub mod cli;
 pub mod device;
 pub mod effect_spec;

@@ -4,7 +4,6 @@
 //! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
 use magcal_calib::diagnosis::{Diagnosis, ParamValue, Verdict};
-use magcal_calib::noise::NoiseSource;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
@@ -33,8 +32,11 @@ pub struct Report {
     pub coverage: CoverageReport,
     /// The world field used.
     pub field: FieldReport,
-    /// Warnings and what the method cannot see.
+    /// What the method cannot see, and other things worth knowing.
     pub notes: Vec<String>,
+    /// What may make the calibration wrong or unusable as it stands, and what to do (empty when all is well).
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// What the base model leaves out (absent with `--no-diagnose`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnosis: Option<DiagnosisReport>,
@@ -285,6 +287,9 @@ pub struct CalibrationReport {
     pub b_se_ut: [f64; 3],
     /// The hard-iron offset in raw units, `−A⁻¹·b`, µT.
     pub offset_ut: [f64; 3],
+    /// Standard errors of the offset, µT.
+    #[serde(default)]
+    pub offset_se_ut: [f64; 3],
     /// Body-fixed corrections.
     pub corrections: Vec<Correction>,
     /// Scalar method: the raw ellipsoid's semi-axes, largest first, µT.
@@ -408,6 +413,7 @@ impl Report {
                 a_se,
                 b_se_ut,
                 offset_ut: magcal_calib::scalar::centre(&model.a, model.b_ut),
+                offset_se_ut: cal.offset_se_ut(),
                 corrections: model
                     .corrections()
                     .filter_map(|e| Correction::from_effect(e, channels))
@@ -449,12 +455,7 @@ impl Report {
                 sigma_ut: cal.noise.sigma_ut,
                 lsb_ut: cal.noise.lsb_ut,
                 floor_ut: cal.noise.floor_ut,
-                source: match cal.noise.source {
-                    NoiseSource::Still { start, end } => {
-                        format!("still segment, samples {start}–{end}")
-                    }
-                    NoiseSource::Differences { order } => format!("differences of order {order}"),
-                },
+                source: crate::calibrate::noise_source(&cal.noise),
             },
             samples: SamplesReport {
                 total: cal.samples.total,
@@ -473,6 +474,7 @@ impl Report {
                 source: cal.field.source().to_owned(),
             },
             notes: cal.notes.clone(),
+            warnings: cal.warnings.clone(),
             diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
             heading: None,
             verdict: None,

@@ -110,7 +110,7 @@ pub fn run(exp: &SeedExperiment) -> Result<SeedComparison, FitError> {
         .iter()
         .map(|q| frames::expected_sensor_field(*q, s.field_ned_ut))
         .collect();
-    let floor = noise::estimate(&rec.mag_ut);
+    let floor = noise::estimate(&rec.mag_ut, Some(&expected));
     let vector = vector::fit(
         &rec.mag_ut,
         &expected,

@@ -191,6 +191,9 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         _ => {}
     }
     out += &verdict_line(&assessment.verdict);
+    for w in &cal.warnings {
+        let _ = writeln!(out, "  WARNING: {w}");
+    }
     match (cal.field.vector(), cal.field.magnitude()) {
         (Some(f), Some(m)) => {
             let _ = writeln!(

@@ -4,35 +4,36 @@
 //! - Vector fit: each calibrated axis is its own least-squares problem; [`VectorFit::field_se_ut`] propagates its
 //!   4×4 covariance of `(a_j, b_j)` to the calibrated field. The rows are independent, so the 3×3 covariance is
 //!   diagonal.
-//! - Scalar fit: the fit's covariance of its nine parameters (the symmetric `A`'s six entries and `b`, on readings
-//!   centred on their mean) is `σ²·(JᵀJ)⁻¹` of the magnitude residual `|A·m + b| − F`. The solver does not return it,
-//!   so it is rebuilt here from the readings and the fitted `A`, `b` in one pass; its diagonal reproduces the solver's
-//!   standard errors of `A` (tested).
+//! - Scalar fit: `B = A·(B̂ − c)`. The solver publishes the centre's covariance and the standard errors of the
+//!   symmetric `A`'s six entries, not their correlations; they are propagated as independent:
+//!   `Σ_B = A·Σ_c·Aᵀ + Σ_rs se_rs²·g_rs·g_rsᵀ`, with `g_rs = ∂B/∂A_rs` at `d = B̂ − c`. Fitting on the centre
+//!   decouples `c` from `A` on a well-covered sphere; whether the whole is honest is checked against the spread of
+//!   fits over simulated recordings (tests).
 
 use magcal_calib::frames::{self, Mat3};
-use magcal_calib::scalar::ScalarFit;
+use magcal_calib::scalar::{SYM, ScalarFit};
 use magcal_calib::vector::VectorFit;
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
-
-/// The scalar fit's parameters: `A`'s entries xx, yy, zz, xy, xz, yz, then `b` on centred readings.
-const P: usize = 9;
-/// Index pairs of the symmetric matrix's parameters, in the solver's order.
-const SYM: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
-/// Readings used to rebuild the scalar covariance (a stride over longer recordings; `JᵀJ` is scaled back up).
-const MAX_READINGS: usize = 100_000;
 
 /// The covariance of the calibrated field as a function of the raw reading.
 #[derive(Clone, Debug)]
 pub enum FieldUncertainty {
     /// A vector fit's per-axis covariances.
     Vector(Box<VectorFit>),
-    /// A scalar fit's parameter covariance, on readings centred on `mean_ut`.
-    Scalar {
-        /// The mean raw reading the parameters are centred on, µT.
-        mean_ut: [f64; 3],
-        /// Covariance of the nine parameters.
-        covariance: Box<SMatrix<f64, P, P>>,
-    },
+    /// A scalar fit's `A`, centre and their uncertainties.
+    Scalar(Box<ScalarParts>),
+}
+
+/// What the scalar fit says of its `A` and centre.
+#[derive(Clone, Debug)]
+pub struct ScalarParts {
+    /// `A`.
+    pub a: Mat3,
+    /// The centre `c`, µT.
+    pub centre_ut: [f64; 3],
+    /// The centre's covariance, µT².
+    pub centre_cov_ut2: Mat3,
+    /// Standard errors of `A`'s entries.
+    pub a_se: Mat3,
 }
 
 impl FieldUncertainty {
@@ -41,37 +42,14 @@ impl FieldUncertainty {
         FieldUncertainty::Vector(Box::new(fit.clone()))
     }
 
-    /// From a scalar fit and the readings it was fitted on; `None` if its normal matrix has no inverse.
-    pub fn scalar(fit: &ScalarFit, raw_ut: &[[f64; 3]]) -> Option<FieldUncertainty> {
-        let n = raw_ut.len();
-        if n <= P {
-            return None;
-        }
-        let mean = raw_ut
-            .iter()
-            .fold(Vector3::zeros(), |s, m| s + Vector3::from(*m))
-            / n as f64;
-        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
-        let b_centred = Vector3::from(fit.b_ut) + a * mean;
-        let stride = n.div_ceil(MAX_READINGS);
-        let mut jtj = SMatrix::<f64, P, P>::zeros();
-        let mut used = 0usize;
-        for m in raw_ut.iter().step_by(stride) {
-            let d = Vector3::from(*m) - mean;
-            let v = a * d + b_centred;
-            let u = v / v.norm();
-            let g = gradient(&d);
-            let j: SVector<f64, P> = g.transpose() * u;
-            jtj += j * j.transpose();
-            used += 1;
-        }
-        jtj *= n as f64 / used as f64;
-        let var = fit.residual_rms_ut.powi(2) * n as f64 / (n - P) as f64;
-        let covariance = jtj.try_inverse()? * var;
-        Some(FieldUncertainty::Scalar {
-            mean_ut: [mean.x, mean.y, mean.z],
-            covariance: Box::new(covariance),
-        })
+    /// From a scalar fit.
+    pub fn scalar(fit: &ScalarFit) -> FieldUncertainty {
+        FieldUncertainty::Scalar(Box::new(ScalarParts {
+            a: fit.a,
+            centre_ut: fit.centre_ut,
+            centre_cov_ut2: fit.centre_cov_ut2,
+            a_se: fit.a_se,
+        }))
     }
 
     /// The covariance of the calibrated field (µT², calibrated axes) at the raw reading `raw_ut`.
@@ -83,13 +61,37 @@ impl FieldUncertainty {
                     std::array::from_fn(|k| if j == k { se[j] * se[j] } else { 0.0 })
                 })
             }
-            FieldUncertainty::Scalar {
-                mean_ut,
-                covariance,
-            } => {
-                let g = gradient(&Vector3::from(frames::sub(raw_ut, *mean_ut)));
-                let c = g * **covariance * g.transpose();
-                std::array::from_fn(|j| std::array::from_fn(|k| c[(j, k)]))
+            FieldUncertainty::Scalar(parts) => {
+                let ScalarParts {
+                    a,
+                    centre_ut,
+                    centre_cov_ut2,
+                    a_se,
+                } = &**parts;
+                let d = frames::sub(raw_ut, *centre_ut);
+                // A·Σ_c·Aᵀ
+                let mut c: Mat3 = std::array::from_fn(|j| {
+                    std::array::from_fn(|k| {
+                        (0..3)
+                            .flat_map(|r| (0..3).map(move |s| (r, s)))
+                            .map(|(r, s)| a[j][r] * centre_cov_ut2[r][s] * a[k][s])
+                            .sum()
+                    })
+                });
+                for &(r, s) in &SYM {
+                    let mut g = [0.0; 3];
+                    g[r] += d[s];
+                    if r != s {
+                        g[s] += d[r];
+                    }
+                    let var = a_se[r][s] * a_se[r][s];
+                    for j in 0..3 {
+                        for k in 0..3 {
+                            c[j][k] += var * g[j] * g[k];
+                        }
+                    }
+                }
+                c
             }
         }
     }
@@ -101,30 +103,21 @@ impl FieldUncertainty {
     }
 }
 
-/// `∂(A·d + b)/∂θ` for the scalar fit's parameters θ at the centred reading `d`: a 3×9 matrix.
-fn gradient(d: &Vector3<f64>) -> SMatrix<f64, 3, P> {
-    let mut g = SMatrix::<f64, 3, P>::zeros();
-    for (idx, &(r, s)) in SYM.iter().enumerate() {
-        g[(r, idx)] += d[s];
-        if r != s {
-            g[(s, idx)] += d[r];
-        }
-    }
-    for j in 0..3 {
-        g[(j, 6 + j)] = 1.0;
-    }
-    g
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use magcal_calib::scalar::{self, ScalarOptions};
-    use magcal_sim::{AttitudeOutput, ChipModel, Scenario, SensorTruth, Trajectory, simulate};
+    use magcal_sim::{ChipModel, Scenario, SensorTruth, Trajectory, simulate};
 
+    /// At the raw reading zero the calibrated field is `b`: the propagated covariance there gives the solver's own
+    /// standard errors of `b` (which it propagates with the correlations), within what leaving out the correlations
+    /// between `A`'s entries and the centre costs on a well-covered sphere.
     #[test]
-    fn the_rebuilt_scalar_covariance_gives_the_solvers_standard_errors() {
-        let chip = ChipModel::by_name("qmc5883l").unwrap();
+    fn at_zero_the_scalar_propagation_gives_the_standard_errors_of_b() {
+        use crate::calibrate::{Fit, Method, calibrate};
+        use crate::field::ReferenceField;
+        use magcal_sim::AttitudeOutput;
+
+        let chip = ChipModel::by_name("lis3mdl").unwrap();
         let mut s = Scenario::new(
             &chip,
             Trajectory::Tumble {
@@ -134,32 +127,34 @@ mod tests {
             3,
         );
         s.sensor = SensorTruth::mounted(
-            [[1.08, 0.03, -0.02], [0.03, 0.93, 0.04], [-0.02, 0.04, 1.12]],
-            [20.0, -35.0, 12.0],
+            [[1.08, 0.03, -0.01], [0.03, 0.95, 0.04], [-0.01, 0.04, 1.12]],
+            [12.0, -30.0, 8.0],
             [0.0; 3],
         );
         s.attitude = AttitudeOutput::None;
-        let raw = simulate(&s).unwrap().recording.mag_ut;
-        let fit = scalar::fit(&raw, &ScalarOptions::default()).unwrap();
-        let Some(FieldUncertainty::Scalar { covariance, .. }) =
-            FieldUncertainty::scalar(&fit, &raw)
-        else {
-            panic!("no covariance")
+        let run = simulate(&s).unwrap();
+        let cal = calibrate(
+            &run.recording,
+            Method::Scalar,
+            ReferenceField::Unknown,
+            false,
+        )
+        .unwrap();
+        let Fit::Scalar(fit) = &cal.fit else {
+            panic!("not scalar")
         };
-        for (idx, &(r, s)) in SYM.iter().enumerate() {
-            let se = covariance[(idx, idx)].sqrt();
-            assert!(
-                (se / fit.a_se[r][s] - 1.0).abs() < 1e-3,
-                "A[{r}][{s}]: {se} vs the solver's {}",
-                fit.a_se[r][s]
-            );
+        let c = FieldUncertainty::scalar(fit).covariance_at([0.0; 3]);
+        for j in 0..3 {
+            let ratio = c[j][j].sqrt() / fit.b_se_ut[j];
+            println!("axis {j}: propagated over the solver's SE of b: {ratio:.3}");
+            assert!((0.75..1.33).contains(&ratio), "axis {j}: {ratio}");
         }
     }
 
     /// The propagated uncertainty is honest: over many simulated recordings of one sensor, the error of the fitted
     /// calibration across the horizontal field direction, at each level heading, divided by the predicted standard
-    /// error, has an RMS near 1 — for the vector fit (with its misalignment) and the scalar fit (a symmetric sensor,
-    /// the magnitude given). Heavy: run in release with `--ignored`.
+    /// error, has an RMS near 1 for the vector fit (with its misalignment; measured 1.00) and at most 1 for the
+    /// scalar fit (a symmetric sensor, the magnitude given; measured 0.81). Heavy: run in release with `--ignored`.
     #[test]
     #[ignore = "statistics over 120 simulated recordings: run in release"]
     fn predicted_errors_match_the_spread_of_fits_over_seeds() {
@@ -212,7 +207,7 @@ mod tests {
                 let cal = calibrate(&run.recording, method, field, false).unwrap();
                 let u = match &cal.fit {
                     Fit::Vector(v) => FieldUncertainty::vector(v),
-                    Fit::Scalar(sf) => FieldUncertainty::scalar(sf, &run.recording.mag_ut).unwrap(),
+                    Fit::Scalar(sf) => FieldUncertainty::scalar(sf),
                 };
                 let m = cal.model();
                 let forward = run.truth.sensor.forward();
@@ -236,8 +231,14 @@ mod tests {
             println!(
                 "{method:?}: error over predicted standard error, RMS {rms_z:.3} over {count}"
             );
+            // The scalar solver's standard errors are the larger of the model-based and the cluster-robust ones,
+            // with a shape prior, and their correlations are left out here: conservative, not optimistic.
+            let honest = match method {
+                Method::Vector => 0.8..1.25,
+                _ => 0.6..1.25,
+            };
             assert!(
-                (0.8..1.25).contains(&rms_z),
+                honest.contains(&rms_z),
                 "{method:?}: errors over predicted standard errors have RMS {rms_z}"
             );
         }

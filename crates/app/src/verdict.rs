@@ -6,7 +6,8 @@
 //! the noise measured in the recording does not account for, at the recording's own field, so the gate follows the
 //! sensor's noise and the local field; no field range or offset limit is assumed. Without the direction of the local
 //! field the heading error cannot be stated: the verdict is then at best usable, and redo when even the most
-//! favourable direction (a horizontal field) leaves more than [`USABLE_DEG`].
+//! favourable direction (a horizontal field) leaves more than [`USABLE_DEG`]. A fit the last checks warn about
+//! (units, gains, field range, a huge hard iron: [`crate::checks`]) is at best usable.
 
 use magcal_calib::frames;
 use magcal_recording::Recording;
@@ -238,7 +239,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
     let model = cal.model();
     let uncertainty = match &cal.fit {
         Fit::Vector(v) => Some(FieldUncertainty::vector(v)),
-        Fit::Scalar(s) => FieldUncertainty::scalar(s, &rec.mag_ut),
+        Fit::Scalar(s) => Some(FieldUncertainty::scalar(s)),
     };
     let (residual_rms_ut, noise_floor_ut) = match &cal.diagnosis {
         Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
@@ -300,10 +301,24 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         (Some((_, f)), true) => f.clone(),
         _ => figures(model.a, model.b_ut, residual_rms_ut, noise_floor_ut),
     };
-    let verdict = match &chosen {
+    let mut verdict = match &chosen {
         Ok(h) => judge(h, &hints),
         Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
     };
+    // A fit the last checks warn about (units, gains, field range, a huge hard iron) is not good, whatever its
+    // heading figures: the warning says what is wrong and what would fix it.
+    if verdict.grade == Grade::Good && !cal.warnings.is_empty() {
+        verdict = Verdict {
+            grade: Grade::Usable,
+            reason: format!(
+                "{}, but the fit carries {} warning(s)",
+                verdict.reason,
+                cal.warnings.len()
+            ),
+            todo: "read the WARNING below: it says what looks wrong and what would fix it"
+                .to_owned(),
+        };
+    }
     Assessment {
         heading: chosen.ok(),
         without_corrections: without_corrections.map(|(n, f)| (n, f.ok())),

@@ -22,6 +22,22 @@ pub enum FitError {
          is the sensor saturated, or the field disturbed during the recording?"
     )]
     NotAnEllipsoid(&'static str),
+    /// The recording does not determine the calibration along some direction (partial coverage).
+    #[error(
+        "the recording does not determine the offset along {}: its uncertainty there is ±{se_ut:.1} µT, {:.0} % of \
+         the field ({field_ut:.1} µT). The sensor did not turn through enough directions: {advice}",
+        crate::coverage::describe(*direction), 100.0 * se_ut / field_ut
+    )]
+    Undetermined {
+        /// The least determined direction, sensor axes.
+        direction: [f64; 3],
+        /// The offset's standard error along it, µT.
+        se_ut: f64,
+        /// The field magnitude, µT.
+        field_ut: f64,
+        /// What to do.
+        advice: String,
+    },
     /// The normal equations were singular.
     #[error("the least-squares problem is singular: {0}")]
     Singular(&'static str),

@@ -1,13 +1,30 @@
 //! The sensor's noise floor, measured from the recording itself.
 //!
-//! White noise of standard deviation σ gives k-th order differences of variance `C(2k, k)·σ²`, while a smooth signal
-//! contributes less the higher the order; the estimate is the smallest normalised RMS over orders 1–4 (outliers
-//! trimmed). When the recording holds a still segment, its spread is used instead. Readings on a grid (the chip's LSB)
-//! are detected, and when the noise is below the LSB the quantisation floor `LSB/√12` is added.
+//! Three sources, best first:
+//! - **poses**: when the reference stays exactly the same over runs of samples (a jig's poses, one attitude per
+//!   pose), the readings' spread inside each run is the noise, pooled over the runs;
+//! - **a still segment** of the readings (windows whose spread is no more than the differences allow);
+//! - **k-th differences**: white noise of standard deviation σ gives k-th order differences of variance
+//!   `C(2k, k)·σ²`, while a smooth signal contributes less the higher the order. The scale is taken robustly (the
+//!   median absolute difference, then the RMS of the differences within four of it), so the jumps between poses or a
+//!   shuffled file cannot pass for noise as long as fewer than half the differences are jumps; the smallest figure
+//!   over orders 1–4 is kept.
+//!
+//! A recording whose every row changes pose (one row per orientation, or rows in random order) has no measurable
+//! sample-to-sample noise: the difference figure is then an upper bound at best, and the fits bound it by what their
+//! residual allows (see [`crate::vector`]). Readings on a grid (the chip's LSB) are detected, and when the noise is
+//! below the LSB the quantisation floor `LSB/√12` is added.
 
 /// How the noise floor was obtained.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum NoiseSource {
+    /// From the spread inside runs of samples that share one reference (a jig's poses).
+    Poses {
+        /// Runs of at least two samples.
+        runs: usize,
+        /// Degrees of freedom pooled over them (samples less one per run).
+        dof: usize,
+    },
     /// From a still segment of the recording (sample indices `[start, end)`).
     Still {
         /// First sample of the segment.
@@ -48,6 +65,15 @@ impl NoiseFloor {
     pub fn calibrated_rms_ut(&self, a: &crate::frames::Mat3) -> f64 {
         rms3(self.calibrated_ut(a))
     }
+
+    /// The floor scaled by `factor` (a bound the fit's residual sets on it).
+    pub fn scaled(&self, factor: f64) -> NoiseFloor {
+        NoiseFloor {
+            sigma_ut: self.sigma_ut.map(|s| s * factor),
+            floor_ut: self.floor_ut.map(|s| s * factor),
+            ..*self
+        }
+    }
 }
 
 /// The per-axis RMS of three per-axis figures.
@@ -57,16 +83,23 @@ pub fn rms3(v: [f64; 3]) -> f64 {
 
 /// Samples used to find the LSB grid (the start of the recording is enough and keeps this O(1)).
 const LSB_PROBE: usize = 20_000;
+/// Differences used for the median that sets the robust scale (evenly strided over the recording).
+const MEDIAN_PROBE: usize = 65_536;
 /// Length of the windows searched for a still segment, samples.
 const STILL_WINDOW: usize = 50;
 /// A still segment must be at least this many windows long.
 const STILL_MIN_WINDOWS: usize = 4;
+/// A still window's spread is at most this fraction of the recording's largest spread.
+const STILL_OF_ROTATION: f64 = 0.1;
+/// Poses give the noise when their pooled degrees of freedom reach this.
+const POSES_MIN_DOF: usize = 20;
 
-/// Estimates the noise floor of raw readings (µT).
-pub fn estimate(raw_ut: &[[f64; 3]]) -> NoiseFloor {
-    let axis = |k: usize| raw_ut.iter().map(|m| m[k]).collect::<Vec<f64>>();
-    let columns = [axis(0), axis(1), axis(2)];
-    let mut best = (f64::INFINITY, 1, [0.0; 3]);
+/// Estimates the noise floor of raw readings (µT). `reference`, when given, is the expected field (or any
+/// per-sample reference) in sample order: runs of identical references are poses, and their spread is the noise.
+pub fn estimate(raw_ut: &[[f64; 3]], reference: Option<&[[f64; 3]]>) -> NoiseFloor {
+    let column = |k: usize| raw_ut.iter().map(|m| m[k]).collect::<Vec<f64>>();
+    let columns = [column(0), column(1), column(2)];
+    let mut best = (f64::INFINITY, 1, [f64::NAN; 3]);
     for order in 1..=4 {
         let s: [f64; 3] = std::array::from_fn(|k| difference_sigma(&columns[k], order));
         let total = s.iter().map(|x| x * x).sum::<f64>();
@@ -75,9 +108,13 @@ pub fn estimate(raw_ut: &[[f64; 3]]) -> NoiseFloor {
         }
     }
     let (_, order, diff_sigma) = best;
-    let (sigma_ut, source) = match still_segment(&columns, diff_sigma) {
-        Some((start, end, s)) => (s, NoiseSource::Still { start, end }),
-        None => (diff_sigma, NoiseSource::Differences { order }),
+    let poses = reference.and_then(|r| pose_sigma(raw_ut, r));
+    let (sigma_ut, source) = match poses {
+        Some((sigma, runs, dof)) => (sigma, NoiseSource::Poses { runs, dof }),
+        None => match still_segment(&columns, diff_sigma) {
+            Some((start, end, s)) => (s, NoiseSource::Still { start, end }),
+            None => (diff_sigma, NoiseSource::Differences { order }),
+        },
     };
     let lsb: [Option<f64>; 3] =
         std::array::from_fn(|k| grid_step(&columns[k][..columns[k].len().min(LSB_PROBE)]));
@@ -102,29 +139,79 @@ fn binomial(n: usize, k: usize) -> f64 {
     (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
 }
 
-/// Normalised RMS of the `order`-th differences, with gross outliers (gaps, spikes) trimmed.
+/// The median of some values (reordered in place); NaN when empty.
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// The noise σ from `order`-th differences, robust to jumps: the median absolute difference sets a scale, and the
+/// RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its variance there, corrected) is the
+/// estimate. Where most differences are exactly zero (readings on a coarse grid) the scale falls back to five times
+/// the plain RMS.
 fn difference_sigma(x: &[f64], order: usize) -> f64 {
-    let coef: Vec<f64> = (0..=order)
-        .map(|j| binomial(order, j) * if j % 2 == 0 { 1.0 } else { -1.0 })
-        .collect();
     if x.len() <= order + 2 {
         return f64::NAN;
     }
-    let diffs: Vec<f64> = x
-        .windows(order + 1)
-        .map(|w| w.iter().zip(&coef).map(|(v, c)| v * c).sum())
+    let coef: Vec<f64> = (0..=order)
+        .map(|j| binomial(order, j) * if j % 2 == 0 { 1.0 } else { -1.0 })
         .collect();
-    let norm = binomial(2 * order, order);
-    let rms = |limit: f64| {
-        let (sum, n) = diffs
-            .iter()
+    let count = x.len() - order;
+    let diff = |i: usize| -> f64 { coef.iter().zip(&x[i..]).map(|(c, v)| c * v).sum() };
+    let rms_within = |limit: f64| {
+        let (sum, n) = (0..count)
+            .map(diff)
             .filter(|d| d.abs() <= limit)
             .fold((0.0, 0usize), |(s, n), d| (s + d * d, n + 1));
         if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
     };
-    let first = rms(f64::INFINITY);
-    // Trimming at 5 RMS removes jumps without biasing a Gaussian estimate by more than 1e-5.
-    rms(5.0 * first) / norm.sqrt()
+    let stride = count.div_ceil(MEDIAN_PROBE).max(1);
+    let mut probe: Vec<f64> = (0..count)
+        .step_by(stride)
+        .map(|i| diff(i).abs())
+        .filter(|d| d.is_finite())
+        .collect();
+    let mad = median(&mut probe);
+    let norm = binomial(2 * order, order).sqrt();
+    if mad > 0.0 {
+        // Truncating a Gaussian at ±4σ keeps 99.893 % of its variance.
+        const KEPT_AT_4_SIGMA: f64 = 0.998_93;
+        let scale = mad / 0.674_489_75;
+        rms_within(4.0 * scale) / KEPT_AT_4_SIGMA.sqrt() / norm
+    } else {
+        rms_within(5.0 * rms_within(f64::INFINITY)) / norm
+    }
+}
+
+/// The pooled spread inside runs of consecutive samples whose reference is identical, if they give enough degrees of
+/// freedom: σ per axis, the runs of two or more, and the pooled degrees of freedom.
+fn pose_sigma(raw_ut: &[[f64; 3]], reference: &[[f64; 3]]) -> Option<([f64; 3], usize, usize)> {
+    let (mut ss, mut dof, mut runs) = ([0.0; 3], 0usize, 0usize);
+    let mut start = 0;
+    let known = |r: &[f64; 3]| r.iter().all(|v| v.is_finite());
+    for end in 1..=raw_ut.len() {
+        if end < raw_ut.len() && known(&reference[start]) && reference[end] == reference[start] {
+            continue;
+        }
+        let run = &raw_ut[start..end];
+        if run.len() >= 2 && known(&reference[start]) {
+            let mean: [f64; 3] =
+                std::array::from_fn(|k| run.iter().map(|m| m[k]).sum::<f64>() / run.len() as f64);
+            for m in run {
+                for k in 0..3 {
+                    ss[k] += (m[k] - mean[k]).powi(2);
+                }
+            }
+            dof += run.len() - 1;
+            runs += 1;
+        }
+        start = end;
+    }
+    let finite = ss.iter().all(|s| s.is_finite());
+    (dof >= POSES_MIN_DOF && finite).then(|| (ss.map(|s| (s / dof as f64).sqrt()), runs, dof))
 }
 
 /// The longest run of windows whose spread (no motion removed) is no more than the difference-based noise allows,
@@ -135,10 +222,14 @@ fn still_segment(
 ) -> Option<(usize, usize, [f64; 3])> {
     let n = columns[0].len();
     let windows = n / STILL_WINDOW;
+    // Still means small against the rotation too: rows in random order also have windows whose spread matches their
+    // differences, and they are not still.
+    let rotation = columns.iter().map(|c| plain_sigma(c)).fold(0.0, f64::max);
     let still = |w: usize| {
         (0..3).all(|k| {
             let seg = &columns[k][w * STILL_WINDOW..(w + 1) * STILL_WINDOW];
-            plain_sigma(seg) <= 1.3 * diff_sigma[k].max(1e-9)
+            let spread = plain_sigma(seg);
+            spread <= 1.3 * diff_sigma[k].max(1e-9) && spread <= STILL_OF_ROTATION * rotation
         })
     };
     let (mut best, mut run_start) = ((0, 0), None);
@@ -235,7 +326,7 @@ mod tests {
     #[test]
     fn measures_white_noise_under_a_moving_signal() {
         for (rate, sigma) in [(20.0, 0.05), (100.0, 0.3), (50.0, 0.1)] {
-            let f = estimate(&rotating(20_000, rate, sigma, None, 7));
+            let f = estimate(&rotating(20_000, rate, sigma, None, 7), None);
             for s in f.sigma_ut {
                 assert!(
                     (s / sigma - 1.0).abs() < 0.05,
@@ -249,7 +340,7 @@ mod tests {
     #[test]
     fn finds_the_lsb_and_adds_the_quantisation_floor() {
         let lsb = 100.0 / 1090.0;
-        let f = estimate(&rotating(20_000, 75.0, 0.02, Some(lsb), 3));
+        let f = estimate(&rotating(20_000, 75.0, 0.02, Some(lsb), 3), None);
         let found = f.lsb_ut.expect("grid not found");
         for k in 0..3 {
             assert!((found[k] / lsb - 1.0).abs() < 1e-3, "{found:?}");
@@ -266,10 +357,69 @@ mod tests {
             *m = m.map(|v| v + noise.sample(&mut rng));
         }
         data.extend(rotating(5000, 50.0, 0.2, None, 2));
-        let f = estimate(&data);
+        let f = estimate(&data, None);
         assert!(matches!(f.source, NoiseSource::Still { start: 0, end } if end >= 900));
         for s in f.sigma_ut {
             assert!((s / 0.2 - 1.0).abs() < 0.1, "{s}");
         }
+    }
+
+    /// Poses: `per_pose` samples at each of 24 fixed readings (a jig), with white noise.
+    fn poses(per_pose: usize, sigma: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        let (mut raw, mut reference) = (Vec::new(), Vec::new());
+        for p in 0..24 {
+            let a = p as f64 * 0.7;
+            let clean = [
+                45.0 * a.cos(),
+                45.0 * a.sin() * (1.3 * a).cos(),
+                30.0 * (1.3 * a).sin(),
+            ];
+            for _ in 0..per_pose {
+                raw.push(clean.map(|c| c + noise.sample(&mut rng)));
+                reference.push(clean);
+            }
+        }
+        (raw, reference)
+    }
+
+    #[test]
+    fn poses_give_the_noise_and_their_jumps_do_not() {
+        for per_pose in [3, 10, 50] {
+            let (raw, reference) = poses(per_pose, 0.05, per_pose as u64);
+            let f = estimate(&raw, Some(&reference));
+            assert!(
+                matches!(f.source, NoiseSource::Poses { runs: 24, .. }),
+                "{f:?}"
+            );
+            let tol = if per_pose == 3 { 0.25 } else { 0.15 };
+            for s in f.sigma_ut {
+                assert!((s / 0.05 - 1.0).abs() < tol, "{per_pose} per pose: {s}");
+            }
+            // Without the reference, the robust differences still see through the jumps between poses.
+            if per_pose >= 10 {
+                let d = estimate(&raw, None);
+                for s in d.sigma_ut {
+                    assert!(
+                        (s / 0.05 - 1.0).abs() < 0.3,
+                        "{per_pose} per pose, differences: {s}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_few_jumps_among_many_samples_do_not_pass_for_noise() {
+        let mut data = rotating(5000, 50.0, 0.1, None, 8);
+        for (i, m) in data.iter_mut().enumerate() {
+            if i % 7 == 0 {
+                m[0] += 30.0;
+            }
+        }
+        let f = estimate(&data, None);
+        assert!((f.sigma_ut[1] / 0.1 - 1.0).abs() < 0.1, "{f:?}");
+        assert!(f.sigma_ut[0] < 0.2, "x: {}", f.sigma_ut[0]);
     }
 }

@@ -2,27 +2,37 @@
 //! `A_j·B̂_i + b_j ≈ B0_j,i` against the known field `B0_i` in sensor axes.
 //!
 //! The three problems share the design `[B̂ᵢᵀ 1]`; they are solved on centred data (the intercept decouples, and the
-//! 3×3 normal matrix is then well conditioned even with a 400 µT hard iron), in f64, in three passes over the samples.
+//! 3×3 normal matrix is then well conditioned even with a 400 µT hard iron), in f64, from sums gathered in one pass.
 //!
 //! The raw readings are the regressors and carry the sensor's noise, which biases plain least squares towards a
 //! smaller `A` by about σ²/spread² (errors in variables). Given the raw noise variance, that bias is removed by
 //! subtracting `N·σ²` from the normal matrix (the corrected least squares of Fuller, *Measurement Error Models*, 1987,
-//! §2.2); with a zero variance this is the paper's plain least squares.
+//! §2.2); with a zero variance this is the paper's plain least squares. The raw noise can only show in the residual
+//! through `A`, so a variance the residual cannot hold (`Σ_k A_jk²·σ_k²` above the residual variance of axis `j`, as
+//! when the noise was measured on rows that jump from pose to pose) is scaled down until it can: the correction is
+//! never larger than the data allow.
+//!
+//! Standard errors: the larger (in every direction of the parameter space) of the model-based covariance
+//! `σ²·(XᵀX − N·σ_raw²)⁻¹` with its exact degrees of freedom and the cluster-robust (sandwich) covariance over cells of
+//! field direction, which sees residuals that are alike within an orientation (reference errors, a pose's attitude
+//! error, model errors that depend on direction) where the model-based one assumes them independent.
 
-use nalgebra::{Matrix3, Matrix4, Vector3};
+use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3, Vector4};
 
 use crate::FitError;
-use crate::coverage::Coverage;
+use crate::coverage::{Coverage, SphereGrid};
 use crate::frames::Mat3;
 use crate::model::Model;
 
 /// Options of the vector fit.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct VectorOptions {
+pub struct VectorOptions<'a> {
     /// Variance of the raw readings' noise per sensor axis, µT² (see the module docs); zero for plain least squares.
     pub raw_noise_var_ut2: [f64; 3],
     /// Skip the coverage check (for callers that ran it already or fit on purpose-built subsets).
     pub skip_coverage_check: bool,
+    /// A weight per sample in `[0, 1]` (zero leaves a sample out), for robust refits; all ones when absent.
+    pub weights: Option<&'a [f64]>,
 }
 
 /// The result of a vector fit.
@@ -38,17 +48,21 @@ pub struct VectorFit {
     pub b_se_ut: [f64; 3],
     /// Per calibrated axis `j`, the covariance of `(a_j1, a_j2, a_j3, b_j)`.
     pub covariance: [[[f64; 4]; 4]; 3],
-    /// RMS of the residual `A·B̂ + b − B0` per axis, µT.
+    /// RMS of the residual `A·B̂ + b − B0` per axis over the samples used (weighted), µT.
     pub residual_rms_ut: [f64; 3],
     /// Condition number of the centred design (√ of the ratio of the extreme eigenvalues of the readings'
     /// covariance): how unevenly the rotation explored the three directions.
     pub condition_number: f64,
-    /// Samples used.
+    /// Samples used (non-zero weight).
     pub n: usize,
-    /// Samples skipped because their expected field was missing (NaN).
+    /// Samples skipped because their expected field was missing (NaN) or their weight zero.
     pub skipped: usize,
     /// Spread of the readings.
     pub coverage: Coverage,
+    /// The factor (at most 1) the raw noise variance was scaled by so that the residual can hold it.
+    pub noise_bound: f64,
+    /// Cells of field direction the samples fell in (the clusters of the robust standard errors).
+    pub direction_cells: usize,
 }
 
 impl VectorFit {
@@ -71,77 +85,174 @@ impl VectorFit {
     }
 }
 
+/// Cells of field direction for the cluster-robust standard errors.
+const DIRECTION_CELLS: usize = 100;
+/// Fewest samples the fit takes (four unknowns per axis, and a few degrees of freedom for the residual).
+pub const MIN_SAMPLES: usize = 8;
+
 /// Fits `A` and `b` to raw readings and the expected field in sensor axes (both µT). Samples whose expected field
-/// has a NaN are skipped and counted.
+/// or reading has a NaN are skipped and counted.
 pub fn fit(
     raw_ut: &[[f64; 3]],
     expected_ut: &[[f64; 3]],
-    opts: &VectorOptions,
+    opts: &VectorOptions<'_>,
 ) -> Result<VectorFit, FitError> {
     assert_eq!(
         raw_ut.len(),
         expected_ut.len(),
         "one expected field per reading"
     );
-    let valid = |i: &usize| expected_ut[*i].iter().all(|v| v.is_finite());
-    let pairs = || (0..raw_ut.len()).filter(valid);
-
-    // Pass 1: means.
-    let (mut n, mut m_sum, mut r_sum) = (0usize, Vector3::zeros(), Vector3::zeros());
-    for i in pairs() {
-        n += 1;
-        m_sum += Vector3::from(raw_ut[i]);
-        r_sum += Vector3::from(expected_ut[i]);
+    if let Some(w) = opts.weights {
+        assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
     }
-    const NEEDED: usize = 8;
-    if n < NEEDED {
+    let weight = |i: usize| {
+        let usable = expected_ut[i]
+            .iter()
+            .chain(&raw_ut[i])
+            .all(|v| v.is_finite());
+        let w = opts.weights.map_or(1.0, |w| w[i]);
+        if usable && w > 0.0 { w } else { 0.0 }
+    };
+
+    // One pass: weighted sums of the readings and references, shifted by the first usable sample for precision.
+    let Some(first) = (0..raw_ut.len()).find(|&i| weight(i) > 0.0) else {
         return Err(FitError::TooFewSamples {
-            needed: NEEDED,
+            needed: MIN_SAMPLES,
+            got: 0,
+        });
+    };
+    let (m0, r0) = (
+        Vector3::from(raw_ut[first]),
+        Vector3::from(expected_ut[first]),
+    );
+    let (mut n, mut w_sum) = (0usize, 0.0);
+    let (mut sm, mut sr) = (Vector3::zeros(), Vector3::zeros());
+    let (mut smm, mut srm, mut srr) = (Matrix3::zeros(), Matrix3::zeros(), Matrix3::zeros());
+    for i in first..raw_ut.len() {
+        let w = weight(i);
+        if w == 0.0 {
+            continue;
+        }
+        let d = Vector3::from(raw_ut[i]) - m0;
+        let e = Vector3::from(expected_ut[i]) - r0;
+        n += 1;
+        w_sum += w;
+        sm += d * w;
+        sr += e * w;
+        smm += d * d.transpose() * w;
+        srm += e * d.transpose() * w;
+        srr += e * e.transpose() * w;
+    }
+    if n < MIN_SAMPLES {
+        return Err(FitError::TooFewSamples {
+            needed: MIN_SAMPLES,
             got: n,
         });
     }
-    let nf = n as f64;
-    let (m_mean, r_mean) = (m_sum / nf, r_sum / nf);
+    let (dm, dr) = (sm / w_sum, sr / w_sum);
+    let m_mean = m0 + dm;
+    let r_mean = r0 + dr;
+    let s_mm = smm - dm * dm.transpose() * w_sum;
+    let s_rm = srm - dr * dm.transpose() * w_sum;
+    let s_rr = srr - dr * dr.transpose() * w_sum;
 
-    // Pass 2: centred cross products.
-    let (mut s_mm, mut s_rm) = (Matrix3::zeros(), Matrix3::zeros());
-    for i in pairs() {
-        let m = Vector3::from(raw_ut[i]) - m_mean;
-        let r = Vector3::from(expected_ut[i]) - r_mean;
-        s_mm += m * m.transpose();
-        s_rm += r * m.transpose();
-    }
-    let coverage = Coverage::from_covariance(&(s_mm / nf));
+    let coverage = Coverage::from_covariance(&(s_mm / w_sum));
     if !opts.skip_coverage_check {
         coverage.check()?;
     }
-    let s_corr = s_mm - Matrix3::from_diagonal(&Vector3::from(opts.raw_noise_var_ut2)) * nf;
-    let s_inv = s_corr.try_inverse().ok_or(FitError::Singular(
+    let s_mm_inv = s_mm.try_inverse().ok_or(FitError::Singular(
         "the readings' covariance has no inverse",
     ))?;
+    // Plain least squares first: its residual bounds the raw noise the correction may assume.
+    let dof = w_sum * (n - 4) as f64 / n as f64;
+    let a_plain = s_rm * s_mm_inv;
+    let rss_plain = s_rr - a_plain * s_rm.transpose();
+    let noise = Vector3::from(opts.raw_noise_var_ut2);
+    let noise_bound = (0..3)
+        .map(|j| {
+            let through_a: f64 = (0..3).map(|k| a_plain[(j, k)].powi(2) * noise[k]).sum();
+            if through_a > 0.0 {
+                (rss_plain[(j, j)].max(0.0) / dof / through_a).min(1.0)
+            } else {
+                1.0
+            }
+        })
+        .fold(1.0, f64::min);
+    let correction = Matrix3::from_diagonal(&(noise * (noise_bound * w_sum)));
+    let s_corr = s_mm - correction;
+    let s_inv = s_corr
+        .cholesky()
+        .map(|c| c.inverse())
+        .ok_or(FitError::Singular(
+            "the readings' covariance less their noise is not positive: the noise is as large as the rotation",
+        ))?;
     let a = s_rm * s_inv;
     let b = r_mean - a * m_mean;
 
-    // Pass 3: residuals.
+    // Second pass: residuals, and their scores per cell of field direction.
+    let grid = SphereGrid::new(DIRECTION_CELLS);
+    let mut cells: Vec<[Vector4<f64>; 3]> = vec![[Vector4::zeros(); 3]; grid.len()];
+    let mut cell_weight = vec![0.0; grid.len()];
     let mut rss = Vector3::zeros();
-    for i in pairs() {
-        let e = a * Vector3::from(raw_ut[i]) + b - Vector3::from(expected_ut[i]);
-        rss += e.component_mul(&e);
-    }
-    let dof = (n - 4) as f64;
-    let covariance: [[[f64; 4]; 4]; 3] = std::array::from_fn(|j| {
-        // Covariance of (a_j, b_j) = σ_j²·(XᵀX)⁻¹, written out for the centred design.
-        let var = rss[j] / dof;
-        let s_inv_m = s_inv * m_mean;
-        let mut c = Matrix4::zeros();
-        c.fixed_view_mut::<3, 3>(0, 0).copy_from(&(s_inv * var));
-        for k in 0..3 {
-            c[(k, 3)] = -var * s_inv_m[k];
-            c[(3, k)] = -var * s_inv_m[k];
+    for i in first..raw_ut.len() {
+        let w = weight(i);
+        if w == 0.0 {
+            continue;
         }
-        c[(3, 3)] = var * (1.0 / nf + m_mean.dot(&s_inv_m));
-        std::array::from_fn(|r| std::array::from_fn(|s| c[(r, s)]))
-    });
+        let m = Vector3::from(raw_ut[i]);
+        let e = a * m + b - Vector3::from(expected_ut[i]);
+        rss += e.component_mul(&e) * w;
+        let c = grid.cell(expected_ut[i]).unwrap_or(0);
+        let x = m - m_mean;
+        let xt = Vector4::new(x[0], x[1], x[2], 1.0);
+        for j in 0..3 {
+            cells[c][j] -= xt * (w * e[j]);
+        }
+        cell_weight[c] += w;
+    }
+    let clusters: Vec<usize> = (0..grid.len()).filter(|&c| cell_weight[c] > 0.0).collect();
+    let g = clusters.len() as f64;
+
+    // Bread: the corrected normal matrix in centred coordinates (the intercept decoupled).
+    let mut bread_inv = Matrix4::zeros();
+    bread_inv.fixed_view_mut::<3, 3>(0, 0).copy_from(&s_inv);
+    bread_inv[(3, 3)] = 1.0 / w_sum;
+    // From centred (a_j, b'_j) to (a_j, b_j): b_j = b'_j − a_j·mean.
+    let mut to_b = Matrix4::identity();
+    for k in 0..3 {
+        to_b[(3, k)] = -m_mean[k];
+    }
+    let mut covariance = [[[0.0; 4]; 4]; 3];
+    for j in 0..3 {
+        let sigma2 = rss[j] / dof;
+        let model_based = bread_inv * sigma2;
+        let theta = Vector4::new(a[(j, 0)], a[(j, 1)], a[(j, 2)], 0.0);
+        let eiv = Vector4::new(
+            correction[(0, 0)],
+            correction[(1, 1)],
+            correction[(2, 2)],
+            0.0,
+        )
+        .component_mul(&theta)
+            / w_sum;
+        let mut meat = Matrix4::zeros();
+        for &c in &clusters {
+            let score = cells[c][j] + eiv * cell_weight[c];
+            meat += score * score.transpose();
+        }
+        let robust = if clusters.len() > 1 {
+            let small_sample = g / (g - 1.0) * (n as f64 - 1.0) / (n as f64 - 4.0);
+            bread_inv * meat * bread_inv * small_sample
+        } else {
+            model_based
+        };
+        let larger = loewner_max(
+            &DMatrix::from_column_slice(4, 4, model_based.as_slice()),
+            &DMatrix::from_column_slice(4, 4, robust.as_slice()),
+        );
+        let c = to_b * Matrix4::from_column_slice(larger.as_slice()) * to_b.transpose();
+        covariance[j] = std::array::from_fn(|r| std::array::from_fn(|s| c[(r, s)]));
+    }
     let a_arr: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| a[(j, k)]));
     Ok(VectorFit {
         a: a_arr,
@@ -149,12 +260,35 @@ pub fn fit(
         a_se: std::array::from_fn(|j| std::array::from_fn(|k| covariance[j][k][k].sqrt())),
         b_se_ut: std::array::from_fn(|j| covariance[j][3][3].sqrt()),
         covariance,
-        residual_rms_ut: std::array::from_fn(|j| (rss[j] / nf).sqrt()),
+        residual_rms_ut: std::array::from_fn(|j| (rss[j] / w_sum).sqrt()),
         condition_number: coverage.spread_ut[0] / coverage.spread_ut[2],
         n,
         skipped: raw_ut.len() - n,
         coverage,
+        noise_bound,
+        direction_cells: clusters.len(),
     })
+}
+
+/// A covariance at least as large as both `a` and `b` in every direction: `a^½·U·max(Λ, 1)·Uᵀ·a^½`, where `U·Λ·Uᵀ`
+/// is `b` whitened by `a`. It is `a` where `b` is smaller and `b` where `b` is larger.
+pub(crate) fn loewner_max(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let ea = a.clone().symmetric_eigen();
+    if !ea.eigenvalues.iter().all(|l| *l > 0.0) {
+        return b.clone();
+    }
+    let with = |f: &dyn Fn(f64) -> f64| {
+        &ea.eigenvectors
+            * DMatrix::from_diagonal(&ea.eigenvalues.map(f))
+            * ea.eigenvectors.transpose()
+    };
+    let (half, inv_half) = (with(&f64::sqrt), with(&|l| 1.0 / l.sqrt()));
+    let w = &inv_half * b * &inv_half;
+    let ew = ((&w + w.transpose()) * 0.5).symmetric_eigen();
+    let clipped = &ew.eigenvectors
+        * DMatrix::from_diagonal(&ew.eigenvalues.map(|l| l.max(1.0)))
+        * ew.eigenvectors.transpose();
+    &half * clipped * &half
 }
 
 #[cfg(test)]

@@ -42,6 +42,8 @@ use samples::Samples;
 use select::{SetAside, select};
 use stats::{Batches, BlockStats, Problem};
 
+/// Fewest samples the diagnosis works on.
+pub const MIN_SAMPLES: usize = 50;
 /// Contiguous time blocks of the cross-validation.
 const CV_BLOCKS: usize = 5;
 /// Contiguous batches for the residual's autocorrelation (method of batch means).
@@ -216,10 +218,9 @@ pub struct Diagnosis {
 pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, FitError> {
     let samples = Samples::gather(input, base);
     let n = samples.len();
-    const NEEDED: usize = 50;
-    if n < NEEDED {
+    if n < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
-            needed: NEEDED,
+            needed: MIN_SAMPLES,
             got: n,
         });
     }

@@ -1,0 +1,149 @@
+//! The last check on every fit, before anything is written: a calibration that cannot be right is refused, one that
+//! looks wrong for a reason the user can fix (units, a field outside the Earth's range) is written with a loud
+//! warning that says what it looks like and what would fix it.
+
+use magcal_calib::scalar::centre;
+use magcal_calib::{FitError, Model, frames};
+use nalgebra::Matrix3;
+
+use crate::calibrate::Fit;
+use crate::field::ReferenceField;
+
+/// The range of the Earth's field at its surface, µT (the World Magnetic Model's extremes, rounded out).
+pub const EARTH_FIELD_UT: (f64, f64) = (22.0, 67.0);
+/// `A`'s singular values may differ by this factor before the gains are called implausible.
+const GAIN_SPREAD_WARN: f64 = 1.5;
+/// Below this ratio of the smallest to the largest singular value, `A` is as good as singular: refused.
+const GAIN_SPREAD_REFUSE: f64 = 1e-3;
+
+/// Raw-count scales of common chips and units, µT per unit, for the units warning.
+const SCALES: [(&str, f64); 9] = [
+    ("HMC5883L counts at ±1.3 G (1090 LSB/G)", 100.0 / 1090.0),
+    ("QMC5883L counts at ±2 G (12000 LSB/G)", 100.0 / 12000.0),
+    ("QMC5883L counts at ±8 G (3000 LSB/G)", 100.0 / 3000.0),
+    ("LIS3MDL counts at ±4 G (6842 LSB/G)", 100.0 / 6842.0),
+    ("LIS2MDL counts (1.5 mG/LSB)", 0.15),
+    ("MMC5983MA 18-bit counts (16384 counts/G)", 100.0 / 16384.0),
+    ("gauss", 100.0),
+    ("milligauss", 0.1),
+    ("nanotesla", 0.001),
+];
+
+/// Checks a fitted model; refuses what cannot be a calibration and returns the warnings for the rest.
+pub fn check(
+    model: &Model,
+    fit: &Fit,
+    field: &ReferenceField,
+    raw_ut: &[[f64; 3]],
+) -> Result<Vec<String>, FitError> {
+    let a = Matrix3::from_fn(|j, k| model.a[j][k]);
+    let sv = a.singular_values();
+    let (lo, hi) = (sv.min(), sv.max());
+    if !(a.determinant().abs() > 0.0 && lo > GAIN_SPREAD_REFUSE * hi && hi.is_finite())
+        || model.b_ut.iter().any(|b| !b.is_finite())
+    {
+        return Err(FitError::Singular(
+            "the fitted matrix A is (nearly) singular: the recording does not determine a calibration",
+        ));
+    }
+    let mut warnings = Vec::new();
+    if hi / lo > GAIN_SPREAD_WARN {
+        warnings.push(format!(
+            "the fitted gains differ by a factor {:.2} between directions (singular values of A {:.4}–{:.4}): more \
+             than a sensor's axes plausibly differ. Check for a saturated axis, a mis-set range, or a magnet moving \
+             with the sensor",
+            hi / lo,
+            lo,
+            hi
+        ));
+    }
+    // The raw readings' radius about their centre: what the sensor's units make of the Earth's field.
+    let c = centre(&model.a, model.b_ut);
+    let mut radii: Vec<f64> = raw_ut
+        .iter()
+        .step_by((raw_ut.len() / 10_000).max(1))
+        .map(|m| frames::norm(frames::sub(*m, c)))
+        .filter(|r| r.is_finite())
+        .collect();
+    let raw_radius = median(&mut radii);
+    let calibrated = match fit {
+        Fit::Scalar(s) => s.field_ut,
+        Fit::Vector(_) => field
+            .magnitude()
+            .unwrap_or(raw_radius * (sv.iter().product::<f64>()).cbrt()),
+    };
+    let (low, high) = EARTH_FIELD_UT;
+    let raw_in_range = (0.5 * low..=1.5 * high).contains(&raw_radius);
+    let known = match fit {
+        Fit::Scalar(s) => s.field_given.then_some(s.field_ut),
+        Fit::Vector(_) => Some(calibrated),
+    };
+    if !raw_in_range && raw_radius > 0.0 {
+        warnings.push(units_warning(raw_radius, model, c, known));
+    } else if !(low..=high).contains(&calibrated) {
+        warnings.push(format!(
+            "the calibrated field is {calibrated:.1} µT, outside the Earth's {low:.0}–{high:.0} µT: if the readings \
+             are µT, the field given (or fitted) is wrong or the sensor sits in a strongly disturbed place; if the \
+             sensor's gain is off, A corrects it only for this field"
+        ));
+    }
+    let offset = frames::norm(c);
+    if raw_in_range && offset > 10.0 * calibrated {
+        warnings.push(format!(
+            "the hard-iron offset is {offset:.0} µT, {:.0} times the field: a magnet or steel very close to the \
+             sensor. The calibration holds only while it stays exactly where it is",
+            offset / calibrated
+        ));
+    }
+    Ok(warnings)
+}
+
+/// What raw readings of this radius look like, and the scale that would make them µT (exact when the field's
+/// magnitude is known, a range over the Earth's fields otherwise).
+fn units_warning(raw_radius: f64, model: &Model, c: [f64; 3], field_ut: Option<f64>) -> String {
+    let (low, high) = EARTH_FIELD_UT;
+    let (scale, span) = match field_ut {
+        Some(f) => (f / raw_radius, format!("{:.4}", f / raw_radius)),
+        None => (
+            (low * high).sqrt() / raw_radius,
+            format!("{:.4}–{:.4}", low / raw_radius, high / raw_radius),
+        ),
+    };
+    let near: Vec<&str> = SCALES
+        .iter()
+        .filter(|(_, s)| (s / scale).ln().abs() < 1.5f64.ln())
+        .map(|(name, _)| *name)
+        .collect();
+    let like = if near.is_empty() {
+        String::new()
+    } else {
+        format!(" (close to {})", near.join(", or "))
+    };
+    format!(
+        "the raw readings are not in µT: they lie {raw_radius:.1} units from their centre, where the Earth's field \
+         is {low:.0}–{high:.0} µT. They look like raw counts or another unit: multiplying them by {span}{like} would \
+         make them µT. {} The offset [{:.1}, {:.1}, {:.1}] is in the raw units, and exports to autopilots (which \
+         expect gauss or mGauss) are wrong: convert the recording to µT and fit again",
+        if field_ut.is_some() {
+            format!(
+                "A (mean gain {:.4}) absorbs the scale, so the calibrated field is in µT.",
+                (model.a[0][0] + model.a[1][1] + model.a[2][2]) / 3.0
+            )
+        } else {
+            "No field magnitude was given, so the calibrated field is in the same units (give --field-ut, \
+             --field-ned or --location/--date)."
+                .to_owned()
+        },
+        c[0],
+        c[1],
+        c[2]
+    )
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}

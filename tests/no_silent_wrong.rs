@@ -1,0 +1,366 @@
+//! Acceptance: inputs users really make end in a right calibration or a clear refusal, never in a wrong number with a
+//! green exit. One test per defect, the defect's reproducer as its input.
+
+mod common;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{floats, magcal_fit};
+use magcal_app::record::sim::TruthFile;
+use magcal_calib::frames;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+/// The outcome of a scalar fit of a partial recording: refused with advice to rotate, or the offset with its
+/// standard errors.
+enum Outcome {
+    Refused(String),
+    Offset([f64; 3], [f64; 3]),
+}
+
+fn fit_offset(rec: &Path, extra: &[&str]) -> Outcome {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("r.json");
+    let params = dir.path().join("p.toml");
+    let mut args = vec![
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--report",
+        report.to_str().unwrap(),
+        "--out",
+        params.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let out = magcal_fit(&args);
+    if !out.status.success() {
+        assert!(!params.exists(), "a refused fit wrote parameters");
+        return Outcome::Refused(String::from_utf8_lossy(&out.stderr).into_owned());
+    }
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let o = floats(&r["calibration"]["offset_ut"]);
+    let se = floats(&r["calibration"]["offset_se_ut"]);
+    ([o[0], o[1], o[2]], [se[0], se[1], se[2]]).into()
+}
+
+impl From<([f64; 3], [f64; 3])> for Outcome {
+    fn from((o, se): ([f64; 3], [f64; 3])) -> Outcome {
+        Outcome::Offset(o, se)
+    }
+}
+
+/// Refused with the direction to rotate, or every offset component within 3 standard errors of the truth.
+fn right_or_refused(outcome: &Outcome, truth: [f64; 3], what: &str) {
+    match outcome {
+        Outcome::Refused(msg) => assert!(
+            msg.contains("turn the sensor")
+                || msg.contains("Turn it")
+                || msg.contains("tip the sensor"),
+            "{what}: refused without saying how to rotate: {msg}"
+        ),
+        Outcome::Offset(o, se) => {
+            for k in 0..3 {
+                assert!(
+                    (o[k] - truth[k]).abs() <= 3.0 * se[k],
+                    "{what}: offset {o:?} ± {se:?}, truth {truth:?}"
+                );
+            }
+        }
+    }
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Defect 1: 200 samples within 25° of one pole (the reproducer, in Rust): refused, naming +Z and how to
+/// turn, and no parameters written.
+#[test]
+fn a_cap_of_25_degrees_is_refused_naming_the_axis() {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let noise = Normal::new(0.0, 0.1).unwrap();
+    let mut text = String::from("t,mx,my,mz\n");
+    for i in 0..200 {
+        let t: f64 = rng.random_range(0.0f64..25.0).to_radians();
+        let p: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let m = [
+            50.0 * t.sin() * p.cos() + 10.0,
+            50.0 * t.sin() * p.sin() - 5.0,
+            50.0 * t.cos() + 3.0,
+        ];
+        let m = m.map(|v| v + noise.sample(&mut rng));
+        let _ = writeln!(
+            text,
+            "{:.2},{:.3},{:.3},{:.3}",
+            i as f64 * 0.01,
+            m[0],
+            m[1],
+            m[2]
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let rec = write(dir.path(), "cap.csv", &text);
+    match fit_offset(&rec, &["--field-ut", "50"]) {
+        Outcome::Refused(msg) => {
+            assert!(
+                msg.contains("+Z") && msg.contains("turn the sensor"),
+                "{msg}"
+            )
+        }
+        Outcome::Offset(o, se) => panic!("a 25° cap was fitted: offset {o:?} ± {se:?}"),
+    }
+}
+
+/// Defect 1: the first 102 rows of a scalar fixture.
+#[test]
+fn the_first_102_rows_of_a_recording_are_refused_or_right() {
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/diagnosis/null_scalar.csv");
+    let text = std::fs::read_to_string(&fixture).unwrap();
+    let mut rows = 0;
+    let head: String = text
+        .lines()
+        .take_while(|l| {
+            if !l.starts_with('#') && !l.starts_with('t') {
+                rows += 1;
+            }
+            rows <= 102
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let truth: toml::Table =
+        toml::from_str(&std::fs::read_to_string(fixture.with_extension("truth.toml")).unwrap())
+            .unwrap();
+    let a: Vec<Vec<f64>> = truth["A"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            r.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_float().unwrap())
+                .collect()
+        })
+        .collect();
+    let b: Vec<f64> = truth["b_ut"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_float().unwrap())
+        .collect();
+    let a: [[f64; 3]; 3] = std::array::from_fn(|j| std::array::from_fn(|k| a[j][k]));
+    let offset = magcal_calib::scalar::centre(&a, [b[0], b[1], b[2]]);
+    let dir = tempfile::tempdir().unwrap();
+    let rec = write(dir.path(), "head.csv", &head);
+    right_or_refused(&fit_offset(&rec, &[]), offset, "102 rows");
+}
+
+/// Defect 1: a hand-held flat turn with tilts of up to ±30° (the commonest hobbyist recording).
+#[test]
+fn a_flat_turn_with_30_degree_tilts_is_refused_or_right() {
+    for seed in 0..6 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 0.1).unwrap();
+        let field = [19.8, 1.2, 45.3];
+        let offset = [10.0, -5.0, 3.0];
+        let mut text = String::from("t,mx,my,mz\n");
+        for i in 0..300 {
+            let yaw = rng.random_range(0.0..std::f64::consts::TAU);
+            let pitch = rng.random_range(-30.0f64..30.0).to_radians();
+            let roll = rng.random_range(-30.0f64..30.0).to_radians();
+            let r = nalgebra::Rotation3::from_euler_angles(roll, pitch, yaw);
+            let b = r.inverse() * nalgebra::Vector3::from(field);
+            let m = [b.x + offset[0], b.y + offset[1], b.z + offset[2]]
+                .map(|v| v + noise.sample(&mut rng));
+            let _ = writeln!(
+                text,
+                "{:.2},{:.3},{:.3},{:.3}",
+                i as f64 * 0.02,
+                m[0],
+                m[1],
+                m[2]
+            );
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let rec = write(dir.path(), "tilt.csv", &text);
+        right_or_refused(
+            &fit_offset(&rec, &["--field-ut", &frames::norm(field).to_string()]),
+            offset,
+            &format!("tilts, seed {seed}"),
+        );
+    }
+}
+
+/// Defect 1: the partial recordings an interrupted `magcal-record --routine free` leaves (cut after 2–32 s).
+#[test]
+fn interrupted_free_recordings_are_refused_or_right() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("free.csv");
+    let truth = dir.path().join("truth.toml");
+    let out = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
+        .args(["--device", "sim:lis3mdl", "--routine", "free", "--out"])
+        .arg(&rec)
+        .arg("--truth")
+        .arg(&truth)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let truth = TruthFile::read(&truth).unwrap();
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let (mut refused, mut fitted) = (0, 0);
+    for cut_s in [2.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0] {
+        let part: String = text
+            .lines()
+            .filter(|l| {
+                l.starts_with('#')
+                    || l.starts_with('t')
+                    || l.split(',')
+                        .next()
+                        .and_then(|t| t.parse::<f64>().ok())
+                        .is_some_and(|t| t < cut_s)
+            })
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let path = write(dir.path(), "part.csv", &part);
+        let outcome = fit_offset(&path, &[]);
+        match outcome {
+            Outcome::Refused(_) => refused += 1,
+            Outcome::Offset(..) => fitted += 1,
+        }
+        right_or_refused(&outcome, truth.offset_ut, &format!("cut at {cut_s} s"));
+    }
+    // The first seconds cover a cap and are refused; half a minute covers the sphere and is fitted.
+    assert!(
+        refused >= 1 && fitted >= 1,
+        "refused {refused}, fitted {fitted}"
+    );
+}
+
+/// Defect 5: quaternions without a world field fall back to the scalar method with a warning that says how to give it.
+#[test]
+fn quaternions_without_a_field_say_how_to_give_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("q.csv");
+    let ok = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
+        .args(["--duration", "60", "--out"])
+        .arg(&rec)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let without: String = text
+        .lines()
+        .filter(|l| {
+            !l.starts_with("# field_ned_ut")
+                && !l.starts_with("# location")
+                && !l.starts_with("# date")
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let rec = write(dir.path(), "nofield.csv", &without);
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose"]);
+    assert!(out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("scalar calibration"), "{stdout}");
+    assert!(
+        stdout.contains("WARNING")
+            && stdout.contains("quaternions")
+            && stdout.contains("--field-ned"),
+        "{stdout}"
+    );
+}
+
+/// Defect 6: raw counts are fitted, with a warning that names what they look like and the scale that makes them µT;
+/// the shared QMC5883L recordings (a gain error) still fit.
+#[test]
+fn raw_counts_get_a_units_warning_with_the_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("ut.csv");
+    let ok = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
+        .args([
+            "--chip",
+            "hmc5883l",
+            "--duration",
+            "60",
+            "--reference",
+            "none",
+            "--out",
+        ])
+        .arg(&rec)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    // µT → HMC5883L counts at 1090 LSB/G.
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let mut counts = String::new();
+    for line in text.lines() {
+        if line.starts_with('#') || line.starts_with('t') {
+            counts += line;
+        } else {
+            let cells: Vec<String> = line
+                .split(',')
+                .enumerate()
+                .map(|(i, c)| match i {
+                    1..=3 => format!("{:.0}", c.parse::<f64>().unwrap() * 10.9),
+                    _ => c.to_owned(),
+                })
+                .collect();
+            counts += &cells.join(",");
+        }
+        counts.push('\n');
+    }
+    let rec = write(dir.path(), "counts.csv", &counts);
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--export",
+        "ardupilot",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        summary.contains("not in µT") && summary.contains("HMC5883L"),
+        "{summary}"
+    );
+    // With the field's magnitude known, the scale is the one that gives it: about 1/10.9 (the sensor's own gains
+    // differ by a few per cent).
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--field-ut",
+        "49.45",
+    ]);
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("by 0.09") && summary.contains("HMC5883L"),
+        "{summary}"
+    );
+    for file in ["qmc5883l_filtered_raw.csv", "qmc5883l_noisy_raw.csv"] {
+        let out = magcal_fit(&[
+            common::real(&format!("qmc5883l/{file}")).to_str().unwrap(),
+            "--no-diagnose",
+        ]);
+        assert!(
+            out.status.success(),
+            "{file}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            String::from_utf8_lossy(&out.stdout).contains("WARNING"),
+            "{file}"
+        );
+    }
+}
