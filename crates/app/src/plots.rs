@@ -437,6 +437,7 @@ fn heading(path: &Path, h: &HeadingErrors) -> PlotResult<()> {
         .x_desc("true heading (°)")
         .y_desc("heading error (°)")
         .x_label_formatter(&whole)
+        .y_label_formatter(&whole)
         .draw()?;
     for c in &h.curves {
         for piece in unwrapped_pieces(&c.before_deg) {
