@@ -8,6 +8,7 @@ use magcal_app::field::{FieldArgs, resolve};
 use magcal_app::params::ParamsFile;
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
+use magcal_app::verdict::{assess, target_model};
 use magcal_recording::Recording;
 
 /// The name the input stands under in messages.
@@ -55,9 +56,12 @@ pub fn pipeline(data: &[u8]) {
     let Ok(cal) = calibrate(&rec, Method::Auto, field, true) else {
         return;
     };
-    assert!(!summary(&cal, NAME).is_empty());
+    let assessment = assess(&cal, &rec, false);
+    assert!(!summary(&cal, &assessment, NAME).is_empty());
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
-    let json = Report::new(&cal, NAME, &channels).to_json();
+    let json = Report::new(&cal, NAME, &channels)
+        .with_assessment(&assessment)
+        .to_json();
     assert!(json.starts_with('{'));
     let params = ParamsFile::of(&cal, &rec, NAME);
     let text = toml::to_string_pretty(&params).expect("a parameters file serialises");
@@ -69,6 +73,7 @@ pub fn pipeline(data: &[u8]) {
         ExportFormat::CHeader,
         ExportFormat::Json,
     ] {
-        assert!(!export(&cal.model(), format).is_empty());
+        let corrections = cal.model().corrections().count();
+        assert!(!export(&target_model(&cal), format, corrections).is_empty());
     }
 }

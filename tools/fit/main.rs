@@ -12,15 +12,20 @@ use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export};
 use magcal_app::field::resolve;
 use magcal_app::files::{check_outputs, write_atomic};
+use magcal_app::howto::{Target, how_to_apply};
 use magcal_app::params::ParamsFile;
-use magcal_app::plots::write_plots;
+use magcal_app::plots::{write_plots, write_readings_plot};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
+use magcal_app::verdict::{Grade, assess, target_model};
 use magcal_app::writeback::write_back_calibration;
 use magcal_recording::Recording;
 
-/// Fit a magnetometer calibration B = A·raw + b to a recording (magcal-recording v1), diagnose what the model leaves
-/// out, print a summary, and write the report, the parameters file and exports.
+/// Fit a magnetometer calibration to a recording, say how far off a compass would be before and after, and write it out.
+///
+/// The calibration is B = A·raw + b. The summary opens with the heading error (degrees) the raw readings have and the
+/// calibration leaves, and a verdict — good, usable or redo — with the reason and what to do; --require good makes
+/// anything less exit non-zero (the report and plots are still written, the parameters and exports are not).
 ///
 /// With an attitude reference in the recording (qw..qz plus the world field, or rx,ry,rz) the vector method of the
 /// seed paper fits every component; without one, the scalar (ellipsoid) method fits the magnitude only. The
@@ -35,7 +40,7 @@ use magcal_recording::Recording;
 /// echo; i2c:/dev/i2c-N:lis2mdl[@ADDR] (or sim:lis2mdl) gets the hard-iron offset in its offset registers, read back.
 /// The other chips have no place for a calibration: that is an error, and the parameters file is the way.
 #[derive(Parser, Debug)]
-#[command(version, about, long_about)]
+#[command(version)]
 struct Args {
     /// The recording (magcal-recording v1 CSV).
     recording: PathBuf,
@@ -67,10 +72,15 @@ struct Args {
     /// Skip the diagnosis (what physics the 12-parameter model leaves out).
     #[arg(long)]
     no_diagnose: bool,
-    /// Write SVG plots of the diagnosis into this directory (created if needed): residual against time before and
-    /// after, against the blamed channel, and over the sphere of field directions.
-    #[arg(long, value_name = "DIR", conflicts_with = "no_diagnose")]
+    /// Write SVG plots into this directory (created if needed): the readings before and after (ellipsoid and
+    /// sphere), the heading error against heading, the residual against time and over the field directions (and
+    /// against the blamed channel).
+    #[arg(long, value_name = "DIR")]
     plots: Option<PathBuf>,
+    /// Exit non-zero unless the verdict is at least this (good or usable); the parameters file, exports and
+    /// write-back are then skipped.
+    #[arg(long, value_enum, value_name = "GRADE")]
+    require: Option<Grade>,
 }
 
 fn main() -> ExitCode {
@@ -116,8 +126,17 @@ fn run(args: Args) -> anyhow::Result<()> {
         bail!("--field-ut must be a positive number of µT, got {f}");
     }
     let field = resolve(&args.field.field_args(args.field_ut), &rec.meta)?;
-    let cal = calibrate(&rec, args.method, field, !args.no_diagnose)
-        .with_context(|| format!("{name}: cannot calibrate"))?;
+    let cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
+        Ok(cal) => cal,
+        Err(e) => {
+            // A refused fit still shows its readings: a recording that did not turn enough is plain to see.
+            if let Some(dir) = &args.plots {
+                eprintln!("wrote {}", write_readings_plot(dir, &rec)?.display());
+            }
+            return Err(e).with_context(|| format!("{name}: cannot calibrate"));
+        }
+    };
+    let assessment = assess(&cal, &rec, args.export.is_some() || args.write_to.is_some());
 
     // With the export on stdout, everything else goes to stderr.
     let export_to_stdout = args.export.is_some() && args.export_out.is_none();
@@ -128,23 +147,38 @@ fn run(args: Args) -> anyhow::Result<()> {
             print!("{text}");
         }
     };
-    say(&summary(&cal, &name));
+    say(&summary(&cal, &assessment, &name));
     if let Some(path) = &args.report {
         let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
-        Report::new(&cal, &name, &channels).write(path)?;
+        Report::new(&cal, &name, &channels)
+            .with_assessment(&assessment)
+            .write(path)?;
     }
-    if let (Some(dir), Some(d)) = (&args.plots, &cal.diagnosis) {
-        for path in write_plots(dir, d)? {
+    if let Some(dir) = &args.plots {
+        for path in write_plots(dir, &cal, &rec, &assessment)? {
             eprintln!("wrote {}", path.display());
         }
+    }
+    let grade = assessment.verdict.grade;
+    if let Some(required) = args.require
+        && grade < required
+    {
+        bail!(
+            "the verdict is {}, and --require {} was given: no parameters file, export or write-back",
+            grade.name(),
+            required.name()
+        );
     }
     if let Some(path) = &args.out {
         ParamsFile::of(&cal, &rec, &name)
             .write(path)
             .with_context(|| format!("writing the parameters {}", path.display()))?;
     }
+    // Exports and devices hold A and b only: the base fit when the final model has corrections.
+    let target = target_model(&cal);
+    let corrections = cal.model().corrections().count();
     if let Some(format) = args.export {
-        let text = export(&cal.model(), format);
+        let text = export(&target, format, corrections);
         match &args.export_out {
             Some(path) => write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?,
@@ -156,5 +190,17 @@ fn run(args: Args) -> anyhow::Result<()> {
             say(&format!("{line}\n"));
         }
     }
+    let where_to = match (&args.write_to, args.export) {
+        (Some(device), _) => Target::Device(device),
+        (None, Some(format)) => Target::Export {
+            format,
+            path: args.export_out.as_deref(),
+        },
+        (None, None) => Target::None,
+    };
+    say(&format!(
+        "\n{}",
+        how_to_apply(where_to, args.out.as_deref(), corrections)
+    ));
     Ok(())
 }

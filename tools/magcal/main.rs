@@ -14,6 +14,7 @@ use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{RecordOptions, Routine, Stop, check_out, device_metadata, record, ui};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
+use magcal_app::verdict::assess;
 use magcal_recording::Recording;
 
 /// The bench calibration workflow in one command: record the magnetometer through a routine, fit the calibration
@@ -29,7 +30,7 @@ use magcal_recording::Recording;
 /// Devices: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv], CHIP one of lis3mdl,
 /// lis2mdl, qmc5883l, hmc5883l, mmc5983ma. The separate tools (magcal-record, magcal-fit) offer every option.
 #[derive(Parser, Debug)]
-#[command(version, about, long_about, verbatim_doc_comment)]
+#[command(version, verbatim_doc_comment)]
 struct Args {
     /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv].
     #[arg(long, default_value = "sim", value_name = "DEV")]
@@ -105,10 +106,13 @@ fn run(args: Args) -> anyhow::Result<()> {
     let field = resolve(&args.field.field_args(None), &rec.meta)?;
     let cal = calibrate(&rec, Method::Auto, field, true)
         .with_context(|| format!("{name}: cannot calibrate"))?;
-    print!("\n{}", summary(&cal, &name));
+    let assessment = assess(&cal, &rec, false);
+    print!("\n{}", summary(&cal, &assessment, &name));
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
     let report_path = args.out_dir.join("report.json");
-    Report::new(&cal, &name, &channels).write(&report_path)?;
+    Report::new(&cal, &name, &channels)
+        .with_assessment(&assessment)
+        .write(&report_path)?;
     let params_path = args.out_dir.join("params.toml");
     ParamsFile::of(&cal, &rec, &name)
         .write(&params_path)

@@ -6,7 +6,7 @@ use magcal_app::seed::{SeedExperiment, run, table};
 /// Simulate the seed paper's experiment (a sensor whose distortion is the inverse of the paper's a, b, mounted a few
 /// degrees off the reference axes) and print vector against scalar calibration in the form of the paper's table.
 #[derive(Parser, Debug)]
-#[command(version, about)]
+#[command(version)]
 struct Args {
     /// Mounting misalignment, degrees.
     #[arg(long, default_value_t = SeedExperiment::default().mount_deg)]

@@ -45,7 +45,7 @@ use magcal_app::record::{
 /// --idle-timeout, outputs that stop changing) ends the recording with an error; the file keeps what was recorded.
 /// Ctrl-C ends the recording and keeps the file.
 #[derive(Parser, Debug)]
-#[command(version, about, long_about, verbatim_doc_comment)]
+#[command(version, verbatim_doc_comment)]
 struct Args {
     /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv].
     #[arg(long, default_value = "sim", value_name = "DEV")]

@@ -19,7 +19,7 @@ use magcal_sim::{
 /// The sensor's errors are drawn from --seed; --effect injects physics the 12-parameter model leaves out (the
 /// catalogue of magcal-fit's diagnosis). --truth writes what a fit should find.
 #[derive(Parser, Debug)]
-#[command(version, about, long_about)]
+#[command(version)]
 struct Args {
     /// Output recording.
     #[arg(long, short)]

@@ -59,8 +59,9 @@ impl Polar {
 }
 
 /// The model in another tool's format. Only the linear part can be exported; body-fixed corrections are listed in a
-/// comment where the format has comments.
-pub fn export(model: &Model, format: ExportFormat) -> String {
+/// comment where the format has comments. `fitted_without` is the number of corrections of the final model this
+/// `A` and `b` were fitted without (see [`crate::verdict::target_model`]), said in the same comment.
+pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> String {
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let centre = -(a.try_inverse().unwrap_or_else(Matrix3::zeros) * Vector3::from(model.b_ut));
     let polar = Polar::of(&model.a);
@@ -74,7 +75,13 @@ pub fn export(model: &Model, format: ExportFormat) -> String {
         notes.push(format!(
             "{dropped} body-fixed correction(s) left out (the target has no place for them)"
         ));
+    } else if fitted_without > 0 {
+        notes.push(format!(
+            "A and b fitted without the {fitted_without} body-fixed correction(s) the parameters file holds (the \
+             target has no place for them)"
+        ));
     }
+    let dropped = dropped + fitted_without;
     match format {
         ExportFormat::Ardupilot => {
             let mut out = String::from(
@@ -188,7 +195,7 @@ mod tests {
             let b = model.apply([raw.x, raw.y, raw.z], &magcal_calib::Inputs::NONE);
             Polar::of(&model.a).rotation.transpose() * Vector3::from(b)
         };
-        let ap = export(&model, ExportFormat::Ardupilot);
+        let ap = export(&model, ExportFormat::Ardupilot, 0);
         let ofs = Vector3::new(
             value(&ap, "COMPASS_OFS_X"),
             value(&ap, "COMPASS_OFS_Y"),
@@ -209,7 +216,7 @@ mod tests {
         assert!((ap_mg / 10.0 - ours).norm() < 1e-3, "{ap_mg} vs {ours}");
         assert!((m - s).norm() < 1e-5);
 
-        let px = export(&model, ExportFormat::Px4);
+        let px = export(&model, ExportFormat::Px4, 0);
         let off = Vector3::new(
             value(&px, "CAL_MAG0_XOFF"),
             value(&px, "CAL_MAG0_YOFF"),
@@ -247,10 +254,14 @@ mod tests {
     #[test]
     fn the_c_header_and_json_carry_a_and_b() {
         let (model, _) = skewed_model();
-        let h = export(&model, ExportFormat::CHeader);
+        let h = export(&model, ExportFormat::CHeader, 2);
         assert!(h.contains("MAGCAL_A[3][3]") && h.contains("12.000000f"));
+        assert!(
+            h.contains("fitted without the 2 body-fixed correction(s)"),
+            "{h}"
+        );
         let j: serde_json::Value =
-            serde_json::from_str(&export(&model, ExportFormat::Json)).unwrap();
+            serde_json::from_str(&export(&model, ExportFormat::Json, 0)).unwrap();
         assert_eq!(j["b_ut"][2].as_f64(), Some(30.0));
     }
 }

@@ -1,9 +1,10 @@
 //! What the magcal command-line tools share: the reference field (with the World Magnetic Model), fitting a recording,
-//! the human summary, the JSON report, the parameters file, exports to other tools, the seed-paper experiment, and
-//! the bench side: devices (simulated, Linux I2C, serial), the recorder and writing a calibration back to a device.
+//! the heading error and the verdict, the human summary, the JSON report, the parameters file and applying it to a
+//! recording, exports to other tools and how to use them, the seed-paper experiment, and the bench side: devices (simulated, Linux I2C, serial), the recorder and writing a calibration back to a device.
 //!
 //! The tools in `tools/` are thin: they parse arguments and call in here.
 
+pub mod apply;
 pub mod calibrate;
 pub mod checks;
 pub mod cli;
@@ -12,10 +13,14 @@ pub mod effect_spec;
 pub mod export;
 pub mod field;
 pub mod files;
+pub mod heading;
+pub mod howto;
 pub mod params;
 pub mod plots;
 pub mod record;
 pub mod report;
 pub mod seed;
 pub mod summary;
+pub mod uncertainty;
+pub mod verdict;
 pub mod writeback;

@@ -1,7 +1,7 @@
 //! The JSON report (`--report report.json`). Its field names are a contract other tools read: `method`,
 //! `calibration.A`, `calibration.b_ut`, `residual.rms_ut`, `residual.noise_floor_ut`, `base.{A,b_ut,rms_ut}`.
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
-//! 12-parameter fit.
+//! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
 use magcal_calib::diagnosis::{Diagnosis, ParamValue, Verdict};
 use serde::{Deserialize, Serialize};
@@ -9,6 +9,7 @@ use serde_json::{Map, Value};
 
 use crate::calibrate::{Calibration, Fit};
 use crate::params::Correction;
+use crate::verdict::{Assessment, GOOD_DEG, USABLE_DEG};
 
 /// The whole report.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -39,6 +40,50 @@ pub struct Report {
     /// What the base model leaves out (absent with `--no-diagnose`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnosis: Option<DiagnosisReport>,
+    /// The heading error before and after, when the local field's direction is known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading: Option<HeadingReport>,
+    /// Good, usable or redo, with the reason and what to do.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<VerdictReport>,
+}
+
+/// The heading figures (see `magcal_app::heading`): the sensor level over 360 headings, the worse side up.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HeadingReport {
+    /// The horizontal field, µT (calibrated units).
+    pub horizontal_ut: f64,
+    /// The inclination, degrees, positive down.
+    pub inclination_deg: f64,
+    /// Raw readings used as if calibrated: worst heading, degrees.
+    pub before_worst_deg: f64,
+    /// Raw readings used as if calibrated: RMS over headings, degrees.
+    pub before_rms_deg: f64,
+    /// What the calibration leaves (one standard deviation): worst heading, degrees.
+    pub left_worst_deg: f64,
+    /// What the calibration leaves: RMS over headings, degrees.
+    pub left_rms_deg: f64,
+    /// The part of `left` from the parameters' standard errors alone, worst heading, degrees.
+    pub left_parameters_deg: f64,
+    /// The residual the measured noise does not account for, µT.
+    pub unexplained_ut: f64,
+    /// One reading's noise across the field, degrees RMS.
+    pub noise_deg: f64,
+}
+
+/// The verdict.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VerdictReport {
+    /// `good`, `usable` or `redo`.
+    pub grade: String,
+    /// Why.
+    pub reason: String,
+    /// The one thing to do.
+    pub todo: String,
+    /// The gate: most heading error left for good, degrees.
+    pub good_deg: f64,
+    /// The gate: most heading error left for usable, degrees.
+    pub usable_deg: f64,
 }
 
 /// The diagnosis, as other tools read it.
@@ -435,7 +480,33 @@ impl Report {
             notes: cal.notes.clone(),
             warnings: cal.warnings.clone(),
             diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
+            heading: None,
+            verdict: None,
         }
+    }
+
+    /// The report with the heading figures and the verdict.
+    pub fn with_assessment(mut self, a: &Assessment) -> Report {
+        self.heading = a.heading.as_ref().map(|h| HeadingReport {
+            horizontal_ut: h.field.horizontal_ut,
+            inclination_deg: h.field.inclination_deg(),
+            before_worst_deg: h.before.worst_deg,
+            before_rms_deg: h.before.rms_deg,
+            left_worst_deg: h.left.worst_deg,
+            left_rms_deg: h.left.rms_deg,
+            left_parameters_deg: h.parameters_deg,
+            unexplained_ut: h.unexplained_ut,
+            noise_deg: h.noise_deg,
+        });
+        let v = &a.verdict;
+        self.verdict = Some(VerdictReport {
+            grade: v.grade.name().to_owned(),
+            reason: v.reason.clone(),
+            todo: v.todo.clone(),
+            good_deg: GOOD_DEG,
+            usable_deg: USABLE_DEG,
+        });
+        self
     }
 
     /// Writes the report as pretty JSON, atomically.

@@ -1,28 +1,161 @@
-//! The short human summary `magcal-fit` prints.
+//! The short human summary `magcal-fit` prints: the heading error and the verdict first, then the parameters, the
+//! fit, and the diagnosis.
 
 use std::fmt::Write;
 
-use magcal_calib::diagnosis::{Diagnosis, Verdict};
+use magcal_calib::diagnosis::{Diagnosis, FoundEffect, Verdict as Finding};
 
-use crate::calibrate::{Calibration, Method};
+use crate::apply::{Against, Check};
+use crate::calibrate::{Calibration, Fit, Method};
+use crate::field::ReferenceField;
+use crate::heading::HeadingErrors;
+use crate::params::ParamsFile;
+use crate::verdict::{Assessment, GOOD_DEG, USABLE_DEG, Verdict, fmt_deg};
 
-/// The summary of a calibration of `recording`.
-pub fn summary(cal: &Calibration, recording: &str) -> String {
+/// A channel the residual follows is named only when it explains at least this share of the residual's variance.
+pub const CHANNEL_SHARE_SHOWN: f64 = 0.05;
+/// A modelled effect is announced as a finding only when it lowers the residual on data the fit did not see by at
+/// least this fraction; smaller ones are listed on one line as too small to notice.
+pub const NOTICEABLE_GAIN: f64 = 0.02;
+
+/// `value ±se` with the standard error in two significant digits and the value to the same decimal place.
+pub fn fmt_se(value: f64, se: f64) -> String {
+    if !(se.is_finite() && se > 0.0) {
+        return format!("{value:.5} (no standard error)");
+    }
+    // The decimal place of the standard error's second significant digit (one fewer if rounding carries over).
+    let mut place = 1 - se.log10().floor() as i32;
+    if (se * 10f64.powi(place)).round() >= 100.0 {
+        place -= 1;
+    }
+    let decimals = place.max(0) as usize;
+    format!("{value:.decimals$} ±{se:.decimals$}")
+}
+
+/// The heading figures in three lines.
+fn heading_lines(h: &HeadingErrors, scalar: bool) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "heading error, sensor level over 360 headings (horizontal field {:.1} µT, inclination {:.1}°, the worse side \
+         up):",
+        h.field.horizontal_ut,
+        h.field.inclination_deg()
+    );
+    let _ = writeln!(
+        out,
+        "  removed by the calibration (the raw readings' error):  worst {}, RMS {}",
+        fmt_deg(h.before.worst_deg),
+        fmt_deg(h.before.rms_deg)
+    );
+    let _ = writeln!(
+        out,
+        "  left after it (one standard deviation):                 worst {}, RMS {}{}",
+        fmt_deg(h.left.worst_deg),
+        fmt_deg(h.left.rms_deg),
+        if scalar {
+            " (a tilt of the sensor on its mount not included)"
+        } else {
+            ""
+        },
+    );
+    let _ = writeln!(
+        out,
+        "  a single reading's noise adds ±{} (averaging readings reduces it)",
+        fmt_deg(h.noise_deg)
+    );
+    out
+}
+
+/// The verdict in one line, with the gate.
+fn verdict_line(v: &Verdict) -> String {
+    format!(
+        "verdict: {} — {}. To do: {}. (good ≤ {}, usable ≤ {} left at worst)\n",
+        v.grade.name().to_uppercase(),
+        v.reason,
+        v.todo,
+        fmt_deg(GOOD_DEG),
+        fmt_deg(USABLE_DEG)
+    )
+}
+
+/// What `magcal-apply` prints: a parameters file checked on `recording`.
+pub fn check_summary(
+    c: &Check,
+    params: &ParamsFile,
+    field: &ReferenceField,
+    recording: &str,
+) -> String {
+    let mut out = String::new();
+    let fitted_on = params
+        .recording
+        .as_ref()
+        .map_or(String::new(), |r| format!(", fitted on {r}"));
+    let against = match &c.against {
+        Against::Vector => "against the expected field (attitude reference)".to_owned(),
+        Against::Magnitude { field_ut, known } => format!(
+            "against the field magnitude {field_ut:.2} µT ({})",
+            if *known {
+                field.source()
+            } else {
+                "this recording's mean: no field given"
+            }
+        ),
+    };
+    let _ = writeln!(
+        out,
+        "{recording}: {} parameters{fitted_on}; {} samples {against}",
+        params.method, c.samples_used
+    );
+    let what = match c.against {
+        Against::Vector => "per axis",
+        Against::Magnitude { .. } => "of |B|",
+    };
+    let _ = writeln!(
+        out,
+        "  residual RMS {:.3} µT {what} (the raw readings as they are: {:.3} µT), the sensor's noise {:.3} µT (×{:.2})",
+        c.residual_rms_ut,
+        c.raw_residual_rms_ut,
+        c.noise_floor_ut,
+        c.residual_rms_ut / c.noise_floor_ut
+    );
+    if let Some(m) = &c.measured {
+        let _ = writeln!(
+            out,
+            "  heading error measured with the attitude reference: raw readings RMS {}, calibrated RMS {} (95 % of \
+             readings within {})",
+            fmt_deg(m.raw_rms_deg),
+            fmt_deg(m.rms_deg),
+            fmt_deg(m.p95_deg)
+        );
+    }
+    match &c.heading {
+        Some(h) => out += &heading_lines(h, c.against != Against::Vector),
+        None => {
+            let _ = writeln!(
+                out,
+                "heading error: not known without the direction of the local field"
+            );
+        }
+    }
+    out + &verdict_line(&c.verdict)
+}
+
+/// The summary of a calibration of `recording`, with its heading figures and verdict.
+pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> String {
     let mut out = String::new();
     let model = cal.model();
     let (a_se, b_se) = cal.standard_errors();
     let method = match cal.method() {
-        Method::Vector => {
-            "vector calibration (seed paper eqs. 2–4, against the known field components)"
-        }
-        _ => "scalar calibration (ellipsoid fit, constant |B|)",
+        Method::Vector => "vector calibration, against the attitude reference",
+        _ => "scalar calibration (ellipsoid fit: the field's magnitude only)",
     };
     let s = &cal.samples;
-    let _ = writeln!(out, "{recording}: {method}");
-    for w in &cal.warnings {
-        let _ = writeln!(out, "  WARNING: {w}");
-    }
-    let _ = write!(out, "  samples: {} used of {}", s.used, s.total);
+    let _ = write!(
+        out,
+        "{recording}: {method}, {} of {} samples",
+        s.used, s.total
+    );
     if s.missing_reference > 0 {
         let _ = write!(
             out,
@@ -34,6 +167,36 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
         let _ = write!(out, " ({} grossly off, excluded)", s.excluded);
     }
     out.push('\n');
+    match &assessment.heading {
+        Some(h) => out += &heading_lines(h, cal.method() == Method::Scalar),
+        None => {
+            let _ = writeln!(
+                out,
+                "heading error: not known without the direction of the local field"
+            );
+        }
+    }
+    match &assessment.without_corrections {
+        Some((n, _)) if assessment.linear_only => {
+            let _ = writeln!(
+                out,
+                "  (A and b alone: the model's {n} correction(s) cannot go to this target)"
+            );
+        }
+        Some((n, Some(h))) => {
+            let _ = writeln!(
+                out,
+                "  with A and b alone (what --export and --write-to carry, without the {n} correction(s)): worst {} \
+                 left",
+                fmt_deg(h.left.worst_deg)
+            );
+        }
+        _ => {}
+    }
+    out += &verdict_line(&assessment.verdict);
+    for w in &cal.warnings {
+        let _ = writeln!(out, "  WARNING: {w}");
+    }
     match (cal.field.vector(), cal.field.magnitude()) {
         (Some(f), Some(m)) => {
             let _ = writeln!(
@@ -52,16 +215,21 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
             let _ = writeln!(out, "  field: unknown");
         }
     }
-    for j in 0..3 {
-        let prefix = if j == 0 { "  A = " } else { "      " };
-        let row: Vec<String> = (0..3)
-            .map(|k| format!("{:>9.5} ±{:.5}", model.a[j][k], a_se[j][k]))
-            .collect();
-        let _ = writeln!(out, "{prefix}[{}]", row.join("  "));
-    }
-    let b: Vec<String> = (0..3)
-        .map(|k| format!("{:.3} ±{:.3}", model.b_ut[k], b_se[k]))
+    let cells: Vec<Vec<String>> = (0..3)
+        .map(|j| (0..3).map(|k| fmt_se(model.a[j][k], a_se[j][k])).collect())
         .collect();
+    let width = cells
+        .iter()
+        .flatten()
+        .map(|c| c.chars().count())
+        .max()
+        .unwrap_or(0);
+    for (j, row) in cells.iter().enumerate() {
+        let prefix = if j == 0 { "  A = " } else { "      " };
+        let row: Vec<String> = row.iter().map(|c| format!("{c:>width$}")).collect();
+        let _ = writeln!(out, "{prefix}[{}]", row.join("   "));
+    }
+    let b: Vec<String> = (0..3).map(|k| fmt_se(model.b_ut[k], b_se[k])).collect();
     let centre = magcal_calib::scalar::centre(&model.a, model.b_ut);
     let _ = writeln!(
         out,
@@ -81,12 +249,12 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
     };
     let _ = writeln!(
         out,
-        "  residual RMS {rms:.3} µT {what}, noise floor {floor:.3} µT (×{:.2})",
+        "  residual RMS {rms:.3} µT {what}, the sensor's noise {floor:.3} µT (×{:.2})",
         rms / floor
     );
     let cov = match &cal.fit {
-        crate::calibrate::Fit::Vector(v) => v.coverage,
-        crate::calibrate::Fit::Scalar(s) => s.coverage,
+        Fit::Vector(v) => v.coverage,
+        Fit::Scalar(s) => s.coverage,
     };
     let _ = writeln!(
         out,
@@ -105,25 +273,36 @@ pub fn summary(cal: &Calibration, recording: &str) -> String {
     out
 }
 
+/// Whether an effect lowers the residual on data the fit did not see enough to notice.
+fn noticeable(e: &FoundEffect) -> bool {
+    e.holdout_rms_before_ut - e.holdout_rms_after_ut >= NOTICEABLE_GAIN * e.holdout_rms_before_ut
+}
+
 /// The diagnosis in a few lines.
 fn diagnosis(d: &Diagnosis) -> String {
     let mut out = String::new();
     let verdict = match d.verdict {
-        Verdict::Consistent => {
+        Finding::Consistent => {
             "consistent: the residual is noise; nothing this recording can show is left out"
         }
-        Verdict::Mismatch if d.effects.is_empty() => {
+        Finding::Mismatch if d.effects.is_empty() => {
             "mismatch: the residual is above the noise, and no effect of the \
              catalogue explains it"
         }
-        Verdict::Mismatch => "mismatch",
+        Finding::Mismatch => "mismatch",
     };
     let _ = writeln!(out, "diagnosis: {verdict}");
     let l = &d.located;
-    if !l.axes.is_empty()
-        || !l.segments.is_empty()
-        || l.channel.is_some()
-        || l.orientation.is_some()
+    let channel = l
+        .channel
+        .as_ref()
+        .filter(|_| l.channel_share >= CHANNEL_SHARE_SHOWN);
+    // Where the residual departs from the noise is only worth saying when the diagnosis says it does.
+    if d.verdict == Finding::Mismatch
+        && (!l.axes.is_empty()
+            || !l.segments.is_empty()
+            || channel.is_some()
+            || l.orientation.is_some())
     {
         let mut parts = Vec::new();
         if !l.axes.is_empty() {
@@ -143,7 +322,7 @@ fn diagnosis(d: &Diagnosis) -> String {
                 o.direction, o.rms_ut, o.elsewhere_rms_ut
             ));
         }
-        if let Some(c) = &l.channel {
+        if let Some(c) = channel {
             parts.push(format!(
                 "follows {c} ({:.0} % of the residual's variance)",
                 100.0 * l.channel_share
@@ -151,8 +330,29 @@ fn diagnosis(d: &Diagnosis) -> String {
         }
         let _ = writeln!(out, "  located: {}", parts.join("; "));
     }
-    for e in &d.effects {
+    let (shown, small): (Vec<&FoundEffect>, Vec<&FoundEffect>) =
+        d.effects.iter().partition(|e| noticeable(e));
+    for e in &shown {
         let _ = writeln!(out, "  found {}: {}", e.effect.id(), e.explanation);
+    }
+    if !small.is_empty() {
+        let list: Vec<String> = small
+            .iter()
+            .map(|e| {
+                format!(
+                    "{} ({:.3} → {:.3} µT)",
+                    e.effect.id(),
+                    e.holdout_rms_before_ut,
+                    e.holdout_rms_after_ut
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "  also modelled, too small to notice (under {:.0} % on data the fit did not see): {}",
+            100.0 * NOTICEABLE_GAIN,
+            list.join(", ")
+        );
     }
     for a in &d.ambiguous {
         let _ = writeln!(
@@ -164,7 +364,7 @@ fn diagnosis(d: &Diagnosis) -> String {
     if !d.effects.is_empty() {
         let _ = writeln!(
             out,
-            "  model: residual {:.3} → {:.3} µT, held-out {:.3} → {:.3} µT, noise floor {:.3} µT",
+            "  model: residual {:.3} → {:.3} µT, on data the fit did not see {:.3} → {:.3} µT, noise {:.3} µT",
             d.base.rms_ut,
             d.extended.rms_ut,
             d.base.holdout_rms_ut,
@@ -172,13 +372,29 @@ fn diagnosis(d: &Diagnosis) -> String {
             d.noise_floor_ut
         );
     }
-    let untestable: Vec<String> = d
-        .untestable
-        .iter()
-        .map(|u| format!("{} ({})", u.id, u.why))
-        .collect();
-    if !untestable.is_empty() {
-        let _ = writeln!(out, "  not tested: {}", untestable.join("; "));
+    if !d.untestable.is_empty() {
+        let _ = writeln!(
+            out,
+            "  not tested: {} effects this recording cannot show (which and why: the --report JSON)",
+            d.untestable.len()
+        );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn standard_errors_have_two_significant_digits() {
+        assert_eq!(fmt_se(0.975_72, 0.002_11), "0.9757 ±0.0021");
+        assert_eq!(fmt_se(-139.961, 0.166), "-139.96 ±0.17");
+        assert_eq!(fmt_se(12.34, 1.5), "12.3 ±1.5");
+        assert_eq!(fmt_se(1234.5, 25.0), "1234 ±25");
+        assert_eq!(fmt_se(0.5, 0.000_012_3), "0.500000 ±0.000012");
+        assert_eq!(fmt_se(0.002_016, 0.000_099_97), "0.00202 ±0.00010");
+        assert_eq!(fmt_se(1.0, 0.0), "1.00000 (no standard error)");
+        assert!(!fmt_se(0.97, 1e-9).contains("±0.0000 "));
+    }
 }

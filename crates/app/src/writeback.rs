@@ -70,22 +70,23 @@ pub enum WriteBackError {
 
 /// Writes a fitted calibration's `A` and `b` to the device and verifies it; the field magnitude is the one the fit
 /// used (for a scalar fit without one, the fitted radius). Body-fixed corrections in the model stay in the
-/// parameters file: no device here can hold them, and a line says so.
+/// parameters file: no device here can hold them, so the device gets the base fit (`A` and `b` fitted without them,
+/// [`crate::verdict::target_model`]), and a line says so.
 pub fn write_back_calibration(
     spec: &DeviceSpec,
     cal: &Calibration,
 ) -> Result<Vec<String>, WriteBackError> {
-    let model = cal.model();
+    let model = crate::verdict::target_model(cal);
     let field_ut = cal.field.magnitude().or(match &cal.fit {
         Fit::Scalar(s) => Some(s.field_ut),
         Fit::Vector(_) => None,
     });
     let mut lines = write_back(spec, &model.a, &model.b_ut, field_ut)?;
-    let corrections = model.corrections().count();
+    let corrections = cal.model().corrections().count();
     if corrections > 0 {
         lines.push(format!(
-            "  the model's {corrections} body-fixed correction(s) cannot be held by the device: apply them from the \
-             parameters file"
+            "  the model's {corrections} body-fixed correction(s) cannot be held by the device: it got A and b fitted \
+             without them; apply them from the parameters file"
         ));
     }
     Ok(lines)

@@ -1,0 +1,366 @@
+//! Applying a parameters file to a recording (`magcal-apply`): the calibrated readings, and how well the parameters
+//! fit this recording — the check of a calibration on a second recording.
+//!
+//! The residual is measured against what the recording offers: the expected field per sample (an attitude
+//! reference plus the world field, or `rx,ry,rz`), or else the field magnitude. With an attitude reference the
+//! heading error is also *measured*, sample by sample, as a tilt-compensated compass with a perfect attitude would
+//! see it. The heading figures over 360 level headings and the verdict follow [`crate::heading`] and
+//! [`crate::verdict`], with this recording's residual and noise (the parameters' own uncertainty is not in a
+//! parameters file, so it is not included).
+
+use magcal_calib::effects::EffectId;
+use magcal_calib::noise;
+use magcal_calib::{Inputs, Model, frames};
+use magcal_recording::Recording;
+
+use crate::calibrate::expected_field;
+use crate::field::ReferenceField;
+use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
+use crate::params::ParamsFile;
+use crate::verdict::{Grade, Hints, Verdict, judge, judge_without_direction};
+
+/// What the residual is measured against.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Against {
+    /// The expected field per sample: residual per axis.
+    Vector,
+    /// The field magnitude: residual of |B|.
+    Magnitude {
+        /// The magnitude, µT.
+        field_ut: f64,
+        /// Whether it was known (otherwise the mean calibrated magnitude of this recording).
+        known: bool,
+    },
+}
+
+/// The heading error measured sample by sample against the attitude reference, degrees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeasuredHeading {
+    /// RMS over the samples, raw readings used as if calibrated.
+    pub raw_rms_deg: f64,
+    /// RMS over the samples, calibrated.
+    pub rms_deg: f64,
+    /// 95 % of the calibrated samples are within this, degrees.
+    pub p95_deg: f64,
+}
+
+/// A parameters file applied to a recording.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Check {
+    /// The calibrated field per row, µT (NaN where a channel a correction needs is missing).
+    pub calibrated_ut: Vec<[f64; 3]>,
+    /// What the residual is measured against.
+    pub against: Against,
+    /// Rows measured.
+    pub samples_used: usize,
+    /// Residual RMS of the calibrated readings, µT (per axis, or of |B|).
+    pub residual_rms_ut: f64,
+    /// The same for the raw readings used as if calibrated, µT.
+    pub raw_residual_rms_ut: f64,
+    /// The recording's noise floor in calibrated units, µT.
+    pub noise_floor_ut: f64,
+    /// Measured against the attitude reference, when there is one.
+    pub measured: Option<MeasuredHeading>,
+    /// Over 360 level headings, when the field's direction is known.
+    pub heading: Option<HeadingErrors>,
+    /// The verdict.
+    pub verdict: Verdict,
+}
+
+/// Why a parameters file cannot be applied to a recording.
+#[derive(Debug, thiserror::Error)]
+pub enum ApplyError {
+    /// The model needs a channel the recording lacks.
+    #[error("the parameters need {0}, which this recording does not have")]
+    MissingChannel(String),
+}
+
+/// The model of `params` for `rec`'s channels.
+pub fn model_for(params: &ParamsFile, rec: &Recording) -> Result<Model, ApplyError> {
+    let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
+    let model = params
+        .model(&channels)
+        .map_err(ApplyError::MissingChannel)?;
+    let needs_temp = model.corrections().any(|e| {
+        matches!(
+            e.id(),
+            EffectId::TemperatureBias | EffectId::TemperatureScale
+        )
+    });
+    if needs_temp && rec.temp_c.is_none() {
+        return Err(ApplyError::MissingChannel(
+            "a temperature column (temp) for their temperature correction".to_owned(),
+        ));
+    }
+    Ok(model)
+}
+
+/// Applies `model` to every row of `rec`.
+pub fn calibrate_rows(model: &Model, rec: &Recording) -> Vec<[f64; 3]> {
+    let mut currents = vec![0.0; rec.currents.len()];
+    (0..rec.len())
+        .map(|i| {
+            for (c, ch) in currents.iter_mut().zip(&rec.currents) {
+                *c = ch.values[i];
+            }
+            let inputs = Inputs {
+                t_s: rec.t_s.as_ref().map_or(0.0, |t| t[i]),
+                temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[i]),
+                currents_a: &currents,
+            };
+            model.apply(rec.mag_ut[i], &inputs)
+        })
+        .collect()
+}
+
+fn rms(sum_sq: f64, n: usize) -> f64 {
+    (sum_sq / n.max(1) as f64).sqrt()
+}
+
+/// The angle of a NED vector's horizontal part east of north, radians.
+fn azimuth(v: [f64; 3]) -> f64 {
+    v[1].atan2(v[0])
+}
+
+fn wrap_deg(x: f64) -> f64 {
+    (x + 180.0).rem_euclid(360.0) - 180.0
+}
+
+/// How far calibrated readings are from a recording's reference.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Misfit {
+    /// What the residual is measured against.
+    pub against: Against,
+    /// Residual RMS of the calibrated readings, µT (per axis, or of |B|).
+    pub residual_rms_ut: f64,
+    /// The same for the raw readings used as if calibrated, µT.
+    pub raw_residual_rms_ut: f64,
+    /// Rows measured.
+    pub samples_used: usize,
+}
+
+/// The misfit of `calibrated_ut` (one per row of `rec`; non-finite rows are left out) against the expected field per
+/// row when given, otherwise against the magnitude `field_ut` (or, without it, the mean calibrated magnitude).
+pub fn misfit(
+    calibrated_ut: &[[f64; 3]],
+    rec: &Recording,
+    expected: Option<&[[f64; 3]]>,
+    field_ut: Option<f64>,
+) -> Misfit {
+    let ok = |i: usize| calibrated_ut[i].iter().all(|v| v.is_finite());
+    match expected {
+        Some(e) => {
+            let rows: Vec<usize> = (0..rec.len())
+                .filter(|&i| ok(i) && e[i].iter().all(|v| v.is_finite()))
+                .collect();
+            let ss = |x: &dyn Fn(usize) -> [f64; 3]| {
+                rows.iter()
+                    .map(|&i| {
+                        let d = frames::sub(x(i), e[i]);
+                        frames::dot(d, d)
+                    })
+                    .sum::<f64>()
+            };
+            Misfit {
+                against: Against::Vector,
+                residual_rms_ut: rms(ss(&|i| calibrated_ut[i]), 3 * rows.len()),
+                raw_residual_rms_ut: rms(ss(&|i| rec.mag_ut[i]), 3 * rows.len()),
+                samples_used: rows.len(),
+            }
+        }
+        None => {
+            let rows: Vec<usize> = (0..rec.len()).filter(|&i| ok(i)).collect();
+            let norms: Vec<f64> = rows
+                .iter()
+                .map(|&i| frames::norm(calibrated_ut[i]))
+                .collect();
+            let (field_ut, known) = match field_ut {
+                Some(f) => (f, true),
+                None => (norms.iter().sum::<f64>() / norms.len().max(1) as f64, false),
+            };
+            let raw_ss: f64 = rows
+                .iter()
+                .map(|&i| (frames::norm(rec.mag_ut[i]) - field_ut).powi(2))
+                .sum();
+            Misfit {
+                against: Against::Magnitude { field_ut, known },
+                residual_rms_ut: rms(
+                    norms.iter().map(|n| (n - field_ut).powi(2)).sum(),
+                    rows.len(),
+                ),
+                raw_residual_rms_ut: rms(raw_ss, rows.len()),
+                samples_used: rows.len(),
+            }
+        }
+    }
+}
+
+/// Applies `params` to `rec` and measures the fit; `field` is the world field (from the command line or the
+/// recording's metadata).
+pub fn check(
+    params: &ParamsFile,
+    rec: &Recording,
+    field: &ReferenceField,
+) -> Result<Check, ApplyError> {
+    let model = model_for(params, rec)?;
+    let calibrated_ut = calibrate_rows(&model, rec);
+    let expected = expected_field(rec, field).ok();
+    let Misfit {
+        against,
+        residual_rms_ut,
+        raw_residual_rms_ut,
+        samples_used,
+    } = misfit(&calibrated_ut, rec, expected.as_deref(), field.magnitude());
+    let noise_floor_ut =
+        noise::estimate(&rec.mag_ut, expected.as_deref()).calibrated_rms_ut(&model.a);
+    let measured = match (&rec.quat, field.vector()) {
+        (Some(q), Some(f)) => measured_heading(q, f, &rec.mag_ut, &calibrated_ut),
+        _ => None,
+    };
+    let magnitude_ut = match &against {
+        Against::Magnitude { field_ut, .. } => *field_ut,
+        Against::Vector => field.magnitude().unwrap_or_else(|| {
+            let e = expected.as_deref().unwrap_or_default();
+            let n: Vec<f64> = e
+                .iter()
+                .map(|v| frames::norm(*v))
+                .filter(|n| n.is_finite())
+                .collect();
+            n.iter().sum::<f64>() / n.len().max(1) as f64
+        }),
+    };
+    let input = |field| HeadingInput {
+        a: model.a,
+        b_ut: model.b_ut,
+        field,
+        uncertainty: None,
+        residual_rms_ut,
+        noise_floor_ut,
+    };
+    let hints = Hints {
+        vector: against == Against::Vector,
+        spans_s: Vec::new(),
+        coverage: 1.0,
+        diagnosis_skipped: false,
+    };
+    let (heading, mut verdict) = match field.vector() {
+        Some(f) => {
+            let (_, inclination_deg, _) = frames::field_angles(f);
+            let h = heading_errors(&input(LocalField::new(inclination_deg, magnitude_ut)));
+            let v = judge(&h, &hints);
+            (Some(h), v)
+        }
+        None => {
+            let lower = heading_errors(&input(LocalField::new(0.0, magnitude_ut)));
+            (None, judge_without_direction(lower.left.worst_deg, &hints))
+        }
+    };
+    if verdict.grade == Grade::Good {
+        "use them: they hold on this recording too".clone_into(&mut verdict.todo);
+    }
+    Ok(Check {
+        calibrated_ut,
+        against,
+        samples_used,
+        residual_rms_ut,
+        raw_residual_rms_ut,
+        noise_floor_ut,
+        measured,
+        heading,
+        verdict,
+    })
+}
+
+/// The heading error per sample with the attitude: the azimuth of the reading turned into NED minus the field's.
+fn measured_heading(
+    quat: &[[f64; 4]],
+    field_ned_ut: [f64; 3],
+    raw_ut: &[[f64; 3]],
+    calibrated_ut: &[[f64; 3]],
+) -> Option<MeasuredHeading> {
+    let north = azimuth(field_ned_ut);
+    let mut raw_errors = Vec::new();
+    let mut errors = Vec::new();
+    for ((q, raw), cal) in quat.iter().zip(raw_ut).zip(calibrated_ut) {
+        if !(q.iter().all(|v| v.is_finite()) && cal.iter().all(|v| v.is_finite())) {
+            continue;
+        }
+        let r = frames::quat_to_matrix(*q);
+        let err = |m: [f64; 3]| -wrap_deg((azimuth(frames::mat_vec(&r, m)) - north).to_degrees());
+        raw_errors.push(err(*raw));
+        errors.push(err(*cal));
+    }
+    if errors.is_empty() {
+        return None;
+    }
+    let rms_deg = |e: &[f64]| rms(e.iter().map(|x| x * x).sum(), e.len());
+    let mut abs: Vec<f64> = errors.iter().map(|e| e.abs()).collect();
+    abs.sort_by(f64::total_cmp);
+    let p95_deg = abs[((abs.len() as f64 * 0.95).ceil() as usize).clamp(1, abs.len()) - 1];
+    Some(MeasuredHeading {
+        raw_rms_deg: rms_deg(&raw_errors),
+        rms_deg: rms_deg(&errors),
+        p95_deg,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use magcal_sim::{ChipModel, Scenario, SensorTruth, Trajectory, simulate};
+
+    /// Parameters fitted on one simulated recording of a sensor fit a second recording of the same sensor (another
+    /// seed for the motion and the noise): the residual is at the noise floor and the heading error measured with
+    /// the attitude is small; the same parameters on another sensor do not fit.
+    #[test]
+    fn the_true_parameters_fit_a_second_recording_and_not_another_sensor() {
+        let chip = ChipModel::by_name("lis3mdl").unwrap();
+        let truth = SensorTruth::mounted(
+            [[1.08, 0.03, -0.01], [0.02, 0.95, 0.04], [-0.03, 0.01, 1.12]],
+            [12.0, -30.0, 8.0],
+            [0.02, -0.03, 0.01],
+        );
+        let record = |seed: u64, sensor: SensorTruth| {
+            let mut s = Scenario::new(
+                &chip,
+                Trajectory::Tumble {
+                    duration_s: 30.0,
+                    rate_rad_s: 1.0,
+                },
+                seed,
+            );
+            s.sensor = sensor;
+            simulate(&s).unwrap().recording
+        };
+        let params = ParamsFile::new("vector", &Model::linear(truth.a, truth.b_ut), &[]);
+        let second = record(8, truth);
+        let field = ReferenceField::Vector {
+            field_ned_ut: second.meta.field_ned_ut.unwrap(),
+            source: "test".into(),
+        };
+        let c = check(&params, &second, &field).unwrap();
+        assert_eq!(c.against, Against::Vector);
+        assert!(
+            (c.residual_rms_ut / c.noise_floor_ut - 1.0).abs() < 0.1,
+            "{} vs {}",
+            c.residual_rms_ut,
+            c.noise_floor_ut
+        );
+        // With the true parameters, what is measured sample by sample is the noise.
+        let m = c.measured.unwrap();
+        let noise_deg = c.heading.as_ref().unwrap().noise_deg;
+        assert!(
+            (m.rms_deg / noise_deg - 1.0).abs() < 0.3 && m.raw_rms_deg > 10.0,
+            "{m:?} against one reading's noise {noise_deg}°"
+        );
+        assert_eq!(c.verdict.grade, Grade::Good, "{:?}", c.verdict);
+
+        let other = record(
+            9,
+            SensorTruth::mounted(truth.a, [-20.0, 10.0, 5.0], [0.0; 3]),
+        );
+        let c = check(&params, &other, &field).unwrap();
+        assert!(c.residual_rms_ut > 10.0 * c.noise_floor_ut, "{c:?}");
+        assert_eq!(c.verdict.grade, Grade::Redo);
+    }
+}

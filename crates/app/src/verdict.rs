@@ -1,0 +1,328 @@
+//! The verdict: good, usable or redo, from the heading error the calibration leaves ([`crate::heading`]), with the
+//! reason and the one thing to do.
+//!
+//! The gate: **good** when the heading error left is at most [`GOOD_DEG`] at its worst heading, **usable** up to
+//! [`USABLE_DEG`], **redo** above. What is left is built from the fit's standard errors and the part of the residual
+//! the noise measured in the recording does not account for, at the recording's own field, so the gate follows the
+//! sensor's noise and the local field; no field range or offset limit is assumed. Without the direction of the local
+//! field the heading error cannot be stated: the verdict is then at best usable, and redo when even the most
+//! favourable direction (a horizontal field) leaves more than [`USABLE_DEG`]. A fit the last checks warn about
+//! (units, gains, field range, a huge hard iron: [`crate::checks`]) is at best usable.
+
+use magcal_calib::frames;
+use magcal_recording::Recording;
+
+use crate::calibrate::{Calibration, Fit};
+use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
+use crate::uncertainty::FieldUncertainty;
+
+/// The most heading error a good calibration leaves, degrees (worst heading): about what a hand-held compass can be
+/// read to.
+pub const GOOD_DEG: f64 = 1.0;
+/// The most a usable one leaves, degrees: about what ArduPilot's default fitness limit (16 mGauss of residual)
+/// allows in a 20 µT horizontal field, and MotionCal's 5 % fit error at mid latitudes.
+pub const USABLE_DEG: f64 = 5.0;
+
+/// The grade, worst first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
+pub enum Grade {
+    /// Record again.
+    #[value(skip)]
+    Redo,
+    /// Usable, with a stated limitation.
+    Usable,
+    /// Good.
+    Good,
+}
+
+impl Grade {
+    /// In words, as printed.
+    pub fn name(self) -> &'static str {
+        match self {
+            Grade::Redo => "redo",
+            Grade::Usable => "usable",
+            Grade::Good => "good",
+        }
+    }
+}
+
+/// The verdict on a calibration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Verdict {
+    /// Good, usable or redo.
+    pub grade: Grade,
+    /// Why, in a sentence.
+    pub reason: String,
+    /// The one thing to do next.
+    pub todo: String,
+}
+
+/// The heading figures and the verdict of a calibration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Assessment {
+    /// The heading figures the verdict is on, when the local field's direction is known.
+    pub heading: Option<HeadingErrors>,
+    /// When the final model has body-fixed corrections: the number of them, and the heading figures of the base fit
+    /// (`A` and `b` fitted without them: what exports and devices get), when the field's direction is known.
+    pub without_corrections: Option<(usize, Option<HeadingErrors>)>,
+    /// Whether `heading` and the verdict are of the base fit (the target cannot hold the corrections).
+    pub linear_only: bool,
+    /// The verdict.
+    pub verdict: Verdict,
+}
+
+/// What the verdict's advice can point at.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Hints {
+    /// The recording had an attitude reference (vector method).
+    pub vector: bool,
+    /// Time spans where the misfit was located, s, when they are a small part of the recording.
+    pub spans_s: Vec<(f64, f64)>,
+    /// Fraction of the sphere of directions covered.
+    pub coverage: f64,
+    /// The diagnosis was skipped (`--no-diagnose`): running it would say what the model leaves out.
+    pub diagnosis_skipped: bool,
+}
+
+/// Degrees in two significant figures below 10, whole degrees above.
+pub fn fmt_deg(x: f64) -> String {
+    if x >= 9.95 {
+        format!("{x:.0}°")
+    } else if x >= 0.995 {
+        format!("{x:.1}°")
+    } else if x >= 0.0995 {
+        format!("{x:.2}°")
+    } else {
+        format!("{x:.3}°")
+    }
+}
+
+/// The verdict from the heading figures.
+pub fn judge(h: &HeadingErrors, hints: &Hints) -> Verdict {
+    let left = h.left.worst_deg;
+    let grade = if left <= GOOD_DEG {
+        Grade::Good
+    } else if left <= USABLE_DEG {
+        Grade::Usable
+    } else {
+        Grade::Redo
+    };
+    if grade == Grade::Good {
+        return Verdict {
+            grade,
+            reason: format!(
+                "{} of heading error left at worst (the raw readings were off by up to {})",
+                fmt_deg(left),
+                fmt_deg(h.before.worst_deg)
+            ),
+            todo: "check it on a second recording with magcal-apply".to_owned(),
+        };
+    }
+    let unexplained_deg = (h.unexplained_ut / h.field.horizontal_ut).to_degrees();
+    let (reason, todo) = if unexplained_deg >= h.parameters_deg {
+        let why = format!(
+            "{} of heading error left: {} by {:.2} µT more than the sensor's noise explains",
+            fmt_deg(left),
+            if hints.vector {
+                "the readings and the attitude reference disagree"
+            } else {
+                "the readings depart from a sphere"
+            },
+            h.unexplained_ut
+        );
+        let todo = match hints.spans_s.first() {
+            _ if hints.diagnosis_skipped => {
+                "run the fit without --no-diagnose: the diagnosis finds what the model leaves out".to_owned()
+            }
+            Some(&(t0, t1)) => format!(
+                "record again with magnets, metal and cables away from the sensor (the misfit is worst at {t0:.0}–{t1:.0} s{})",
+                if hints.spans_s.len() > 1 {
+                    format!(" and {} more spans", hints.spans_s.len() - 1)
+                } else {
+                    String::new()
+                }
+            ),
+            None if hints.vector => {
+                "check the attitude reference (its axes and timing against the sensor's, the local field), then \
+                 record again away from magnets and metal"
+                    .to_owned()
+            }
+            None => "record again away from magnets, metal and cables, turning the sensor slowly through every \
+                     direction"
+                .to_owned(),
+        };
+        (why, todo)
+    } else {
+        (
+            format!(
+                "{} of heading error left: the fit itself is uncertain ({:.0} % of the directions covered)",
+                fmt_deg(left),
+                100.0 * hints.coverage
+            ),
+            "record again for longer, turning the sensor through every direction".to_owned(),
+        )
+    };
+    Verdict {
+        grade,
+        reason,
+        todo,
+    }
+}
+
+/// The verdict when the local field's direction is unknown: `lower_bound_deg` is what is left with the whole field
+/// horizontal (the least a compass can be off by).
+pub fn judge_without_direction(lower_bound_deg: f64, hints: &Hints) -> Verdict {
+    let todo =
+        "give the local field: --location LAT,LON,ALT --date YYYY-MM-DD (or --field-ned N,E,D)"
+            .to_owned();
+    if lower_bound_deg > USABLE_DEG {
+        return Verdict {
+            grade: Grade::Redo,
+            reason: format!(
+                "at least {} of heading error left, whatever the local field",
+                fmt_deg(lower_bound_deg)
+            ),
+            todo: if hints.vector {
+                "record again away from magnets and metal, and check the attitude reference"
+                    .to_owned()
+            } else {
+                "record again away from magnets, metal and cables, turning the sensor slowly through every direction"
+                    .to_owned()
+            },
+        };
+    }
+    Verdict {
+        grade: Grade::Usable,
+        reason: "the heading error depends on the local field's inclination, which this recording does not give"
+            .to_owned(),
+        todo,
+    }
+}
+
+/// The magnitude of the field in the model's calibrated units, µT: the field vector's, the scalar fit's target, or
+/// the mean of the expected field (`rx,ry,rz`).
+fn model_field_ut(cal: &Calibration, rec: &Recording) -> Option<f64> {
+    match &cal.fit {
+        Fit::Scalar(s) => Some(s.field_ut),
+        Fit::Vector(_) => cal.field.magnitude().or_else(|| {
+            let r = rec.ref_ut.as_ref()?;
+            let norms: Vec<f64> = r
+                .iter()
+                .map(|v| frames::norm(*v))
+                .filter(|n| n.is_finite())
+                .collect();
+            (!norms.is_empty()).then(|| norms.iter().sum::<f64>() / norms.len() as f64)
+        }),
+    }
+}
+
+/// The model an export or a device gets: the final model when it has no body-fixed corrections, the base fit
+/// otherwise. A target that holds `A` and `b` only needs the best `A` and `b` without the corrections; the final
+/// model's `A` and `b` were fitted together with them and, used alone, can leave far more (a nonlinearity absorbs
+/// part of the scale).
+pub fn target_model(cal: &Calibration) -> magcal_calib::Model {
+    let model = cal.model();
+    if model.corrections().count() > 0 {
+        cal.base_model()
+    } else {
+        model
+    }
+}
+
+/// Spans that cover less than this share of the recording are worth pointing at.
+const SPAN_SHARE: f64 = 0.5;
+
+/// The heading figures and verdict of a calibration of `rec`. With `linear_only` (the calibration goes to an export
+/// or a device, which hold `A` and `b` only) and a final model with corrections, they are of the base fit: `A` and
+/// `b` fitted without the corrections, with the residual they leave ([`target_model`]).
+pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessment {
+    let model = cal.model();
+    let uncertainty = match &cal.fit {
+        Fit::Vector(v) => Some(FieldUncertainty::vector(v)),
+        Fit::Scalar(s) => Some(FieldUncertainty::scalar(s)),
+    };
+    let (residual_rms_ut, noise_floor_ut) = match &cal.diagnosis {
+        Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
+        None => (cal.residual_rms_ut, cal.noise_floor_ut),
+    };
+    let spans_s: Vec<(f64, f64)> = cal.diagnosis.as_ref().map_or_else(Vec::new, |d| {
+        d.located
+            .segments
+            .iter()
+            .map(|s| (s.t0_s, s.t1_s))
+            .collect()
+    });
+    let duration_s = rec.t_s.as_ref().map_or(0.0, |t| {
+        t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0)
+    });
+    let covered: f64 = spans_s.iter().map(|(a, b)| b - a).sum();
+    let hints = Hints {
+        vector: matches!(cal.fit, Fit::Vector(_)),
+        spans_s: if covered < SPAN_SHARE * duration_s {
+            spans_s
+        } else {
+            Vec::new()
+        },
+        coverage: cal.sphere_coverage,
+        diagnosis_skipped: cal.diagnosis.is_none(),
+    };
+    let magnitude_ut = model_field_ut(cal, rec).unwrap_or(f64::NAN);
+    let direction = cal.field.vector().map(|f| frames::field_angles(f).1);
+    let figures = |a, b_ut, residual_rms_ut, noise_floor_ut| {
+        let input = |field| HeadingInput {
+            a,
+            b_ut,
+            field,
+            uncertainty: uncertainty.as_ref(),
+            residual_rms_ut,
+            noise_floor_ut,
+        };
+        match direction {
+            Some(inclination_deg) => Ok(heading_errors(&input(LocalField::new(
+                inclination_deg,
+                magnitude_ut,
+            )))),
+            // The least error any field can give: all of it horizontal.
+            None => Err(heading_errors(&input(LocalField::new(0.0, magnitude_ut)))
+                .left
+                .worst_deg),
+        }
+    };
+    let corrections = model.corrections().count();
+    let without_corrections = (corrections > 0).then(|| {
+        let base = cal.base_model();
+        (
+            corrections,
+            figures(base.a, base.b_ut, cal.residual_rms_ut, cal.noise_floor_ut),
+        )
+    });
+    let linear_only = linear_only && without_corrections.is_some();
+    let chosen = match (&without_corrections, linear_only) {
+        (Some((_, f)), true) => f.clone(),
+        _ => figures(model.a, model.b_ut, residual_rms_ut, noise_floor_ut),
+    };
+    let mut verdict = match &chosen {
+        Ok(h) => judge(h, &hints),
+        Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
+    };
+    // A fit the last checks warn about (units, gains, field range, a huge hard iron) is not good, whatever its
+    // heading figures: the warning says what is wrong and what would fix it.
+    if verdict.grade == Grade::Good && !cal.warnings.is_empty() {
+        verdict = Verdict {
+            grade: Grade::Usable,
+            reason: format!(
+                "{}, but the fit carries {} warning(s)",
+                verdict.reason,
+                cal.warnings.len()
+            ),
+            todo: "read the WARNING below: it says what looks wrong and what would fix it"
+                .to_owned(),
+        };
+    }
+    Assessment {
+        heading: chosen.ok(),
+        without_corrections: without_corrections.map(|(n, f)| (n, f.ok())),
+        linear_only,
+        verdict,
+    }
+}
