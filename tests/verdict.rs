@@ -75,7 +75,7 @@ fn the_summary_opens_with_the_heading_error_and_a_verdict() {
         ),
         (
             "redo.csv",
-            &["--effect-rms", "bias_drift:6"],
+            &["--effect-rms", "bias_drift:10"],
             &["--no-diagnose"],
             "REDO",
         ),
