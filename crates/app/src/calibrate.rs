@@ -196,13 +196,10 @@ pub struct ExcludedSpan {
     pub excluded: usize,
 }
 
-/// Excluded rows closer than this in time are one span, s.
-const SPAN_GAP_S: f64 = 0.5;
-
 impl RobustSummary {
     fn of(kept: Vec<bool>, scale_ut: f64, rec: &Recording) -> RobustSummary {
         let t = rec.t_s.as_deref();
-        let spans = robust::excluded_spans(&kept, t, SPAN_GAP_S)
+        let spans = robust::excluded_runs(&kept)
             .into_iter()
             .map(|(start, end)| ExcludedSpan {
                 start,
@@ -321,11 +318,14 @@ pub fn calibrate(
         Method::Vector => {
             let expected = expected_field(rec, &field)?;
             let noise = noise::estimate(&rec.mag_ut, Some(&expected));
-            let r = robust::fit(&VectorProblem {
-                raw_ut: Cow::Borrowed(&rec.mag_ut),
-                expected_ut: Cow::Owned(expected),
-                raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-            })?;
+            let r = robust::fit(
+                &VectorProblem {
+                    raw_ut: Cow::Borrowed(&rec.mag_ut),
+                    expected_ut: Cow::Owned(expected),
+                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+                },
+                rec.t_s.as_deref(),
+            )?;
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
@@ -335,11 +335,14 @@ pub fn calibrate(
         }
         _ => {
             let noise = noise::estimate(&rec.mag_ut, None);
-            let r = robust::fit(&ScalarProblem {
-                raw_ut: Cow::Borrowed(&rec.mag_ut),
-                field_ut: field.magnitude(),
-                raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-            })?;
+            let r = robust::fit(
+                &ScalarProblem {
+                    raw_ut: Cow::Borrowed(&rec.mag_ut),
+                    field_ut: field.magnitude(),
+                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+                },
+                rec.t_s.as_deref(),
+            )?;
             let s = r.fit;
             notes.push(format!(
                 "rotation not observable: {}",

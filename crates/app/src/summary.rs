@@ -281,17 +281,35 @@ fn noticeable(e: &FoundEffect) -> bool {
 /// The diagnosis in a few lines.
 fn diagnosis(d: &Diagnosis) -> String {
     let mut out = String::new();
+    let reference = if d.reference_floor_ut > 0.5 * d.noise_floor_ut {
+        format!(
+            " (the residual beyond the sensor's noise, {:.2} µT, is the reference's own error)",
+            d.reference_floor_ut
+        )
+    } else {
+        String::new()
+    };
     let verdict = match d.verdict {
         Finding::Consistent => {
-            "consistent: the residual is noise; nothing this recording can show is left out"
+            format!("consistent: nothing this recording can show is left out{reference}")
         }
         Finding::Mismatch if d.effects.is_empty() => {
-            "mismatch: the residual is above the noise, and no effect of the \
-             catalogue explains it"
+            "mismatch: disturbances located, left out of the calibration".to_owned()
         }
-        Finding::Mismatch => "mismatch",
+        Finding::Mismatch => "mismatch".to_owned(),
     };
     let _ = writeln!(out, "diagnosis: {verdict}");
+    const SPANS_SHOWN: usize = 6;
+    for sp in d.spans.iter().take(SPANS_SHOWN) {
+        let _ = writeln!(out, "  disturbance {}", sp.explanation);
+    }
+    if d.spans.len() > SPANS_SHOWN {
+        let _ = writeln!(
+            out,
+            "  and {} more disturbances (all in the --report JSON)",
+            d.spans.len() - SPANS_SHOWN
+        );
+    }
     let l = &d.located;
     let channel = l
         .channel
@@ -299,22 +317,11 @@ fn diagnosis(d: &Diagnosis) -> String {
         .filter(|_| l.channel_share >= CHANNEL_SHARE_SHOWN);
     // Where the residual departs from the noise is only worth saying when the diagnosis says it does.
     if d.verdict == Finding::Mismatch
-        && (!l.axes.is_empty()
-            || !l.segments.is_empty()
-            || channel.is_some()
-            || l.orientation.is_some())
+        && (!l.axes.is_empty() || channel.is_some() || l.orientation.is_some())
     {
         let mut parts = Vec::new();
         if !l.axes.is_empty() {
             parts.push(format!("axes {}", l.axes.join(", ")));
-        }
-        if !l.segments.is_empty() {
-            let spans: Vec<String> = l
-                .segments
-                .iter()
-                .map(|s| format!("{:.1}–{:.1} s", s.t0_s, s.t1_s))
-                .collect();
-            parts.push(format!("spans {}", spans.join(", ")));
         }
         if let Some(o) = l.orientation {
             parts.push(format!(
@@ -361,15 +368,23 @@ fn diagnosis(d: &Diagnosis) -> String {
             a.why, a.experiment
         );
     }
+    for r in &d.rejected {
+        let _ = writeln!(out, "  not modelled, {}: {}", r.id, r.why);
+    }
     if !d.effects.is_empty() {
         let _ = writeln!(
             out,
-            "  model: residual {:.3} → {:.3} µT, on data the fit did not see {:.3} → {:.3} µT, noise {:.3} µT",
+            "  model: residual {:.3} → {:.3} µT, on data the fit did not see {:.3} → {:.3} µT, noise {:.3} µT{}",
             d.base.rms_ut,
             d.extended.rms_ut,
             d.base.holdout_rms_ut,
             d.extended.holdout_rms_ut,
-            d.noise_floor_ut
+            d.noise_floor_ut,
+            if reference.is_empty() {
+                String::new()
+            } else {
+                format!(", the reference's own error {:.3} µT", d.reference_floor_ut)
+            }
         );
     }
     if !d.untestable.is_empty() {

@@ -203,6 +203,27 @@ impl SphereGrid {
     }
 }
 
+/// Weights that keep any cell of direction from outweighing the rest: each sample's `base` weight, scaled down in a
+/// cell whose total exceeds twice the median occupied cell's so that it holds no more (MotionCal and ArduPilot thin
+/// their samples by such cells; a still stretch is one direction, however long). `cell` is each sample's cell of a
+/// grid of `cells` cells.
+pub fn capped_cell_weights(cell: &[usize], base: &[f64], cells: usize) -> Vec<f64> {
+    let mut count = vec![0.0; cells];
+    for (c, w) in cell.iter().zip(base) {
+        count[*c] += w;
+    }
+    let mut occupied: Vec<f64> = count.iter().copied().filter(|c| *c > 0.0).collect();
+    if occupied.is_empty() {
+        return base.to_vec();
+    }
+    let mid = occupied.len() / 2;
+    let cap = 2.0 * *occupied.select_nth_unstable_by(mid, f64::total_cmp).1;
+    cell.iter()
+        .zip(base)
+        .map(|(c, w)| w * (cap / count[*c]).min(1.0))
+        .collect()
+}
+
 /// Fraction of the sphere of directions visited, on a [`SphereGrid`] of about `cells` equal-area cells.
 pub fn sphere_fraction(directions: impl IntoIterator<Item = [f64; 3]>, cells: usize) -> f64 {
     let grid = SphereGrid::new(cells);

@@ -11,14 +11,29 @@
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
 //!    plausible ones.
-//! 3. **On all samples**, a few reweighting passes from the best seed, then samples whose residual exceeds
-//!    [`GROSS_SIGMA`] times the scale are excluded and the rest fitted by plain (weighted 0/1) least squares. Without
-//!    gross disturbances nothing is excluded and the fit *is* the least-squares fit.
+//! 3. **On all samples**, a few reweighting passes from the best seed; then the samples whose residual exceeds
+//!    [`GROSS_SIGMA`] times the scale make spans — merged across gaps of up to [`SPAN_GAP_S`] and widened over
+//!    their ramps (neighbours above [`RAMP_SIGMA`]) — which are excluded, and the rest is fitted by plain (weighted
+//!    0/1) least squares; twice, with the spans of the new fit. A whole span goes, not only its gross samples: a
+//!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
+//!    samples in between are no cleaner. Without gross disturbances nothing is excluded and the fit *is* the
+//!    least-squares fit.
 
 use crate::FitError;
 use crate::frames::Mat3;
 use crate::model::Model;
 
+/// Gross samples closer than this in time are one span, s.
+pub const SPAN_GAP_S: f64 = 0.5;
+/// Without time, gross samples this close are one span.
+pub const SPAN_GAP_SAMPLES: usize = 5;
+/// A span's neighbours down to this many scales belong to it (the ramp of a magnet brought close by hand).
+pub const RAMP_SIGMA: f64 = 3.0;
+/// Neighbouring spans separated by less than this share of their mean length are one span: a magnet attached to a
+/// turning sensor shows in |B| only while the field points along it, and the lulls in between are no cleaner.
+pub const GAP_SHARE: f64 = 0.5;
+/// Passes of excluding the spans of the current fit and fitting again.
+const SPAN_PASSES: usize = 2;
 /// Seeds are fitted on a subsample of at most this many samples.
 pub const SEED_SAMPLES: usize = 8_000;
 /// A residual beyond this many standard deviations (per axis) of the scale is gross.
@@ -76,8 +91,8 @@ impl<F> Robust<F> {
     }
 }
 
-/// The robust fit of a problem (see the module docs).
-pub fn fit<P: RobustProblem>(problem: &P) -> Result<Robust<P::Fit>, FitError> {
+/// The robust fit of a problem (see the module docs); `t_s` is each sample's time, when known.
+pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<P::Fit>, FitError> {
     let n = problem.len();
     let stride = n.div_ceil(SEED_SAMPLES).max(1);
     let sub = (stride > 1).then(|| problem.every(stride));
@@ -111,31 +126,135 @@ pub fn fit<P: RobustProblem>(problem: &P) -> Result<Robust<P::Fit>, FitError> {
             residual_ut,
         });
     };
-    // On all samples: reweight from the best seed, then exclude what is gross and fit the rest plainly.
+    // On all samples: reweight from the best seed, then exclude the gross spans and fit the rest plainly.
     let mut fit = seed;
     let mut residual_ut = problem.residuals(&fit);
     for _ in 0..FULL_ITERATIONS {
         let w = biweight(&residual_ut, scale::<P>(&residual_ut));
         match problem.quick_fit(&w) {
-            Ok(f) => fit = f,
-            Err(_) => break,
+            Ok(f) if plausible(&P::model(&f).a) || !plausible(&P::model(&fit).a) => fit = f,
+            _ => break,
         }
         residual_ut = problem.residuals(&fit);
     }
-    let sigma_ut = scale::<P>(&residual_ut);
-    let kept: Vec<bool> = residual_ut
-        .iter()
-        .map(|e| !(e.is_finite() && *e > GROSS_SIGMA * sigma_ut))
-        .collect();
-    let weights: Vec<f64> = kept.iter().map(|k| if *k { 1.0 } else { 0.0 }).collect();
-    let fit = problem.final_fit(&weights)?;
-    let residual_ut = problem.residuals(&fit);
+    let mut sigma_ut = scale::<P>(&residual_ut);
+    let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
+    let mut final_fit = None;
+    for pass in 0..SPAN_PASSES {
+        let (f, k) = fit_outside(problem, &residual_ut, sigma_ut, t_s, kept)?;
+        residual_ut = problem.residuals(&f);
+        sigma_ut = scale::<P>(&residual_ut);
+        final_fit = Some(f);
+        let again = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
+        // The spans returned are those the final fit left out.
+        let settled = again == k;
+        kept = if settled || pass + 1 == SPAN_PASSES {
+            k
+        } else {
+            again
+        };
+        if settled {
+            break;
+        }
+    }
+    // Samples the fit cannot use inside a span are not excluded by it.
+    for (k, e) in kept.iter_mut().zip(&residual_ut) {
+        *k |= !e.is_finite();
+    }
     Ok(Robust {
-        fit,
+        fit: final_fit.expect("at least one pass"),
         kept,
         sigma_ut,
         residual_ut,
     })
+}
+
+/// The final fit without the samples not `kept`. Excluding a span must never leave the recording undetermined (its
+/// coverage is what a calibration stands on): if the fit without them is refused, the spans are taken again at
+/// twice the scale, and so on, down to excluding nothing.
+fn fit_outside<P: RobustProblem>(
+    problem: &P,
+    residual_ut: &[f64],
+    sigma_ut: f64,
+    t_s: Option<&[f64]>,
+    mut kept: Vec<bool>,
+) -> Result<(P::Fit, Vec<bool>), FitError> {
+    let mut factor = 1.0;
+    loop {
+        let weights: Vec<f64> = kept.iter().map(|k| if *k { 1.0 } else { 0.0 }).collect();
+        match problem.final_fit(&weights) {
+            Ok(f) => return Ok((f, kept)),
+            Err(e) if kept.iter().all(|k| *k) => return Err(e),
+            Err(_) => {
+                factor *= 2.0;
+                kept = outside(
+                    &gross_spans(residual_ut, factor * sigma_ut, t_s),
+                    kept.len(),
+                );
+            }
+        }
+    }
+}
+
+/// Per sample of `n`, whether it lies outside every span.
+pub fn outside(spans: &[(usize, usize)], n: usize) -> Vec<bool> {
+    let mut kept = vec![true; n];
+    for &(a, b) in spans {
+        kept[a..b].fill(false);
+    }
+    kept
+}
+
+/// The gross spans of residual sizes `e` against the scale `sigma` (per axis): the samples beyond [`GROSS_SIGMA`],
+/// merged across gaps of up to [`SPAN_GAP_S`] (or [`SPAN_GAP_SAMPLES`] without time), widened over their ramps
+/// (neighbours beyond [`RAMP_SIGMA`]), and merged across lulls shorter than [`GAP_SHARE`] of the mean of the spans around them,
+/// as sample ranges `[start, end)`.
+pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>) -> Vec<(usize, usize)> {
+    let gross = |i: usize| e[i].is_finite() && e[i] > GROSS_SIGMA * sigma;
+    let ramp = |i: usize| e[i].is_finite() && e[i] > RAMP_SIGMA * sigma;
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for i in (0..e.len()).filter(|&i| gross(i)) {
+        let near = |end: usize| match t_s {
+            Some(t) => t[i] - t[end - 1] <= SPAN_GAP_S,
+            None => i - end < SPAN_GAP_SAMPLES,
+        };
+        match runs.last_mut() {
+            Some(run) if near(run.1) => run.1 = i + 1,
+            _ => runs.push((i, i + 1)),
+        }
+    }
+    let mut widened: Vec<(usize, usize)> = Vec::with_capacity(runs.len());
+    for k in 0..runs.len() {
+        let (mut a, mut b) = runs[k];
+        let floor = widened.last().map_or(0, |s| s.1);
+        let ceiling = runs.get(k + 1).map_or(e.len(), |r| r.0);
+        while a > floor && ramp(a - 1) {
+            a -= 1;
+        }
+        while b < ceiling && ramp(b) {
+            b += 1;
+        }
+        widened.push((a, b));
+    }
+    // Lulls shorter than a share of the spans around them are part of one disturbance.
+    let length = |(a, b): (usize, usize)| match t_s {
+        Some(t) => t[b - 1] - t[a],
+        None => (b - a) as f64,
+    };
+    let gap = |(_, b): (usize, usize), (c, _): (usize, usize)| match t_s {
+        Some(t) => t[c] - t[b - 1],
+        None => (c - b) as f64,
+    };
+    let mut out: Vec<(usize, usize)> = Vec::with_capacity(widened.len());
+    for span in widened {
+        match out.last_mut() {
+            Some(last) if gap(*last, span) <= GAP_SHARE * (length(*last) + length(span)) / 2.0 => {
+                last.1 = span.1
+            }
+            _ => out.push(span),
+        }
+    }
+    out
 }
 
 /// The seeds' spans: all samples, and contiguous thirds, halves and two-thirds at offsets of a sixth.
@@ -161,7 +280,13 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
             .zip(&w_prev)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        fit = p.quick_fit(&w).ok()?;
+        let Ok(next) = p.quick_fit(&w) else { break };
+        // Reweighting can wander off to a matrix that explains a still stretch and part of a disturbance: a
+        // plausible fit is not given up for an implausible one.
+        if plausible(&P::model(&fit).a) && !plausible(&P::model(&next).a) {
+            break;
+        }
+        fit = next;
         if change < 1e-3 {
             break;
         }
@@ -171,7 +296,9 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
     Some((fit, scale::<P>(&e)))
 }
 
-/// The residual's scale: the median residual size over the usable samples, as a standard deviation per axis.
+/// The residual's scale: the median residual size over the usable samples, as a standard deviation per axis. Each
+/// sample counts as much as the next, so the state the recording is in most of the time sets it — still stretches
+/// included, which is what tells a clean state from a magnet attached while the sensor was turned most.
 fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
     let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
@@ -197,28 +324,18 @@ fn biweight(e: &[f64], s: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The runs of excluded samples, as index ranges `[start, end)`: neighbouring runs whose gap is at most `gap_s` in
-/// time (or, without time, [`SPAN_GAP_SAMPLES`] samples) are one span.
-pub fn excluded_spans(kept: &[bool], t_s: Option<&[f64]>, gap_s: f64) -> Vec<(usize, usize)> {
-    let mut spans: Vec<(usize, usize)> = Vec::new();
+/// The runs of samples not `kept`, as ranges `[start, end)`.
+pub fn excluded_runs(kept: &[bool]) -> Vec<(usize, usize)> {
+    let mut runs: Vec<(usize, usize)> = Vec::new();
     for (i, k) in kept.iter().enumerate() {
-        if *k {
-            continue;
-        }
-        let near = |last: usize| match t_s {
-            Some(t) => t[i] - t[last - 1] <= gap_s,
-            None => i - last < SPAN_GAP_SAMPLES,
-        };
-        match spans.last_mut() {
-            Some(span) if near(span.1) => span.1 = i + 1,
-            _ => spans.push((i, i + 1)),
+        match runs.last_mut() {
+            _ if *k => {}
+            Some(run) if run.1 == i => run.1 = i + 1,
+            _ => runs.push((i, i + 1)),
         }
     }
-    spans
+    runs
 }
-
-/// Without time, excluded samples this close are one span.
-pub const SPAN_GAP_SAMPLES: usize = 5;
 
 /// Whether a matrix's gains are within [`PLAUSIBLE_GAIN_RATIO`] of each other.
 pub fn plausible(a: &Mat3) -> bool {
@@ -300,7 +417,7 @@ mod tests {
     #[test]
     fn a_disturbance_over_45_percent_of_the_samples_cannot_capture_the_fit() {
         let p = line(2000, 500..1400);
-        let r = fit(&p).unwrap();
+        let r = fit(&p, None).unwrap();
         assert!(
             (r.fit.0 - 2.0).abs() < 0.01 && (r.fit.1 - 1.0).abs() < 0.05,
             "{:?}",
@@ -313,7 +430,7 @@ mod tests {
     #[test]
     fn without_disturbances_it_is_least_squares() {
         let p = line(2000, 0..0);
-        let r = fit(&p).unwrap();
+        let r = fit(&p, None).unwrap();
         assert_eq!(r.excluded(), 0);
         assert_eq!(r.fit, p.quick_fit(&vec![1.0; 2000]).unwrap());
     }

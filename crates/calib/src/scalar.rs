@@ -27,7 +27,7 @@ use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3, Vect
 use std::borrow::Cow;
 
 use crate::FitError;
-use crate::coverage::{Coverage, SphereGrid, describe};
+use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe};
 use crate::frames::Mat3;
 use crate::model::Model;
 use crate::robust::RobustProblem;
@@ -399,8 +399,8 @@ fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
     (r2 > 0.0 && r2.is_finite()).then(|| (c + mean, r2.sqrt()))
 }
 
-/// Weights that keep any cell of direction from outweighing the rotation: at most twice the median occupied cell's
-/// count per cell. Returns the weights, the cell of each sample and the number of occupied cells.
+/// Each reading's cell of direction about `centre`, the weights that keep any cell from outweighing the rotation
+/// ([`capped_cell_weights`]), and the number of occupied cells.
 fn direction_weights(
     raw: &[Vector3<f64>],
     base: &[f64],
@@ -414,19 +414,12 @@ fn direction_weights(
             grid.cell([d.x, d.y, d.z]).unwrap_or(0)
         })
         .collect();
-    let mut count = vec![0.0; grid.len()];
-    for (c, w) in cell.iter().zip(base) {
-        count[*c] += w;
+    let w = capped_cell_weights(&cell, base, grid.len());
+    let mut occupied = vec![false; grid.len()];
+    for (c, wi) in cell.iter().zip(base) {
+        occupied[*c] |= *wi > 0.0;
     }
-    let mut occupied: Vec<f64> = count.iter().copied().filter(|c| *c > 0.0).collect();
-    let cells = occupied.len();
-    let mid = occupied.len() / 2;
-    let cap = 2.0 * *occupied.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let w = cell
-        .iter()
-        .zip(base)
-        .map(|(c, w)| w * (cap / count[*c]).min(1.0))
-        .collect();
+    let cells = occupied.iter().filter(|o| **o).count();
     (w, cell, cells)
 }
 

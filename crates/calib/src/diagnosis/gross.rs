@@ -1,8 +1,8 @@
 //! Gross disturbances: the spans where the residual departs grossly from the rest, and what each one is.
 //!
-//! Input: the per-sample residual of a model, which samples it kept (the robust fit's verdict: within
-//! [`crate::robust::GROSS_SIGMA`] of the scale), and the scale. Output: spans (sample ranges), each classified by
-//! what explains it:
+//! Input: the per-sample residual of a model, which samples it kept (the robust fit's verdict: outside the spans of
+//! samples beyond [`crate::robust::GROSS_SIGMA`] of the scale, see [`crate::robust::gross_spans`]), and the scale.
+//! Output: spans (sample ranges), each classified by what explains it:
 //! - **fixed to the sensor** — a constant in sensor axes (something magnetic attached to the board): modelled as a
 //!   `bias_window`, the samples inside kept;
 //! - **fixed to the room** — a constant in NED seen through the attitude (a magnet placed on the bench and taken
@@ -20,12 +20,6 @@ use crate::frames::{self, Mat3};
 
 use super::scan;
 
-/// A gross sample's neighbours down to this many scales above the rest belong to its span (the ramp of a magnet
-/// brought close by hand).
-const RAMP_SIGMA: f64 = 3.0;
-/// Gross samples closer than this in time are one span, s; without time, this many samples.
-const GAP_S: f64 = 0.5;
-const GAP_SAMPLES: usize = 5;
 /// A constant explains a span when it leaves at most this many times the scale's variance per axis…
 const EXPLAINED_SCALES2: f64 = 4.0;
 /// …or at most this fraction of the span's residual energy.
@@ -110,45 +104,18 @@ impl Residual<'_> {
     }
 }
 
-/// The gross spans: runs of samples not `kept`, merged across short gaps and widened over their ramps, classified.
-/// `t` is the time (None without one), `scale_ut` the residual's scale per axis, `directions` the field direction
-/// in sensor axes per sample.
+/// The gross spans (the runs of samples not `kept`: the robust fit's spans, merged and widened there), classified.
+/// `scale_ut` is the residual's scale per axis, `directions` the field direction in sensor axes per sample.
 pub(crate) fn spans(
     residual: &Residual<'_>,
     kept: &[bool],
-    t: Option<&[f64]>,
     scale_ut: f64,
     directions: &[[f64; 3]],
 ) -> Vec<Span> {
-    let n = kept.len();
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    for i in (0..n).filter(|&i| !kept[i]) {
-        let near = |end: usize| match t {
-            Some(t) => t[i] - t[end - 1] <= GAP_S,
-            None => i - end < GAP_SAMPLES,
-        };
-        match runs.last_mut() {
-            Some(run) if near(run.1) => run.1 = i + 1,
-            _ => runs.push((i, i + 1)),
-        }
-    }
-    // Widen over the ramps, without running into the next span (sizes against the scale per axis, as the robust
-    // fit judges them).
-    let ramp = RAMP_SIGMA * scale_ut;
-    let mut out: Vec<Span> = Vec::new();
-    for k in 0..runs.len() {
-        let (mut a, mut b) = runs[k];
-        let floor = out.last().map_or(0, |s: &Span| s.end);
-        let ceiling = runs.get(k + 1).map_or(n, |r| r.0);
-        while a > floor && residual.size(a - 1) > ramp {
-            a -= 1;
-        }
-        while b < ceiling && residual.size(b) > ramp {
-            b += 1;
-        }
-        out.push(classify(residual, a, b, scale_ut, directions));
-    }
-    out
+    crate::robust::excluded_runs(kept)
+        .into_iter()
+        .map(|(a, b)| classify(residual, a, b, scale_ut, directions))
+        .collect()
 }
 
 /// What explains the residual of samples `[a, b)`.

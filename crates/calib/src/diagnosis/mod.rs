@@ -47,7 +47,7 @@ use crate::effects::{Effect, EffectId, Frame};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 use crate::noise::NoiseFloor;
-use crate::robust::{GROSS_SIGMA, RobustProblem};
+use crate::robust::{self, RobustProblem};
 use candidates::{Candidate, Offer, ScanTimes};
 use fitted::{SYM, coefficient, linear_of, linear_se, not_excited, params_of};
 use gross::{Residual, Span};
@@ -314,13 +314,12 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         }
         // The spans again, with the catalogue's effects out of the residual.
         let (a, b) = linear_of(&round.sel.last, setup.vector, base, setup.raw_mean);
-        let effects = round.chosen_effects(false);
+        let effects = round.catalogue_effects();
         let residual = setup.residual(&a, b, &effects);
         let scale2 = setup.scale(&residual);
-        let kept2: Vec<bool> = residual
-            .iter()
-            .map(|e| setup.size(e) <= GROSS_SIGMA * scale2)
-            .collect();
+        let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
+        let times = samples.has_time.then_some(samples.t.as_slice());
+        let kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
         if kept2 == kept {
             break;
         }
@@ -483,8 +482,7 @@ impl<'a> Setup<'a> {
                 unit: &self.unit,
             }
         };
-        let times = s.has_time.then_some(s.t.as_slice());
-        let mut spans = gross::spans(&view, kept, times, scale, &self.unit);
+        let mut spans = gross::spans(&view, kept, scale, &self.unit);
         let mut included = vec![true; n];
         let mut clean = vec![true; n];
         let mut span_effects = Vec::new();
@@ -779,16 +777,10 @@ impl Round {
         cand.template.with_params(p)
     }
 
-    /// The effects in the final model: the catalogue's chosen ones, and with `spans` the modelled spans' too.
-    fn chosen_effects(&self, spans: bool) -> Vec<Effect> {
-        let forced = self
-            .cands
-            .iter()
-            .enumerate()
-            .filter(|(_, c)| c.forced && spans);
-        forced
-            .map(|(c, _)| c)
-            .chain(self.chosen_steps())
+    /// The catalogue's effects in the final model (not the spans').
+    fn catalogue_effects(&self) -> Vec<Effect> {
+        self.chosen_steps()
+            .into_iter()
             .map(|c| self.fitted_effect(c, &self.sel.last))
             .collect()
     }
@@ -835,7 +827,6 @@ impl Setup<'_> {
         // row is scaled by the autocorrelation factor.
         let tau_last = problem.autocorrelation(&last);
         let sigma2_last = last.rss / dof * tau_last;
-        let (ext_a, ext_b) = linear_of(&last, vector, base, self.raw_mean);
         // The base fit on the clean samples alone, and its held-out residual there.
         let base12 = problem
             .solve_on(Rows::Clean, &linear, None, true)
@@ -843,7 +834,19 @@ impl Setup<'_> {
         let base_cv = problem
             .cv_rss_on(Rows::Clean, &linear)
             .unwrap_or(round.sel.base_cv);
-        let (base_a, base_b) = linear_of(&base12, vector, base, self.raw_mean);
+        // The final linear part is the base fit's moved by what the effects change in this problem's least squares:
+        // without effects it is the base fit itself (whose scalar solver has a shape prior and direction weights the
+        // linearised problem does not).
+        let (ext_a, ext_b) = {
+            let (a1, b1) = linear_of(&last, vector, base, self.raw_mean);
+            let (a0, b0) = linear_of(&base12, vector, base, self.raw_mean);
+            let a: Mat3 = std::array::from_fn(|j| {
+                std::array::from_fn(|k| base.a[j][k] + a1[j][k] - a0[j][k])
+            });
+            let b: [f64; 3] = std::array::from_fn(|j| base.b_ut[j] + b1[j] - b0[j]);
+            (a, b)
+        };
+        let (base_a, base_b) = (base.a, base.b_ut);
 
         // The effects with their fitted parameters: the modelled spans', then the catalogue's in the order chosen.
         let forced: Vec<usize> = (0..round.cands.len())
