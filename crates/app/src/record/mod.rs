@@ -469,7 +469,7 @@ pub fn record(
     let layout = Layout {
         t: true,
         temp: source.has_temperature(),
-        quat: cube,
+        quat: cube || source.has_quaternion(),
         ..Layout::default()
     };
     let mut meta = opts.meta.clone();
@@ -687,7 +687,7 @@ fn run(
         }
         match opts.routine {
             Routine::Free => {
-                out.write(&r, None)?;
+                out.write(&r, r.quat)?;
                 if map.fraction() >= opts.target_coverage {
                     ui.progress(&progress(t_s, out, &map, opts, None));
                     break Stop::Coverage;
