@@ -434,3 +434,32 @@ fn any_line_format_is_read_in_its_unit_adafruit_xyz_counts_and_a_pattern_in_gaus
         }
     }
 }
+
+#[test]
+fn numbers_read_in_the_wrong_unit_are_said_before_and_while_recording() {
+    use magcal_mockhw::firmware::Output;
+    // The board prints raw counts of 0.15 µT (a LIS2MDL's); the device string names no scale, so they are taken as
+    // µT: a field of some 300 "µT".
+    let config = board(|c| {
+        c.output = Output::XyzCounts(0.15);
+        c.raw_lines = Some(3000);
+        c.lines_per_wall_s = 4000.0;
+    });
+    let run = serial_run("xyz", config, &[], None);
+    assert!(
+        run.stderr.contains(
+            "note: the numbers of the xyz lines are read as µT; if the board prints gauss"
+        ),
+        "{}",
+        run.stderr
+    );
+    let said = run
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("the field's magnitude is 3"))
+        .unwrap_or_else(|| panic!("no live word on the unit: {}", run.stdout));
+    assert!(
+        said.contains("the readings are not µT") && said.contains(":scale=K"),
+        "{said}"
+    );
+}
