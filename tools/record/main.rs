@@ -47,6 +47,14 @@ use magcal_app::record::{
 ///           vector calibration (every component, misalignment included). Give the local field with --field-ned
 ///           or --location/--date.
 ///
+/// THE SCREEN (on a terminal):
+///   the coverage map (the sphere of field directions, +Z half left, -Z half right, seen from outside: # covered by a
+///   recorded sample, . not yet), MotionCal's quality figures of the samples updated live (gaps, variance, wobble,
+///   fit error; MotionCal sends a calibration below 15, 4.5, 4 and 5 %; cube24 shows variance and fit error), a
+///   warning while the field's magnitude departs from the rest (a magnet near), and a progress bar (coverage and
+///   its target for free, poses for cube24). Keys typed are not echoed while it runs. The coverage is the one
+///   magcal-fit reports for the same file.
+///
 /// WORKFLOW:
 ///   magcal-record --device i2c:/dev/i2c-1:lis3mdl --routine cube24 --location 52.2,0.1,20 --date 2026-11-21 \
 ///       --out rec.csv
