@@ -32,7 +32,43 @@ fn run(exe: &str, args: &[&str]) -> Output {
     out
 }
 
-/// Records `sim:CHIP` with `routine`, fits it; returns the report's calibration and the truth.
+/// The recorder's coverage figures, %: its summary's, and its last live one (free rotation only).
+fn recorder_coverage_pct(stdout: &str) -> (f64, Option<f64>) {
+    let number_before = |text: &str, tail: &str| -> Option<f64> {
+        let head = &text[..text.find(tail)?];
+        head.rsplit(' ').next()?.parse().ok()
+    };
+    let summary = stdout
+        .lines()
+        .find(|l| l.starts_with("recorded "))
+        .and_then(|l| number_before(l, " % of the sphere"))
+        .unwrap_or_else(|| panic!("no coverage in the summary: {stdout}"));
+    let live = stdout
+        .lines()
+        .rfind(|l| l.starts_with("recording: t="))
+        .and_then(|l| number_before(l.split_once("coverage ")?.1, " %"));
+    (summary, live)
+}
+
+/// Checks that the recorder's coverage is the fit's, within the summary's rounding (and a live figure within 3
+/// points).
+fn assert_same_coverage(what: &str, recorder_stdout: &str, report: &serde_json::Value) {
+    let fit_pct = 100.0 * report["coverage"]["sphere_fraction"].as_f64().unwrap();
+    let (summary, live) = recorder_coverage_pct(recorder_stdout);
+    assert!(
+        (summary - fit_pct).abs() <= 0.5 + 1e-9,
+        "{what}: the recorder says {summary} %, the fit {fit_pct:.1} %"
+    );
+    if let Some(live) = live {
+        assert!(
+            (live - fit_pct).abs() <= 3.0,
+            "{what}: the live figure was {live} %, the fit says {fit_pct:.1} %"
+        );
+    }
+}
+
+/// Records `sim:CHIP` with `routine`, fits it; returns the report's calibration and the truth, having checked that
+/// the recorder's coverage is the fit's.
 fn record_and_fit(
     dir: &Path,
     chip: &str,
@@ -44,7 +80,7 @@ fn record_and_fit(
     let report = dir.join(format!("{chip}-{routine}-report.json"));
     let seed = seed.to_string();
     let start = Instant::now();
-    run(
+    let out = run(
         env!("CARGO_BIN_EXE_magcal-record"),
         &[
             "--device",
@@ -61,6 +97,7 @@ fn record_and_fit(
         ],
     );
     let recorded = start.elapsed();
+    let recorder_stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     run(
         env!("CARGO_BIN_EXE_magcal-fit"),
         &[rec.to_str().unwrap(), "--report", report.to_str().unwrap()],
@@ -72,7 +109,46 @@ fn record_and_fit(
     );
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_same_coverage(&format!("{chip} {routine}"), &recorder_stdout, &report);
     (report, TruthFile::read(&truth).unwrap())
+}
+
+#[test]
+fn the_recorders_coverage_is_the_fits_on_the_cube_poses_at_10_hz() {
+    // Issue 7's reproducer: the recorder said 73–76 % (it counted the moves between poses), the fit 24 %.
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("cube.csv");
+    let report = dir.path().join("report.json");
+    let out = run(
+        env!("CARGO_BIN_EXE_magcal-record"),
+        &[
+            "--device",
+            "sim:qmc5883l",
+            "--rate",
+            "10",
+            "--routine",
+            "cube24",
+            "--field-ned",
+            "19.8,1.2,45.3",
+            "--out",
+            rec.to_str().unwrap(),
+        ],
+    );
+    run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[rec.to_str().unwrap(), "--report", report.to_str().unwrap()],
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_same_coverage("qmc5883l cube24 at 10 Hz", &stdout, &report);
+    // 24 directions on a grid of 98 cells: about a quarter of the sphere, some poses on a cell's edge.
+    let (summary, _) = recorder_coverage_pct(&stdout);
+    assert!((20.0..=35.0).contains(&summary), "{summary} %: {stdout}");
+    assert!(
+        !stdout.contains("target"),
+        "the cube routine has no coverage target: {stdout}"
+    );
 }
 
 fn matrix(v: &serde_json::Value) -> Matrix3<f64> {

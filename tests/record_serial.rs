@@ -331,3 +331,135 @@ fn a_board_reset_starts_a_noted_segment_and_time_stays_true_whatever_header_it_p
         );
     }
 }
+
+/// The recording's rows against what the board printed: every sample, in µT, within the print's resolution.
+fn assert_rows_are_the_boards_field(
+    what: &str,
+    rec: &Recording,
+    truth_ut: &[[f64; 3]],
+    within_ut: f64,
+) {
+    assert_eq!(rec.len(), truth_ut.len(), "{what}: every line recorded");
+    let worst = rec
+        .mag_ut
+        .iter()
+        .zip(truth_ut)
+        .flat_map(|(m, t)| (0..3).map(move |k| (m[k] - t[k]).abs()))
+        .fold(0.0, f64::max);
+    assert!(
+        worst <= within_ut,
+        "{what}: {worst} µT off the board's field"
+    );
+}
+
+#[test]
+fn any_line_format_is_read_in_its_unit_adafruit_xyz_counts_and_a_pattern_in_gauss() {
+    use magcal_mockhw::firmware::Output;
+    const LINES: u64 = 400;
+    const HMC5883L_UT_PER_COUNT: f64 = 100.0 / 1090.0;
+    let pattern = r"^t=(?P<t_ms>\d+)ms mag=\[(?P<mx>\S+) (?P<my>\S+) (?P<mz>\S+)\] G temp=(?P<temp>\S+)C q=\[(?P<qw>\S+) (?P<qx>\S+) (?P<qy>\S+) (?P<qz>\S+)\]$";
+    // (what, the device string's format, what the board prints, the resolution of its print in µT, garbage lines)
+    let cases: Vec<(&str, String, Output, f64, u64)> = vec![
+        // Adafruit's example prints two decimals of µT after a banner of sensor details (7 lines, none a sample).
+        ("adafruit", "adafruit".into(), Output::Adafruit, 0.005, 7),
+        (
+            "xyz counts",
+            format!("xyz:scale={HMC5883L_UT_PER_COUNT}"),
+            Output::XyzCounts(HMC5883L_UT_PER_COUNT),
+            HMC5883L_UT_PER_COUNT / 2.0,
+            0,
+        ),
+        // Five decimals of gauss are 0.001 µT.
+        (
+            "pattern in gauss",
+            format!("unit=gauss:pattern={pattern}"),
+            Output::Gauss,
+            0.0005,
+            0,
+        ),
+    ];
+    let runs: Vec<_> = cases
+        .into_iter()
+        .map(|(what, format, output, resolution_ut, garbage)| {
+            let config = board(|c| {
+                c.output = output;
+                c.raw_lines = Some(LINES);
+                c.lines_per_wall_s = 2000.0;
+            });
+            let handle = std::thread::spawn(move || serial_run(&format, config, &[], None));
+            (what, resolution_ut, garbage, handle)
+        })
+        .collect();
+    for (what, resolution_ut, garbage, handle) in runs {
+        let run = handle.join().unwrap();
+        assert!(
+            run.stderr
+                .contains(&format!("disconnected after {LINES} samples")),
+            "{what}: every line understood: {}",
+            run.stderr
+        );
+        let skipped = if garbage > 0 {
+            format!("garbage lines skipped: {garbage} (unrecognized {garbage})")
+        } else {
+            "garbage lines skipped: 0".to_owned()
+        };
+        assert!(run.stderr.contains(&skipped), "{what}: {}", run.stderr);
+        let rec = Recording::read(&run.path).unwrap();
+        assert_rows_are_the_boards_field(
+            what,
+            &rec,
+            &run.report.sample_mag_ut,
+            resolution_ut + 1e-9,
+        );
+        if what == "pattern in gauss" {
+            // The board's clock (ms), its temperature and its attitude (printed to 1e-5, normalised by the
+            // reader) are read by their groups.
+            let t = rec.t_s.as_ref().unwrap();
+            for (t, truth) in t.iter().zip(&run.report.sample_times_s) {
+                assert!(
+                    (t - truth).abs() < 6e-4,
+                    "{t} s against the board's {truth} s"
+                );
+            }
+            assert!(rec.temp_c.as_ref().unwrap().iter().all(|c| c.is_finite()));
+            let quat = rec.quat.as_ref().expect("the board's attitude is recorded");
+            for (q, truth) in quat.iter().zip(&run.report.sample_quat) {
+                assert!(
+                    (0..4).all(|k| (q[k] - truth[k]).abs() < 2e-5),
+                    "{q:?} against {truth:?}"
+                );
+            }
+        } else {
+            assert!(rec.quat.is_none(), "{what}: no attitude column");
+        }
+    }
+}
+
+#[test]
+fn numbers_read_in_the_wrong_unit_are_said_before_and_while_recording() {
+    use magcal_mockhw::firmware::Output;
+    // The board prints raw counts of 0.15 µT (a LIS2MDL's); the device string names no scale, so they are taken as
+    // µT: a field of some 300 "µT".
+    let config = board(|c| {
+        c.output = Output::XyzCounts(0.15);
+        c.raw_lines = Some(3000);
+        c.lines_per_wall_s = 4000.0;
+    });
+    let run = serial_run("xyz", config, &[], None);
+    assert!(
+        run.stderr.contains(
+            "note: the numbers of the xyz lines are read as µT; if the board prints gauss"
+        ),
+        "{}",
+        run.stderr
+    );
+    let said = run
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("the field's magnitude is 3"))
+        .unwrap_or_else(|| panic!("no live word on the unit: {}", run.stdout));
+    assert!(
+        said.contains("the readings are not µT") && said.contains(":scale=K"),
+        "{said}"
+    );
+}

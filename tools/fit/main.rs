@@ -36,7 +36,7 @@ use magcal_recording::Recording;
 /// Workflow: magcal-record (or magcal-sim) writes the recording, magcal-fit fits it.
 ///
 /// With --write-to DEV the fitted parameters also go to the device, after the files are written, and are verified:
-/// serial:PATH[:BAUD][:motioncal|csv] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
+/// serial:PATH[:BAUD] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
 /// echo; i2c:/dev/i2c-N:lis2mdl[@ADDR] (or sim:lis2mdl) gets the hard-iron offset in its offset registers, read back.
 /// The other chips have no place for a calibration: that is an error, and the parameters file is the way.
 #[derive(Parser, Debug)]
@@ -65,7 +65,7 @@ struct Args {
     /// Where to write the export (default: stdout, with the summary moved to stderr).
     #[arg(long, value_name = "PATH", requires = "export")]
     export_out: Option<PathBuf>,
-    /// Write the calibration to this device and verify it: serial:PATH[:BAUD][:motioncal|csv] (MotionCal packet,
+    /// Write the calibration to this device and verify it: serial:PATH[:BAUD] (MotionCal packet,
     /// confirmed by the echo) or i2c:/dev/i2c-N:lis2mdl[@ADDR] / sim:lis2mdl (offset registers, read back).
     #[arg(long, value_name = "DEV")]
     write_to: Option<DeviceSpec>,

@@ -27,12 +27,13 @@ use magcal_recording::Recording;
 ///   magcal --device i2c:/dev/i2c-1:lis3mdl --routine cube24 --location 52.2,0.1,20 --date 2026-11-21
 ///   magcal --device serial:/dev/ttyACM0 --routine free
 ///
-/// Devices: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv], CHIP one of lis3mdl,
-/// lis2mdl, qmc5883l, hmc5883l, mmc5983ma. The separate tools (magcal-record, magcal-fit) offer every option.
+/// Devices: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT], CHIP one of lis3mdl, lis2mdl,
+/// qmc5883l, hmc5883l, mmc5983ma, FORMAT one of motioncal, csv, adafruit, xyz, pattern=REGEX (magcal-record --help
+/// says more). The separate tools (magcal-record, magcal-fit) offer every option.
 #[derive(Parser, Debug)]
 #[command(version, verbatim_doc_comment)]
 struct Args {
-    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv].
+    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT].
     #[arg(long, default_value = "sim", value_name = "DEV")]
     device: DeviceSpec,
     /// The routine: cube24 (vector calibration; needs the local field for real devices) or free (scalar).
@@ -74,6 +75,9 @@ fn run(args: Args) -> anyhow::Result<()> {
         ..OpenOptions::default()
     };
     let interrupt = interrupt_flag("magcal")?;
+    if let Some(note) = args.device.unit_note() {
+        eprintln!("{note}");
+    }
     let mut source = device::open(&args.device, &open)?;
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
     println!(

@@ -15,12 +15,27 @@ use magcal_app::record::{
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
 ///
 /// DEVICES (--device):
-///   sim[:CHIP]                          a simulated chip (the default: no hardware needed); a virtual hand
-///                                       performs the routine
-///   i2c:/dev/i2c-N:CHIP[@ADDR]          a chip on a Linux I2C bus, e.g. i2c:/dev/i2c-1:lis3mdl@0x1c
-///   serial:PATH[:BAUD][:motioncal|csv]  a board streaming MotionCal Raw: lines (default) or native CSV,
-///                                       e.g. serial:/dev/ttyACM0:115200
+///   sim[:CHIP]                      a simulated chip (the default: no hardware needed); a virtual hand performs
+///                                   the routine
+///   i2c:/dev/i2c-N:CHIP[@ADDR]      a chip on a Linux I2C bus, e.g. i2c:/dev/i2c-1:lis3mdl@0x1c
+///   serial:PATH[:BAUD][:FORMAT]     a board streaming lines, 115200 baud unless given, e.g. serial:/dev/ttyACM0
 ///   CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma.
+///
+/// SERIAL FORMATS (the FORMAT of serial:PATH[:BAUD][:FORMAT]):
+///   motioncal         Raw:ax,ay,az,gx,gy,gz,mx,my,mz (MotionCal, Adafruit's calibration sketches; the default)
+///   csv               magcal's native CSV: a header naming t,mx,my,mz[,temp,qw,qx,qy,qz,…], then data (µT)
+///   adafruit          the Adafruit Unified Sensor examples: X: 12.34  Y: -5.67  Z: 40.10  uT
+///   xyz               three numbers a line: x,y,z (commas, semicolons, tabs or spaces)
+///   pattern=REGEX     any line: a regular expression with named groups mx, my, mz and optionally t (s) or
+///                     t_ms (ms), temp (°C), qw, qx, qy, qz (the attitude, sensor to NED; recorded with the
+///                     field); searched in each line (anchor it with ^…$); it takes the rest of the device
+///                     string, so quote it for the shell
+///   xyz and pattern= read µT unless told: add :unit=UNIT (uT, gauss, mG, nT) and/or :scale=K (each printed
+///   number times K is in UNIT: raw counts). Examples:
+///     serial:/dev/ttyUSB0:9600:xyz:scale=0.0917        HMC5883L counts at ±1.3 G (0.0917 µT each)
+///     serial:/dev/ttyUSB0:xyz:unit=gauss:scale=0.0000833   QMC5883L counts at ±2 G (1/12000 G each)
+///     'serial:/dev/ttyACM0:unit=gauss:pattern=^M (?P<mx>\S+) (?P<my>\S+) (?P<mz>\S+)$'
+///   Lines that are no sample (banners, other chatter, half lines) are counted and skipped.
 ///
 /// ROUTINES (--routine):
 ///   free    turn the sensor freely through every orientation; a live map shows which directions of the field
@@ -31,6 +46,14 @@ use magcal_app::record::{
 ///           still for the dwell time (or when you press Enter). Each pose's attitude is recorded, which gives the
 ///           vector calibration (every component, misalignment included). Give the local field with --field-ned
 ///           or --location/--date.
+///
+/// THE SCREEN (on a terminal):
+///   the coverage map (the sphere of field directions, +Z half left, -Z half right, seen from outside: # covered by a
+///   recorded sample, . not yet), MotionCal's quality figures of the samples updated live (gaps, variance, wobble,
+///   fit error; MotionCal sends a calibration below 15, 4.5, 4 and 5 %; cube24 shows variance and fit error), a
+///   warning while the field's magnitude departs from the rest (a magnet near), and a progress bar (coverage and
+///   its target for free, poses for cube24). Keys typed are not echoed while it runs. The coverage is the one
+///   magcal-fit reports for the same file.
 ///
 /// WORKFLOW:
 ///   magcal-record --device i2c:/dev/i2c-1:lis3mdl --routine cube24 --location 52.2,0.1,20 --date 2026-11-21 \
@@ -47,7 +70,7 @@ use magcal_app::record::{
 #[derive(Parser, Debug)]
 #[command(version, verbatim_doc_comment)]
 struct Args {
-    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:motioncal|csv].
+    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT] (see above).
     #[arg(long, default_value = "sim", value_name = "DEV")]
     device: String,
     /// The routine.
@@ -152,6 +175,9 @@ fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let interrupt = interrupt_flag("magcal-record")?;
+    if let Some(note) = spec.unit_note() {
+        eprintln!("{note}");
+    }
     let mut source = device::open(&spec, &open)?;
     if let Some(rate_hz) = source.rate_hz()
         && (rate_hz - args.rate).abs() > 0.01 * args.rate

@@ -1,7 +1,7 @@
 //! From a recording to a fitted calibration: pick the method, build the expected field, check, fit, measure.
 
-use magcal_calib::coverage::sphere_fraction;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
+use magcal_calib::directions::recorded_fraction;
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
 use std::borrow::Cow;
@@ -419,15 +419,8 @@ pub fn calibrate(
         robust,
         diagnosis: None,
     };
-    // Sphere coverage from at most ~100 000 readings: the fraction of 100 cells needs no more.
-    let stride = (rec.len() / 100_000).max(1);
-    cal.sphere_coverage = sphere_fraction(
-        rec.mag_ut
-            .iter()
-            .step_by(stride)
-            .map(|m| model.apply(*m, &Inputs::NONE)),
-        100,
-    );
+    // The recorder's definition of coverage, so both give the same figure for the same rows.
+    cal.sphere_coverage = recorded_fraction(&rec.mag_ut);
     if diagnose {
         if used < diagnosis::MIN_SAMPLES {
             cal.notes.push(format!(

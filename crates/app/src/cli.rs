@@ -68,12 +68,14 @@ impl WorldFieldOpts {
 
 /// Installs the Ctrl-C handler of a recording tool and returns the flag it sets. The first Ctrl-C sets it: the
 /// recording stops at the next sample or within a fraction of a second, and the file is finished. A second one, should
-/// the first go unheeded, exits at once with status 130 (the file keeps every row flushed so far, and parses).
+/// the first go unheeded, exits at once with status 130 (the file keeps every row flushed so far, and parses), the
+/// terminal's echo restored.
 pub fn interrupt_flag(tool: &'static str) -> anyhow::Result<Arc<AtomicBool>> {
     let interrupt = Arc::new(AtomicBool::new(false));
     let flag = interrupt.clone();
     ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::Relaxed) {
+            crate::record::tty::restore();
             eprintln!("{tool}: interrupted again: stopping now (the file keeps what was written)");
             std::process::exit(130);
         }

@@ -4,13 +4,15 @@
 //!   needs no hardware.
 //! - `i2c:/dev/i2c-N:CHIP[@ADDR]`: a chip on a Linux I2C bus (linux-embedded-hal), at ADDR (`0x1e` or `30`) or the
 //!   chip's default address.
-//! - `serial:PATH[:BAUD][:motioncal|csv]`: a board streaming MotionCal `Raw:` lines or native CSV.
+//! - `serial:PATH[:BAUD][:FORMAT][:unit=UNIT][:scale=K]`: a board streaming lines: MotionCal `Raw:` lines (the
+//!   default), native CSV, the Adafruit Unified Sensor examples' `X: … Y: … Z: … uT`, three numbers `x,y,z`, or any
+//!   line a `pattern=REGEX` with named groups `mx`, `my`, `mz` reads (see [`magcal_driver::serial`]).
 
 use std::fmt;
 use std::str::FromStr;
 use std::time::Duration;
 
-use magcal_driver::serial::DeviceSpec as SerialSpec;
+use magcal_driver::serial::{DeviceSpec as SerialSpec, PatternKind, Protocol};
 use magcal_driver::{AnyMagnetometer, ChipKind};
 pub use magcal_mockhw::Fault;
 
@@ -22,10 +24,11 @@ pub const DEFAULT_SIM_CHIP: ChipKind = ChipKind::Lis3mdl;
 
 /// The device syntax, for `--help` texts.
 pub const DEVICE_HELP: &str = "sim[:CHIP] (a simulated chip, the default) | i2c:/dev/i2c-N:CHIP[@ADDR] (Linux I2C) | \
-serial:PATH[:BAUD][:motioncal|csv] (a streaming board); CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma";
+serial:PATH[:BAUD][:FORMAT][:unit=UNIT][:scale=K] (a streaming board; FORMAT motioncal, csv, adafruit, xyz or \
+pattern=REGEX); CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma";
 
 /// A parsed device string.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum DeviceSpec {
     /// A simulated chip.
     Sim {
@@ -57,6 +60,24 @@ impl DeviceSpec {
     /// Whether this is a simulated device.
     pub fn is_sim(&self) -> bool {
         matches!(self, DeviceSpec::Sim { .. })
+    }
+
+    /// A note to show before recording when the device's numbers are read in a unit nobody stated: `xyz` and
+    /// `pattern=` lines without `unit=` or `scale=` are taken as µT.
+    pub fn unit_note(&self) -> Option<String> {
+        let DeviceSpec::Serial(s) = self else {
+            return None;
+        };
+        match &s.protocol {
+            Protocol::Pattern(p) if p.kind() != PatternKind::Adafruit && !p.scale().stated => {
+                Some(format!(
+                    "note: the numbers of the {} lines are read as µT; if the board prints gauss, mG, nT or raw counts, \
+                 add :unit=gauss|mG|nT or :scale=K (K µT per count) to the device string",
+                    s.protocol.name()
+                ))
+            }
+            _ => None,
+        }
     }
 }
 
@@ -287,7 +308,6 @@ pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, So
 #[cfg(test)]
 mod tests {
     use super::*;
-    use magcal_driver::serial::Protocol;
 
     fn p(s: &str) -> Result<DeviceSpec, DeviceSpecError> {
         s.parse()
@@ -340,6 +360,28 @@ mod tests {
             "serial:/dev/ttyUSB0:115200:motioncal",
         ] {
             assert_eq!(p(text).unwrap().to_string(), text);
+        }
+    }
+
+    #[test]
+    fn numbers_in_an_unstated_unit_get_a_note() {
+        let note = |s: &str| p(s).unwrap().unit_note();
+        let said = note("serial:/dev/ttyUSB0:xyz").unwrap();
+        assert!(
+            said.contains("xyz lines are read as µT") && said.contains(":unit="),
+            "{said}"
+        );
+        assert!(
+            note("serial:/dev/ttyUSB0:pattern=(?P<mx>\\S+),(?P<my>\\S+),(?P<mz>\\S+)").is_some()
+        );
+        for stated in [
+            "serial:/dev/ttyUSB0:xyz:unit=uT",
+            "serial:/dev/ttyUSB0:xyz:scale=0.15",
+            "serial:/dev/ttyUSB0:adafruit",
+            "serial:/dev/ttyUSB0",
+            "sim",
+        ] {
+            assert_eq!(note(stated), None, "{stated}");
         }
     }
 

@@ -11,7 +11,7 @@ pub const REFUSE_RATIO: f64 = 0.1;
 /// A principal spread below this fraction of the largest gets a warning.
 pub const WARN_RATIO: f64 = 0.3;
 /// Below this largest spread (µT) the sensor did not rotate at all.
-const STILL_SPREAD_UT: f64 = 1.0;
+pub(crate) const STILL_SPREAD_UT: f64 = 1.0;
 
 /// The spread of the readings along their principal directions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -201,6 +201,16 @@ impl SphereGrid {
             ((lon / std::f64::consts::TAU * self.per_band as f64) as usize).min(self.per_band - 1);
         Some(band * self.per_band + cell)
     }
+
+    /// The centre of cell `cell` (a unit vector): the middle of its band in z, of its longitudes in azimuth.
+    pub fn centre(&self, cell: usize) -> [f64; 3] {
+        let (band, k) = (cell / self.per_band, cell % self.per_band);
+        let z = -1.0 + (2.0 * band as f64 + 1.0) / self.bands as f64;
+        let lon =
+            (k as f64 + 0.5) * std::f64::consts::TAU / self.per_band as f64 - std::f64::consts::PI;
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        [r * lon.cos(), r * lon.sin(), z]
+    }
 }
 
 /// Weights that keep any cell of direction from outweighing the rest: each sample's `base` weight, scaled down in a
@@ -287,6 +297,16 @@ mod tests {
             Coverage::of(&line).check(),
             Err(CoverageError::OneDirection { .. })
         ));
+    }
+
+    #[test]
+    fn every_cell_centre_lies_in_its_cell() {
+        let grid = SphereGrid::new(100);
+        for cell in 0..grid.len() {
+            let c = grid.centre(cell);
+            assert!((c.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-12);
+            assert_eq!(grid.cell(c), Some(cell));
+        }
     }
 
     #[test]

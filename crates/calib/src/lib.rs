@@ -7,7 +7,8 @@
 //!
 //! Without the default `std` feature only [`frames`], [`effects`] and [`model`] are compiled (no heap, no I/O), so a
 //! firmware can apply a calibration. With `std`: the vector solver (paper eqs. 2–4), the scalar (ellipsoid) solver,
-//! coverage checks and the noise-floor estimate. Nothing in this crate reads or writes files.
+//! coverage checks, the coverage of the sphere of directions (one definition for recorder and fit) and the
+//! noise-floor estimate. Nothing in this crate reads or writes files.
 #![cfg_attr(not(feature = "std"), no_std)]
 
 pub mod effects;
@@ -19,6 +20,8 @@ pub mod coverage;
 #[cfg(feature = "std")]
 pub mod diagnosis;
 #[cfg(feature = "std")]
+pub mod directions;
+#[cfg(feature = "std")]
 mod error;
 #[cfg(feature = "std")]
 pub mod noise;
@@ -26,6 +29,8 @@ pub mod noise;
 pub mod robust;
 #[cfg(feature = "std")]
 pub mod scalar;
+#[cfg(feature = "std")]
+pub mod sphere;
 #[cfg(feature = "std")]
 pub mod vector;
 

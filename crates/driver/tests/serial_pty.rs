@@ -15,8 +15,8 @@ use magcal_driver::serial::echo::FieldMismatch;
 use magcal_driver::serial::motioncal::EchoKind;
 use magcal_driver::serial::packet::{DecodeError, SIGNATURE, crc16};
 use magcal_driver::serial::{
-    self, CalibrationPacket, GarbageCounts, GarbageKind, PACKET_LEN, Protocol, Received,
-    SerialSource, StreamStop, VerifyFailure, WriteError, decode,
+    self, CalibrationPacket, DeviceSpec, GarbageCounts, GarbageKind, PACKET_LEN, Protocol,
+    Received, SerialSource, StreamStop, VerifyFailure, WriteError, decode,
 };
 use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::pty::openpty;
@@ -564,6 +564,41 @@ fn a_native_csv_stream_with_garbage() {
         assert_eq!(g.get(kind), n, "{kind}: {g}");
     }
     assert_eq!(g.total(), 4);
+}
+
+#[test]
+fn adafruit_lines_in_utf8_are_read_and_the_raw_lines_before_them_skipped() {
+    // The LIS3MDL example prints raw counts, then µT (here with the `µT` a UTF-8 sketch may print).
+    let adafruit: DeviceSpec = "/dev/null:adafruit".parse().unwrap();
+    let (mut source, master) = connect(adafruit.protocol);
+    let (unplug_tx, unplug_rx) = mpsc::channel::<()>();
+    let firmware = thread::spawn(move || {
+        let mut fw = Firmware::new(master);
+        let mut text = String::from("Adafruit LIS3MDL test!\r\nLIS3MDL Found!\r\n");
+        for i in 0..40 {
+            text += &format!("\nX:  {}  \tY:  -567  \tZ:  4010\r\n", 100 * i);
+            text += &format!("\tX: {i}.25 µT\tY: -5.67 µT\tZ: 40.10 µT\r\n");
+        }
+        fw.send(text.as_bytes());
+        unplug_rx.recv().unwrap();
+    });
+    let received = read_n(&mut source, 40);
+    unplug_tx.send(()).unwrap();
+    firmware.join().unwrap();
+    assert!(matches!(
+        source.read_sample(),
+        Err(StreamStop::Disconnected { .. })
+    ));
+    assert_eq!(received[39].sample.mag_ut, [39.25, -5.67, 40.10]);
+    let c = source.counts();
+    assert_eq!(c.samples, 40);
+    assert_eq!(
+        c.garbage.get(GarbageKind::Unrecognized),
+        42,
+        "the banner and the raw lines: {}",
+        c.garbage
+    );
+    assert_eq!(c.garbage.total(), 42);
 }
 
 #[test]

@@ -2,7 +2,9 @@
 //! from their protocol (not their code).
 //!
 //! It streams `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines (accelerometer in 1/8192 g, gyro in 1/16 °/s, magnetometer in
-//! 0.1 µT), or magcal's native CSV (`t,mx,my,mz,temp` after a header, `t` on the board's own clock), computed from a
+//! 0.1 µT), magcal's native CSV (`t,mx,my,mz,temp` after a header, `t` on the board's own clock), or the lines of
+//! other sketches ([`Output`]: the Adafruit Unified Sensor example, raw counts `x,y,z`, a line of its own in gauss),
+//! computed from a
 //! [`Bench`] whose hand tumbles the board, mixes in garbage lines if asked (line noise, half lines, other chatter),
 //! takes MotionCal's 68-byte calibration packet (signature 117, 84; CRC-16/MODBUS over all 68 bytes must be zero),
 //! and prints what it holds as `Cal1:`/`Cal2:` echoes: right after taking a packet and every so many lines. It can
@@ -22,7 +24,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use magcal_sim::SimError;
-use magcal_sim::bench::{Bench, BenchConfig};
+use magcal_sim::bench::{Bench, BenchConfig, BenchSample};
 
 /// Length of a MotionCal calibration packet, bytes.
 const PACKET_BYTES: usize = 68;
@@ -43,12 +45,20 @@ pub enum EchoMode {
 }
 
 /// What the board prints.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Output {
     /// MotionCal `Raw:` lines.
     MotionCal,
     /// magcal's native CSV: `# sensor:` and a header line, then `t,mx,my,mz,temp` (t on the board's clock, s).
     Csv,
+    /// The Adafruit Unified Sensor example (HMC5883): a sensor-details banner, then `X: 12.34  Y: -5.67  Z: 40.10  uT`
+    /// (µT, two decimals, as Arduino prints a float).
+    Adafruit,
+    /// Three integers a line, `x,y,z`: raw counts of this many µT each.
+    XyzCounts(f64),
+    /// A line of the board's own: `t=12340ms mag=[0.24100 -0.33700 -0.38900] G temp=24.70C q=[w x y z]`, time in
+    /// ms on the board's clock, the field in gauss (five decimals), the attitude quaternion (sensor to NED).
+    Gauss,
 }
 
 /// Something wrong with the board.
@@ -136,6 +146,10 @@ pub struct FirmwareReport {
     pub stopped: String,
     /// Bench time of every sample line sent, s (the truth a recording's `t` is compared with).
     pub sample_times_s: Vec<f64>,
+    /// The field every sample line printed, as the board measured it before printing, µT.
+    pub sample_mag_ut: Vec<[f64; 3]>,
+    /// The board's attitude at every sample line (sensor to NED, `[w, x, y, z]`).
+    pub sample_quat: Vec<[f64; 4]>,
 }
 
 /// The firmware; see the [module docs](self).
@@ -200,7 +214,7 @@ impl<P: Read + Write> MotionCalFirmware<P> {
         let wall_per_bench_s = self.config.sample_rate_hz / self.config.lines_per_wall_s;
         let mut i: u64 = 0;
         let mut bench_t_s = 0.0;
-        if self.config.output == Output::Csv {
+        if matches!(self.config.output, Output::Csv | Output::Adafruit) {
             self.banner();
         }
         self.report.stopped = loop {
@@ -240,8 +254,11 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 }
                 _ => {}
             }
-            let line = self.sample_line(bench_t_s);
+            let sample = self.bench.sample(bench_t_s);
+            let line = self.sample_line(&sample);
             self.send(line.as_bytes());
+            self.report.sample_mag_ut.push(sample.raw_ut);
+            self.report.sample_quat.push(sample.quat);
             self.report.sample_times_s.push(bench_t_s);
             self.report.raw_lines += 1;
             i += 1;
@@ -260,25 +277,32 @@ impl<P: Read + Write> MotionCalFirmware<P> {
         self.report
     }
 
-    /// What the board prints when it boots (for CSV, also when it starts; a MotionCal board only after a reset, as
-    /// its first boot happened before the port was opened): a line of chatter, and for CSV its metadata and header.
+    /// What the board prints when it boots (for CSV and the Adafruit example, also when it starts; the other boards
+    /// only after a reset, as their first boot happened before the port was opened): a line of chatter, for CSV its
+    /// metadata and header, for the Adafruit example its sensor details.
     fn banner(&mut self) {
         let text = match self.config.output {
-            Output::MotionCal => "MotionCal-compatible sketch: streaming\r\n".to_owned(),
             Output::Csv => format!(
                 "booting magcal CSV sketch\r\n# sensor: simulated board\r\n{}\r\n",
                 self.header
             ),
+            Output::Adafruit => {
+                "HMC5883 Magnetometer Test\r\n\r\n------------------------------------\r\n\
+                 Sensor:       HMC5883\r\nMax Value:    800.00 uT\r\nMin Value:    -800.00 uT\r\n\
+                 Resolution:   0.20 uT\r\n------------------------------------\r\n\r\n"
+                    .to_owned()
+            }
+            _ => "MotionCal-compatible sketch: streaming\r\n".to_owned(),
         };
         self.send(text.as_bytes());
     }
 
-    /// The line of the bench at `t_s` in the board's output format.
-    fn sample_line(&mut self, t_s: f64) -> String {
+    /// The line of a bench sample in the board's output format.
+    fn sample_line(&self, s: &BenchSample) -> String {
+        let t_s = s.t_s;
         match self.config.output {
-            Output::MotionCal => self.raw_line(t_s),
+            Output::MotionCal => raw_line(s),
             Output::Csv => {
-                let s = self.bench.sample(t_s);
                 let t = format!("{:.3}", t_s - self.boot_s);
                 let [x, y, z] = s.raw_ut.map(|v| format!("{v:.2}"));
                 let temp = format!("{:.2}", s.temp_c);
@@ -289,27 +313,24 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 };
                 fields + "\r\n"
             }
+            Output::Adafruit => {
+                let [x, y, z] = s.raw_ut;
+                format!("X: {x:.2}  Y: {y:.2}  Z: {z:.2}  uT\r\n")
+            }
+            Output::XyzCounts(ut_per_count) => {
+                let [x, y, z] = s.raw_ut.map(|v| (v / ut_per_count).round() as i64);
+                format!("{x},{y},{z}\r\n")
+            }
+            Output::Gauss => {
+                let ms = ((t_s - self.boot_s) * 1000.0).round() as i64;
+                let [x, y, z] = s.raw_ut.map(|v| v / 100.0);
+                let [w, qx, qy, qz] = s.quat;
+                format!(
+                    "t={ms}ms mag=[{x:.5} {y:.5} {z:.5}] G temp={:.2}C q=[{w:.5} {qx:.5} {qy:.5} {qz:.5}]\r\n",
+                    s.temp_c
+                )
+            }
         }
-    }
-
-    /// The `Raw:` line of the bench at `t_s`.
-    fn raw_line(&mut self, t_s: f64) -> String {
-        let s = self.bench.sample(t_s);
-        let r = magcal_calib::frames::quat_to_matrix(s.quat);
-        // Specific force of a board at rest: 1 g up, i.e. −D in NED, seen in the board's axes.
-        let accel_g = magcal_calib::frames::mat_t_vec(&r, [0.0, 0.0, -1.0]);
-        let mut line = String::from("Raw:");
-        let values = accel_g
-            .iter()
-            .map(|g| g * 8192.0)
-            .chain(s.omega_rad_s.iter().map(|w| w.to_degrees() * 16.0))
-            .chain(s.raw_ut.iter().map(|m| m * 10.0));
-        for (k, v) in values.enumerate() {
-            let sep = if k == 0 { "" } else { "," };
-            let _ = write!(line, "{sep}{}", v.round() as i64);
-        }
-        line.push_str("\r\n");
-        line
     }
 
     /// Prints the calibration held.
@@ -398,6 +419,25 @@ impl<P: Read + Write> MotionCalFirmware<P> {
             }
         }
     }
+}
+
+/// The `Raw:` line of a bench sample.
+fn raw_line(s: &BenchSample) -> String {
+    let r = magcal_calib::frames::quat_to_matrix(s.quat);
+    // Specific force of a board at rest: 1 g up, i.e. −D in NED, seen in the board's axes.
+    let accel_g = magcal_calib::frames::mat_t_vec(&r, [0.0, 0.0, -1.0]);
+    let mut line = String::from("Raw:");
+    let values = accel_g
+        .iter()
+        .map(|g| g * 8192.0)
+        .chain(s.omega_rad_s.iter().map(|w| w.to_degrees() * 16.0))
+        .chain(s.raw_ut.iter().map(|m| m * 10.0));
+    for (k, v) in values.enumerate() {
+        let sep = if k == 0 { "" } else { "," };
+        let _ = write!(line, "{sep}{}", v.round() as i64);
+    }
+    line.push_str("\r\n");
+    line
 }
 
 /// Garbage lines, one of each kind a line stream meets: line noise, a half line, other chatter, a garbled number.
@@ -560,6 +600,42 @@ mod tests {
             (report.raw_lines, report.stopped.as_str()),
             (2, "told to stop")
         );
+    }
+
+    #[test]
+    fn other_sketches_print_their_own_lines_of_the_same_field() {
+        let lines_of = |output: Output| {
+            let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+            config.raw_lines = Some(3);
+            config.echo_every = 1000;
+            config.lines_per_wall_s = 1e6;
+            config.output = output;
+            let (report, text) = run(Vec::new(), config);
+            let lines: Vec<String> = text.lines().map(str::to_owned).collect();
+            (report, lines)
+        };
+        let (report, lines) = lines_of(Output::Adafruit);
+        assert_eq!(lines[0], "HMC5883 Magnetometer Test");
+        let [x, y, z] = report.sample_mag_ut[2];
+        assert_eq!(
+            lines.last().unwrap(),
+            &format!("X: {x:.2}  Y: {y:.2}  Z: {z:.2}  uT")
+        );
+        let (report, lines) = lines_of(Output::XyzCounts(0.15));
+        let counts = report.sample_mag_ut[0].map(|v| (v / 0.15).round() as i64);
+        assert_eq!(
+            lines[0],
+            format!("{},{},{}", counts[0], counts[1], counts[2])
+        );
+        let (report, lines) = lines_of(Output::Gauss);
+        let [x, ..] = report.sample_mag_ut[1];
+        assert!(
+            lines[1].starts_with(&format!("t=10ms mag=[{:.5} ", x / 100.0))
+                && lines[1].contains(" G temp="),
+            "{}",
+            lines[1]
+        );
+        assert_eq!(report.sample_quat.len(), 3);
     }
 
     #[test]

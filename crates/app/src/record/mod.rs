@@ -1,9 +1,9 @@
 //! The recorder behind `magcal-record`: a [`Source`] of samples, a routine that tells the operator (or the virtual
 //! hand of a `sim` device) what to do, and an incremental, crash-safe [`RecordingWriter`].
 //!
-//! - **free**: the sensor is turned freely; every sample is written; the recording stops when the live
-//!   [`CoverageMap`] reaches the target coverage of the sphere of field directions, after the longest duration, or
-//!   on an interrupt (Ctrl-C).
+//! - **free**: the sensor is turned freely; every sample is written (with the board's attitude, when a serial
+//!   board prints one); the recording stops when the live [`CoverageMap`] of the written samples reaches the
+//!   target coverage of the sphere of field directions, after the longest duration, or on an interrupt (Ctrl-C).
 //! - **cube24**: the 24 static poses of a cube jig against a reference edge ([`magcal_sim::cube24_poses`]). Each
 //!   prompt names the face down and where the reference edge points. Once the sensor has left the last pose and has
 //!   stayed still for a dwell (every axis' spread below a threshold), it has settled; from then on each sample that
@@ -13,9 +13,12 @@
 //!   the take: the rows written stay (they were still, at the pose), and the pose is taken once the jig settles
 //!   again. Enter takes the next dwell whatever it holds. The settling dwell keeps the end of the move out.
 //!
-//! Both routines watch the field magnitude ([`MagnitudeWatch`]): a magnet or iron near the sensor, which changes it,
-//! is said live; its samples are written but kept out of the coverage map. Saturated samples (counted by the
-//! source) are not written.
+//! The coverage map counts the samples written, by the definition the fit uses too
+//! ([`magcal_calib::directions`]), so the recorder's figure and the fit's agree; in the cube routine that is the
+//! poses' few directions, and no target applies. [`Quality`] gives MotionCal's figures of the samples written.
+//! Both routines watch the field magnitude of every reading ([`MagnitudeWatch`]): a magnet or iron near the sensor,
+//! which changes it, is said live and shown while it lasts; its samples are written but do not count as coverage.
+//! Saturated samples (counted by the source) are not written.
 //!
 //! An existing file is never replaced unless asked ([`RecordOptions::force`]; [`check_out`] says so before the
 //! device is opened), and the file is locked while it is written, so a second recorder on it is refused. The file
@@ -29,9 +32,11 @@
 pub mod clock;
 pub mod coverage;
 pub mod magnitude;
+pub mod quality;
 pub mod sim;
 pub mod source;
 pub mod still;
+pub mod tty;
 pub mod ui;
 
 use std::fs::File;
@@ -43,10 +48,12 @@ use magcal_driver::serial::GarbageCounts;
 use magcal_recording::{CreateOptions, Layout, Metadata, Note, RecordingWriter, Sample};
 use magcal_sim::{CubePose, cube24_poses};
 
+use crate::checks::EARTH_FIELD_UT;
 use crate::device::{BadOption, DeviceSpec, positive_at_most};
 
 pub use coverage::CoverageMap;
-pub use magnitude::{MagnitudeEvent, MagnitudeWatch};
+pub use magnitude::{Disturbance, MagnitudeEvent, MagnitudeWatch};
+pub use quality::Quality;
 pub use source::{Reading, Source, SourceError};
 pub use still::StillWindow;
 pub use ui::{Progress, Ui};
@@ -187,14 +194,14 @@ pub struct RecordSummary {
     pub samples: u64,
     /// Recording time, s.
     pub duration_s: f64,
-    /// Fraction of the sphere of directions seen.
+    /// Fraction of the sphere of directions the written samples cover (the fit's definition, so its figure).
     pub coverage: f64,
     /// Cube poses taken.
     pub poses: usize,
     /// Samples the chip refused as saturated (not recorded).
     pub saturated: u64,
-    /// Samples whose field magnitude departed from the rest's (a magnet or iron nearby; recorded, kept out of the
-    /// coverage map).
+    /// Readings whose field magnitude departed from the rest's (a magnet or iron nearby; recorded, not counted as
+    /// coverage).
     pub disturbed: u64,
     /// Times at which the device's clock restarted and a new segment of time began, s of recording time.
     pub clock_restarts: Vec<f64>,
@@ -469,7 +476,7 @@ pub fn record(
     let layout = Layout {
         t: true,
         temp: source.has_temperature(),
-        quat: cube,
+        quat: cube || source.has_quaternion(),
         ..Layout::default()
     };
     let mut meta = opts.meta.clone();
@@ -592,6 +599,7 @@ fn run(
     };
     let mut map = CoverageMap::new();
     let mut magnitude = MagnitudeWatch::new();
+    let mut units_told = false;
     let mut jig = Cube::new((opts.dwell_s * rate_hz).round() as usize);
     let mut seen = 0u64;
     let mut saturated_told = 0;
@@ -666,44 +674,59 @@ fn run(
                 kept: out.rows(),
             });
         }
-        let (disturbed, event) = magnitude.add(t_s, r.mag_ut, map.fraction());
-        match event {
+        match magnitude.add(t_s, r.mag_ut) {
             Some(MagnitudeEvent::Departed {
                 t_s,
                 magnitude_ut,
                 usual_ut,
             }) => ui.message(&format!(
                 "t = {t_s:.1} s: the field magnitude is {magnitude_ut:.1} µT, not the {usual_ut:.1} µT of the rest: a \
-                 magnet or iron near the sensor? Move it away; these samples are recorded but kept out of the \
-                 coverage map"
+                 magnet or iron near the sensor? Move it away; these samples are recorded but do not count as \
+                 coverage"
             )),
             Some(MagnitudeEvent::Returned { t_s, lasted_s }) => ui.message(&format!(
                 "t = {t_s:.1} s: the field magnitude is back to the rest's (disturbed for {lasted_s:.1} s)"
             )),
             None => {}
         }
-        if !disturbed {
-            map.add(r.mag_ut);
+        if !units_told && let Some(usual_ut) = magnitude.usual_ut() {
+            units_told = true;
+            if let Some(note) = units_note(usual_ut) {
+                ui.message(&note);
+            }
         }
         match opts.routine {
             Routine::Free => {
-                out.write(&r, None)?;
-                if map.fraction() >= opts.target_coverage {
-                    ui.progress(&progress(t_s, out, &map, opts, None));
+                out.write(&r, r.quat)?;
+                map.add(r.mag_ut);
+                // The live figure counts around a sphere up to 2 µT old: the stop is decided on the final one.
+                if map.fraction() >= opts.target_coverage && {
+                    map.finish();
+                    map.fraction() >= opts.target_coverage
+                } {
+                    ui.progress(&progress(t_s, out, &map, &magnitude, opts, None));
                     break Stop::Coverage;
                 }
             }
             Routine::Cube24 => {
-                if cube_step(&mut jig, &r, source, opts, ui, out)? {
-                    ui.progress(&progress(t_s, out, &map, opts, Some(jig.taken)));
+                if cube_step(&mut jig, &r, source, opts, ui, out, &mut map)? {
+                    ui.progress(&progress(t_s, out, &map, &magnitude, opts, Some(jig.taken)));
                     break Stop::AllPoses;
                 }
             }
         }
         // Rows taken a while ago reach the file even when no row follows them (between two cube poses).
         out.flush_if_due()?;
-        ui.progress(&progress(t_s, out, &map, opts, cube.then_some(jig.taken)));
+        ui.progress(&progress(
+            t_s,
+            out,
+            &map,
+            &magnitude,
+            opts,
+            cube.then_some(jig.taken),
+        ));
     };
+    map.finish();
     Ok(RecordSummary {
         path: out.path().to_owned(),
         samples: out.rows(),
@@ -727,6 +750,7 @@ fn cube_step(
     opts: &RecordOptions,
     ui: &mut dyn Ui,
     out: &mut Out,
+    map: &mut CoverageMap,
 ) -> Result<bool, RecordError> {
     if !jig.manual_take && ui.enter_pressed() {
         jig.manual_take = true;
@@ -767,6 +791,7 @@ fn cube_step(
     }
     let pose = &jig.poses[jig.taken];
     out.write(r, Some(pose.quat))?;
+    map.add(r.mag_ut);
     jig.held += 1;
     (0..3).for_each(|k| jig.held_sum_ut[k] += r.mag_ut[k]);
     if jig.held < jig.window.capacity() {
@@ -815,6 +840,7 @@ fn progress<'a>(
     t_s: f64,
     out: &Out,
     map: &'a CoverageMap,
+    magnitude: &MagnitudeWatch,
     opts: &RecordOptions,
     taken: Option<usize>,
 ) -> Progress<'a> {
@@ -822,9 +848,24 @@ fn progress<'a>(
         t_s,
         samples: out.rows(),
         coverage: map,
-        target: opts.target_coverage,
+        target: taken.is_none().then_some(opts.target_coverage),
         poses: taken.map(|t| (t, 24)),
+        quality: Quality::of(map.directions()),
+        disturbance: magnitude.disturbance(),
     }
+}
+
+/// What the rest's field magnitude says about the readings' unit, when it is far from the Earth's field in µT.
+fn units_note(usual_ut: f64) -> Option<String> {
+    let (low, high) = EARTH_FIELD_UT;
+    if (0.5 * low..=1.5 * high).contains(&usual_ut) {
+        return None;
+    }
+    Some(format!(
+        "the field's magnitude is {usual_ut:.3} in the readings' units, where the Earth's is {low:.0}–{high:.0} µT: \
+         the readings are not µT (raw counts, gauss, nT?). A serial board's unit is set in the device string \
+         (:unit=gauss|mG|nT or :scale=K); the fit will warn and can still calibrate"
+    ))
 }
 
 /// `YYYY-MM-DDTHH:MM:SSZ` for a system time (UTC).

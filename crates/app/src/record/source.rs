@@ -3,7 +3,9 @@
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
-use magcal_driver::serial::{GarbageCounts, GarbageKind, Protocol, SerialSource, StreamStop};
+use magcal_driver::serial::{
+    FORMATS, GarbageCounts, GarbageKind, Protocol, SerialSource, StreamStop,
+};
 use magcal_driver::{Error as ChipError, Magnetometer};
 
 use magcal_mockhw::SharedBench;
@@ -30,6 +32,8 @@ pub struct Reading {
     pub mag_ut: [f64; 3],
     /// Temperature, °C, where the device gives one.
     pub temp_c: Option<f64>,
+    /// Attitude quaternion `[w, x, y, z]` (sensor axes into NED), where the device gives one.
+    pub quat: Option<[f64; 4]>,
 }
 
 /// Why a source gave no sample.
@@ -111,6 +115,10 @@ pub trait Source {
     fn rate_hz(&self) -> Option<f64>;
     /// Whether readings carry a temperature.
     fn has_temperature(&self) -> bool;
+    /// Whether readings carry an attitude quaternion (a board that prints its own).
+    fn has_quaternion(&self) -> bool {
+        false
+    }
     /// The next sample, waiting for it on the device's clock; `None` when none came within a short wait (call
     /// again: the caller meanwhile looks at Ctrl-C). A saturated sample is not a field value: it is counted
     /// ([`Source::saturated`]) and skipped.
@@ -271,6 +279,7 @@ where
                         t_s,
                         mag_ut: m.map(f64::from),
                         temp_c: self.temp_c,
+                        quat: None,
                     }));
                 }
                 Err(ChipError::NotReady) => {}
@@ -329,7 +338,7 @@ struct LastTime {
     host_s: f64,
 }
 
-/// Samples from a serial line stream (MotionCal `Raw:` lines or native CSV).
+/// Samples from a serial line stream (MotionCal `Raw:` lines, native CSV, or lines read by a pattern).
 ///
 /// Time is the board's `t` where the stream has one, the host's reception time otherwise, and never runs backwards
 /// or stands still: when the board's clock restarts (it reset), a new segment begins, continued from the last
@@ -421,21 +430,20 @@ impl LineSource {
                  device string, serial:PATH:BAUD (this one: {})",
                 self.device
             )
-        } else if protocol == Protocol::Csv && garbage.get(GarbageKind::NoHeader) > 0 {
+        } else if matches!(protocol, Protocol::Csv) && garbage.get(GarbageKind::NoHeader) > 0 {
             format!(
                 "{} lines of numbers but no header line naming mx,my,mz: the board printed its header before the \
                  port was opened; reset it while recording",
                 garbage.get(GarbageKind::NoHeader)
             )
         } else {
-            let other = match protocol {
-                Protocol::MotionCal => "csv",
-                Protocol::Csv => "motioncal",
-            };
             format!(
-                "{} lines received, none a {protocol} sample{last}: wrong protocol? (…:{other} in the device string \
-                 reads the other one)",
-                counts.lines
+                "{} lines received, none a {} sample{last}: wrong format? {} reads {}; the device string's format \
+                 is one of {FORMATS} (serial:PATH[:BAUD][:FORMAT])",
+                counts.lines,
+                protocol.name(),
+                protocol.name(),
+                protocol.shape()
             )
         };
         SourceError::NoSamples {
@@ -453,16 +461,25 @@ impl Source for LineSource {
     }
 
     fn sensor(&self) -> String {
-        format!("serial ({} stream)", self.source.protocol())
+        format!("serial ({} stream)", self.source.protocol().name())
     }
 
     fn rate_hz(&self) -> Option<f64> {
         None
     }
 
-    /// Native CSV streams may carry `temp`; MotionCal lines never do.
+    /// Native CSV streams may carry `temp`, and patterns with a `temp` group; MotionCal lines never do.
     fn has_temperature(&self) -> bool {
-        self.source.protocol() == Protocol::Csv
+        match self.source.protocol() {
+            Protocol::Csv => true,
+            Protocol::Pattern(p) => p.has_temperature(),
+            Protocol::MotionCal => false,
+        }
+    }
+
+    /// Patterns with `qw,qx,qy,qz` groups carry the board's attitude.
+    fn has_quaternion(&self) -> bool {
+        matches!(self.source.protocol(), Protocol::Pattern(p) if p.has_quaternion())
     }
 
     /// The next sample, or `None` after a short wait; no sample for the idle timeout is an error, and so is a
@@ -478,6 +495,7 @@ impl Source for LineSource {
                     t_s,
                     mag_ut: r.sample.mag_ut,
                     temp_c: r.sample.temp_c.filter(|t| t.is_finite()),
+                    quat: r.sample.quat_wxyz,
                 }))
             }
             Err(StreamStop::Idle { .. }) => {

@@ -84,6 +84,7 @@ mod tests {
             t_s: 0.0,
             mag_ut: [x, 10.0, -5.0],
             temp_c: None,
+            quat: None,
         }
     }
 

@@ -1,12 +1,17 @@
-//! What the operator sees: prompts, the live coverage map and progress bar on a terminal, plain progress lines
-//! otherwise; and the Enter key.
+//! What the operator sees: prompts, and the live display — the coverage map with its legend, MotionCal-style quality
+//! figures, a warning while the field's magnitude departs from the rest, and a progress bar — redrawn in place on a
+//! terminal (with echo off, so Enter and Ctrl-C leave no stale lines); plain progress lines otherwise. And the Enter
+//! key.
 
 use std::io::{BufRead, IsTerminal};
 use std::sync::mpsc::{self, Receiver};
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::coverage::CoverageMap;
+use super::magnitude::Disturbance;
+use super::quality::{MOTIONCAL_LIMITS, Quality};
+use super::tty::EchoOff;
 
 /// What the recorder reports while it runs.
 #[derive(Clone, Copy, Debug)]
@@ -15,12 +20,68 @@ pub struct Progress<'a> {
     pub t_s: f64,
     /// Samples written.
     pub samples: u64,
-    /// Directions seen.
+    /// Directions the recorded samples cover.
     pub coverage: &'a CoverageMap,
-    /// The coverage the free routine stops at, 0–1.
-    pub target: f64,
+    /// The free routine's coverage target, 0–1; none for the cube routine, whose poses are a few directions by
+    /// design.
+    pub target: Option<f64>,
     /// For the cube routine: poses taken, and of how many.
     pub poses: Option<(usize, usize)>,
+    /// MotionCal-style figures of the recorded samples, once they determine a sphere.
+    pub quality: Option<Quality>,
+    /// The field's magnitude departing from the rest now (a magnet near), if it does.
+    pub disturbance: Option<Disturbance>,
+}
+
+/// The coverage map's legend.
+fn legend(cube: bool) -> &'static str {
+    if cube {
+        "# the field's direction in a pose taken   . none yet   (seen from outside)"
+    } else {
+        "# a direction of the field seen   . not yet   (seen from outside)"
+    }
+}
+
+/// The quality figures, two lines: all four for free rotation, variance and fit error for the cube's poses (whose
+/// few directions are by design).
+fn quality_lines(quality: Option<Quality>, cube: bool) -> String {
+    let l = MOTIONCAL_LIMITS;
+    let Some(q) = quality else {
+        return "quality: once the samples span three dimensions".to_owned();
+    };
+    let within = if q.within_motioncal_limits(!cube) {
+        "all within"
+    } else {
+        "not yet"
+    };
+    if cube {
+        format!(
+            "quality: variance {:.1} %, fit error {:.1} %\n  (MotionCal asks below {} and {} %: {within})",
+            q.variance_pct, q.fit_error_pct, l.variance_pct, l.fit_error_pct
+        )
+    } else {
+        format!(
+            "quality: gaps {:.1} %, variance {:.1} %, wobble {:.1} %, fit error {:.1} %\n  (MotionCal asks below {}, \
+             {}, {} and {} %: {within})",
+            q.gaps_pct,
+            q.variance_pct,
+            q.wobble_pct,
+            q.fit_error_pct,
+            l.gaps_pct,
+            l.variance_pct,
+            l.wobble_pct,
+            l.fit_error_pct
+        )
+    }
+}
+
+/// The warning shown while the field's magnitude departs from the rest, two lines.
+fn disturbance_lines(d: &Disturbance) -> String {
+    format!(
+        "! the field is {:.1} µT, not the {:.1} µT of the rest, since t = {:.1} s\n  a magnet or iron near the \
+         sensor? Move it away (not counted as coverage)",
+        d.magnitude_ut, d.usual_ut, d.since_s
+    )
 }
 
 /// The operator's side of a recording.
@@ -31,7 +92,7 @@ pub trait Ui {
     fn progress(&mut self, p: &Progress<'_>);
     /// Whether Enter was pressed since the last call.
     fn enter_pressed(&mut self) -> bool;
-    /// The recording is over: clear any live display.
+    /// The recording is over: leave the live display's last state, and the terminal as it was.
     fn finish(&mut self);
 }
 
@@ -65,22 +126,34 @@ impl EnterKey {
     }
 }
 
-/// A terminal: the coverage map redrawn in place above a progress bar (indicatif).
+/// A terminal: the live display redrawn in place (indicatif) on standard output, with echo off.
 pub struct TerminalUi {
     bar: ProgressBar,
     enter: Option<EnterKey>,
-    cube: Option<usize>,
+    cube: bool,
+    echo_off: Option<EchoOff>,
 }
 
 impl TerminalUi {
-    /// A live display; `enter` listens for the Enter key (none when unattended). `cube_poses` makes the bar count
-    /// poses instead of coverage.
+    /// A live display on standard output, with echo off; `enter` listens for the Enter key (none when unattended).
+    /// `cube_poses` makes the bar count poses instead of coverage.
     pub fn new(enter: Option<EnterKey>, cube_poses: Option<usize>) -> TerminalUi {
+        let mut ui = TerminalUi::on(ProgressDrawTarget::stdout(), enter, cube_poses);
+        ui.echo_off = EchoOff::new();
+        ui
+    }
+
+    /// A live display drawn to `target`.
+    fn on(
+        target: ProgressDrawTarget,
+        enter: Option<EnterKey>,
+        cube_poses: Option<usize>,
+    ) -> TerminalUi {
         let (len, template) = match cube_poses {
             Some(n) => (n as u64, "{msg}\n[{bar:40}] {pos}/{len} poses  {prefix}"),
             None => (100, "{msg}\n[{bar:40}] {pos:>3}% of the sphere  {prefix}"),
         };
-        let bar = ProgressBar::new(len);
+        let bar = ProgressBar::with_draw_target(Some(len), target);
         bar.set_style(
             ProgressStyle::with_template(template)
                 .expect("the template is valid")
@@ -89,7 +162,8 @@ impl TerminalUi {
         TerminalUi {
             bar,
             enter,
-            cube: cube_poses,
+            cube: cube_poses.is_some(),
+            echo_off: None,
         }
     }
 }
@@ -100,19 +174,27 @@ impl Ui for TerminalUi {
     }
 
     fn progress(&mut self, p: &Progress<'_>) {
-        match (self.cube, p.poses) {
-            (Some(_), Some((taken, _))) => self.bar.set_position(taken as u64),
-            _ => self
+        match p.poses {
+            Some((taken, _)) => self.bar.set_position(taken as u64),
+            None => self
                 .bar
                 .set_position((100.0 * p.coverage.fraction()).floor() as u64),
         }
-        let target = match p.poses {
-            Some(_) => String::new(),
-            None => format!(", target {:.0} %", 100.0 * p.target),
-        };
+        let target = p
+            .target
+            .map(|t| format!(", target {:.0} %", 100.0 * t))
+            .unwrap_or_default();
         self.bar
             .set_prefix(format!("{:.1} s, {} samples{target}", p.t_s, p.samples));
-        self.bar.set_message(p.coverage.render(5));
+        let mut text = p.coverage.render(5);
+        text += legend(self.cube);
+        text.push('\n');
+        text += &quality_lines(p.quality, self.cube);
+        if let Some(d) = &p.disturbance {
+            text.push('\n');
+            text += &disturbance_lines(d);
+        }
+        self.bar.set_message(text);
     }
 
     fn enter_pressed(&mut self) -> bool {
@@ -121,13 +203,17 @@ impl Ui for TerminalUi {
 
     fn finish(&mut self) {
         self.bar.abandon();
+        self.echo_off = None;
     }
 }
 
-/// Not a terminal (a pipe, a log, a test): a progress line per second of recording time.
+/// Not a terminal (a pipe, a log, a test): a progress line per second of recording time, and the last one at the
+/// end.
 pub struct PlainUi {
     enter: Option<EnterKey>,
     next_line_s: f64,
+    /// The latest progress line, if it was not printed.
+    pending: Option<String>,
 }
 
 impl PlainUi {
@@ -136,6 +222,7 @@ impl PlainUi {
         PlainUi {
             enter,
             next_line_s: 0.0,
+            pending: None,
         }
     }
 }
@@ -146,28 +233,40 @@ impl Ui for PlainUi {
     }
 
     fn progress(&mut self, p: &Progress<'_>) {
-        if p.t_s < self.next_line_s {
-            return;
-        }
-        self.next_line_s = p.t_s.floor() + 1.0;
-        let poses = p
-            .poses
-            .map(|(taken, n)| format!(", poses {taken}/{n}"))
-            .unwrap_or_default();
-        println!(
-            "recording: t={:.2} s, samples={}, coverage {:.0} % (target {:.0} %){poses}",
+        let due = p.t_s >= self.next_line_s;
+        let routine = match (p.poses, p.target) {
+            (Some((taken, n)), _) => format!("poses {taken}/{n}"),
+            (None, Some(target)) => format!(
+                "coverage {:.0} % (target {:.0} %)",
+                100.0 * p.coverage.fraction(),
+                100.0 * target
+            ),
+            (None, None) => format!("coverage {:.0} %", 100.0 * p.coverage.fraction()),
+        };
+        let line = format!(
+            "recording: t={:.2} s, samples={}, {routine}; {}",
             p.t_s,
             p.samples,
-            100.0 * p.coverage.fraction(),
-            100.0 * p.target
+            quality_lines(p.quality, p.poses.is_some()).replace("\n ", "")
         );
+        if due {
+            self.next_line_s = p.t_s.floor() + 1.0;
+            self.pending = None;
+            println!("{line}");
+        } else {
+            self.pending = Some(line);
+        }
     }
 
     fn enter_pressed(&mut self) -> bool {
         self.enter.as_ref().is_some_and(EnterKey::pressed)
     }
 
-    fn finish(&mut self) {}
+    fn finish(&mut self) {
+        if let Some(line) = self.pending.take() {
+            println!("{line}");
+        }
+    }
 }
 
 /// The live display when standard output is a terminal, plain lines otherwise. Unattended (`auto`), nothing
@@ -178,5 +277,188 @@ pub fn for_stdout(auto: bool, cube_poses: Option<usize>) -> Box<dyn Ui> {
         Box::new(TerminalUi::new(enter, cube_poses))
     } else {
         Box::new(PlainUi::new(enter))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io;
+    use std::sync::{Arc, Mutex};
+
+    use indicatif::TermLike;
+
+    use super::*;
+
+    /// A terminal emulator (vt100) that indicatif draws to.
+    #[derive(Clone)]
+    struct Screen(Arc<Mutex<vt100::Parser>>);
+
+    impl std::fmt::Debug for Screen {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("Screen")
+        }
+    }
+
+    impl Screen {
+        fn new() -> Screen {
+            let size = |n| std::num::NonZeroU16::new(n).unwrap();
+            Screen(Arc::new(Mutex::new(vt100::Parser::new(
+                size(40),
+                size(100),
+                0,
+            ))))
+        }
+
+        fn send(&self, bytes: &str) -> io::Result<()> {
+            self.0.lock().unwrap().process(bytes.as_bytes());
+            Ok(())
+        }
+
+        /// The screen's rows, trailing blanks trimmed.
+        fn lines(&self) -> Vec<String> {
+            let parser = self.0.lock().unwrap();
+            parser
+                .screen()
+                .rows(0, 100)
+                .map(|r| r.trim_end().to_owned())
+                .collect()
+        }
+    }
+
+    impl TermLike for Screen {
+        fn width(&self) -> u16 {
+            100
+        }
+        fn height(&self) -> u16 {
+            40
+        }
+        fn move_cursor_up(&self, n: usize) -> io::Result<()> {
+            self.send(&format!("\x1b[{n}A"))
+        }
+        fn move_cursor_down(&self, n: usize) -> io::Result<()> {
+            self.send(&format!("\x1b[{n}B"))
+        }
+        fn move_cursor_right(&self, n: usize) -> io::Result<()> {
+            self.send(&format!("\x1b[{n}C"))
+        }
+        fn move_cursor_left(&self, n: usize) -> io::Result<()> {
+            self.send(&format!("\x1b[{n}D"))
+        }
+        fn write_line(&self, s: &str) -> io::Result<()> {
+            self.send(&format!("{s}\r\n"))
+        }
+        fn write_str(&self, s: &str) -> io::Result<()> {
+            self.send(s)
+        }
+        fn clear_line(&self) -> io::Result<()> {
+            self.send("\r\x1b[2K")
+        }
+        fn flush(&self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_screen_shows_the_map_its_legend_the_figures_and_a_magnet_while_it_lasts() {
+        let screen = Screen::new();
+        let mut ui = TerminalUi::on(
+            ProgressDrawTarget::term_like(Box::new(screen.clone())),
+            None,
+            None,
+        );
+        let mut map = CoverageMap::new();
+        for i in 0..2000 {
+            let z = -1.0 + 2.0 * (i as f64 + 0.5) / 2000.0;
+            let phi = i as f64 * 2.399963;
+            let r = (1.0 - z * z).sqrt();
+            map.add([50.0 * r * phi.cos() + 10.0, 50.0 * r * phi.sin(), 50.0 * z]);
+        }
+        let quality = Quality::of(map.directions());
+        assert!(quality.is_some());
+        let magnet = Disturbance {
+            since_s: 20.1,
+            magnitude_ut: 144.6,
+            usual_ut: 46.9,
+        };
+        let progress = |t_s: f64, disturbance: Option<Disturbance>| Progress {
+            t_s,
+            samples: (100.0 * t_s) as u64,
+            coverage: &map,
+            target: Some(0.9),
+            poses: None,
+            quality,
+            disturbance,
+        };
+        ui.message("free rotation: turn the sensor");
+        ui.progress(&progress(20.0, None));
+        ui.progress(&progress(21.0, Some(magnet)));
+        ui.message("t = 20.1 s: the field magnitude is 144.6 µT");
+        let during = screen.lines();
+        let count =
+            |lines: &[String], what: &str| lines.iter().filter(|l| l.contains(what)).count();
+        assert_eq!(
+            count(&during, "! the field is 144.6 µT, not the 46.9 µT"),
+            1,
+            "{during:#?}"
+        );
+        assert_eq!(
+            count(&during, "a magnet or iron near the sensor? Move it away"),
+            1
+        );
+        ui.progress(&progress(26.0, None));
+        ui.finish();
+        let after = screen.lines();
+        for (what, n) in [
+            ("free rotation: turn the sensor", 1),
+            ("t = 20.1 s: the field magnitude is 144.6 µT", 1),
+            ("+Z hemisphere", 1),
+            ("# a direction of the field seen", 1),
+            ("quality: gaps", 1),
+            ("% of the sphere  26.0 s, 2600 samples, target 90 %", 1),
+            ("! the field is", 0),
+        ] {
+            assert_eq!(count(&after, what), n, "{what}: {after:#?}");
+        }
+    }
+
+    #[test]
+    fn the_cube_routine_shows_no_gaps_and_every_line_fits_80_columns() {
+        let q = Quality {
+            gaps_pct: 75.0,
+            variance_pct: 1.0,
+            wobble_pct: 6.0,
+            fit_error_pct: 1.2,
+        };
+        let cube = quality_lines(Some(q), true);
+        assert!(
+            cube.contains("variance 1.0 %")
+                && !cube.contains("gaps")
+                && cube.contains("all within"),
+            "{cube}"
+        );
+        let free = quality_lines(Some(q), false);
+        assert!(
+            free.contains("gaps 75.0 %")
+                && free.contains("wobble 6.0 %")
+                && free.ends_with("not yet)"),
+            "{free}"
+        );
+        assert!(legend(true).contains("pose"));
+        let d = Disturbance {
+            since_s: 120.5,
+            magnitude_ut: 144.6,
+            usual_ut: 46.9,
+        };
+        let text = [
+            legend(true),
+            legend(false),
+            &cube,
+            &free,
+            &disturbance_lines(&d),
+        ]
+        .join("\n");
+        for line in text.lines() {
+            assert!(line.chars().count() <= 80, "{line}");
+        }
     }
 }

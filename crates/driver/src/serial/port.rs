@@ -202,7 +202,7 @@ pub fn open(path: &str, baud: u32, protocol: Protocol) -> Result<SerialSource, O
 impl DeviceSpec {
     /// Opens the device this spec names; see [`open`].
     pub fn open(&self) -> Result<SerialSource, OpenError> {
-        open(&self.path, self.baud, self.protocol)
+        open(&self.path, self.baud, self.protocol.clone())
     }
 }
 
@@ -243,7 +243,7 @@ impl<L: Link> SerialSource<L> {
     }
 
     /// The line protocol read.
-    pub fn protocol(&self) -> Protocol {
+    pub fn protocol(&self) -> &Protocol {
         self.parser.protocol()
     }
 

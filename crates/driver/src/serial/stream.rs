@@ -41,8 +41,14 @@ pub struct StreamParser {
     counts: LineCounts,
 }
 
-/// Whether `bytes` is a line of printable ASCII (tabs allowed).
-fn as_text(bytes: &[u8]) -> Option<&str> {
+/// Whether `bytes` is a line of text: printable ASCII (tabs allowed), or with `utf8` any UTF-8 without control
+/// characters (pattern formats may print `µT`).
+fn as_text(bytes: &[u8], utf8: bool) -> Option<&str> {
+    if utf8 {
+        return std::str::from_utf8(bytes)
+            .ok()
+            .filter(|t| !t.chars().any(|c| c != '\t' && c.is_control()));
+    }
     if bytes
         .iter()
         .all(|&b| b == b'\t' || (0x20..0x7f).contains(&b))
@@ -64,8 +70,8 @@ impl StreamParser {
     }
 
     /// The protocol parsed.
-    pub fn protocol(&self) -> Protocol {
-        self.protocol
+    pub fn protocol(&self) -> &Protocol {
+        &self.protocol
     }
 
     /// Counters so far.
@@ -100,7 +106,8 @@ impl StreamParser {
     }
 
     fn classify(&mut self, line: &[u8]) -> Parsed {
-        let Some(text) = as_text(line) else {
+        let utf8 = matches!(self.protocol, Protocol::Pattern(_));
+        let Some(text) = as_text(line, utf8) else {
             return Parsed::Garbage(GarbageKind::Binary);
         };
         if let Some((echo, result)) = motioncal::parse_echo(text) {
@@ -113,7 +120,7 @@ impl StreamParser {
                 },
             };
         }
-        match self.protocol {
+        match &self.protocol {
             Protocol::MotionCal => match motioncal::parse_line(text) {
                 Ok(MotionCalLine::Raw(raw)) => Parsed::Sample(raw.to_sample()),
                 Ok(MotionCalLine::Echo(e)) => Parsed::Echo(e),
@@ -123,6 +130,10 @@ impl StreamParser {
                 Ok(CsvLine::Sample(s)) => Parsed::Sample(s),
                 Ok(CsvLine::Header) => Parsed::Header,
                 Ok(CsvLine::Comment) => Parsed::Comment,
+                Err(kind) => Parsed::Garbage(kind),
+            },
+            Protocol::Pattern(p) => match p.parse_line(text) {
+                Ok(s) => Parsed::Sample(s),
                 Err(kind) => Parsed::Garbage(kind),
             },
         }
