@@ -27,6 +27,7 @@ use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3, Vect
 use std::borrow::Cow;
 
 use crate::FitError;
+use crate::chunks;
 use crate::coverage::{Coverage, SphereGrid, describe};
 use crate::frames::Mat3;
 use crate::model::Model;
@@ -206,10 +207,10 @@ impl RobustProblem for ScalarProblem<'_> {
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
         let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
         let b = Vector3::from(fit.b_ut);
-        self.raw_ut
-            .iter()
-            .map(|m| ((a * Vector3::from(*m) + b).norm() - fit.field_ut).abs())
-            .collect()
+        let raw = &self.raw_ut;
+        chunks::map(raw.len(), |i| {
+            ((a * Vector3::from(raw[i]) + b).norm() - fit.field_ut).abs()
+        })
     }
 
     fn model(fit: &ScalarFit) -> Model {
