@@ -157,9 +157,16 @@ impl Rows<'_> {
             };
             rest = next;
             if !line.is_empty() {
-                fields.split(line, self.separator);
                 let unchecked = time.first_unchecked_s.is_none();
-                let result = self.parser.push(&fields, rows, &mut time);
+                let result = if self
+                    .parser
+                    .push_plain(line, self.separator, rows, &mut time)
+                {
+                    Ok(())
+                } else {
+                    fields.split(line, self.separator);
+                    self.parser.push(&fields, rows, &mut time)
+                };
                 if unchecked && time.first_unchecked_s.is_some() {
                     first_line = lines;
                 }

@@ -228,6 +228,167 @@ impl RowParser<'_> {
     }
 }
 
+/// Columns a row may have for [`RowParser::push_plain`].
+const PLAIN_COLUMNS: usize = 32;
+
+impl RowParser<'_> {
+    /// The fast path for a plain row: every numeric field a decimal number or empty, nothing to trim, exactly as
+    /// many fields as the header, every value within its limits, `t` not going backwards, a unit quaternion. Appends
+    /// it and returns true; returns false without touching `out` or `time` for anything else, which
+    /// [`RowParser::push`] then reads (and refuses or accepts alike).
+    pub(crate) fn push_plain(
+        &self,
+        line: &[u8],
+        separator: u8,
+        out: &mut Recording,
+        time: &mut TimeLink,
+    ) -> bool {
+        if self.roles.len() > PLAIN_COLUMNS {
+            return false;
+        }
+        let mut t_s = f64::NAN;
+        let mut mag_ut = [f64::NAN; 3];
+        let mut temp_c = f64::NAN;
+        let mut quat = [f64::NAN; 4];
+        let mut ref_ut = [f64::NAN; 3];
+        let mut gyro_rad_s = [f64::NAN; 3];
+        let mut currents = [f64::NAN; PLAIN_COLUMNS];
+        let mut extra: [(usize, usize); PLAIN_COLUMNS] = [(0, 0); PLAIN_COLUMNS];
+        let last = self.roles.len() - 1;
+        let mut pos = 0;
+        for (k, role) in self.roles.iter().enumerate() {
+            // The field ends at a separator, or at the line's end for the last one.
+            let at_end = |end: usize| {
+                if k == last {
+                    end == line.len()
+                } else {
+                    line.get(end) == Some(&separator)
+                }
+            };
+            let value = if let Role::Extra(j) = role {
+                let end = memchr::memchr(separator, &line[pos..]).map_or(line.len(), |i| pos + i);
+                if !at_end(end) {
+                    return false;
+                }
+                extra[*j] = (pos, end);
+                pos = end;
+                f64::NAN
+            } else if at_end(pos) {
+                f64::NAN
+            } else {
+                let rest = &line[pos..];
+                let digits = match rest.first() {
+                    Some(b'-' | b'+') => &rest[1..],
+                    _ => rest,
+                };
+                if !digits
+                    .first()
+                    .is_some_and(|b| b.is_ascii_digit() || *b == b'.')
+                {
+                    return false;
+                }
+                let Ok((value, used)) = fast_float2::parse_partial::<f64, _>(rest) else {
+                    return false;
+                };
+                pos += used;
+                if !at_end(pos) || !value.is_finite() {
+                    return false;
+                }
+                value
+            };
+            let limit = match *role {
+                Role::Time => {
+                    t_s = value;
+                    limits::TIME
+                }
+                Role::Mag(a) => {
+                    mag_ut[a] = value;
+                    limits::FIELD
+                }
+                Role::Temp => {
+                    temp_c = value;
+                    limits::TEMP
+                }
+                Role::Quat(a) => {
+                    quat[a] = value;
+                    limits::UNBOUNDED
+                }
+                Role::Ref(a) => {
+                    ref_ut[a] = value;
+                    limits::FIELD
+                }
+                Role::Gyro(a) => {
+                    gyro_rad_s[a] = value;
+                    limits::GYRO
+                }
+                Role::Current(j) => {
+                    currents[j] = value;
+                    limits::CURRENT
+                }
+                Role::Extra(_) => limits::UNBOUNDED,
+            };
+            if limit.exceeded_by(value) {
+                return false;
+            }
+            pos += 1;
+        }
+        // Required values present, t in order, a quaternion of unit length.
+        if mag_ut.iter().any(|v| v.is_nan()) || (out.t_s.is_some() && t_s.is_nan()) {
+            return false;
+        }
+        if let Some(previous_s) = time.previous_s
+            && out.t_s.is_some()
+            && t_s < previous_s
+        {
+            return false;
+        }
+        let quat = group_or_nan(quat);
+        let quat = if quat[0].is_nan() {
+            quat
+        } else {
+            match normalise_quat(quat) {
+                Ok(q) => q,
+                Err(_) => return false,
+            }
+        };
+        let mut extra_text = [""; PLAIN_COLUMNS];
+        for (text, (start, end)) in extra_text.iter_mut().zip(&extra).take(out.extra.len()) {
+            match std::str::from_utf8(&line[*start..*end]) {
+                Ok(t) => *text = t,
+                Err(_) => return false,
+            }
+        }
+
+        if let Some(t) = &mut out.t_s {
+            if time.previous_s.is_none() {
+                time.first_unchecked_s = Some(t_s);
+            }
+            time.previous_s = Some(t_s);
+            t.push(t_s);
+        }
+        out.mag_ut.push(mag_ut);
+        if let Some(temp) = &mut out.temp_c {
+            temp.push(temp_c);
+        }
+        if let Some(q) = &mut out.quat {
+            q.push(quat);
+        }
+        if let Some(r) = &mut out.ref_ut {
+            r.push(group_or_nan(ref_ut));
+        }
+        if let Some(g) = &mut out.gyro_rad_s {
+            g.push(group_or_nan(gyro_rad_s));
+        }
+        for (channel, value) in out.currents.iter_mut().zip(currents) {
+            channel.values.push(value);
+        }
+        for (column, text) in out.extra.iter_mut().zip(extra_text) {
+            column.values.push(text.to_owned());
+        }
+        true
+    }
+}
+
 /// `value` if it is within `limit`; an out-of-range error quoting the field's text otherwise.
 fn within<'t>(
     text: &impl Fn() -> std::borrow::Cow<'t, str>,
