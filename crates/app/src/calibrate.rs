@@ -5,7 +5,6 @@ use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
 use rayon::prelude::*;
-use rayon::prelude::*;
 use std::borrow::Cow;
 
 use magcal_calib::robust;
