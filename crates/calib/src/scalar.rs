@@ -328,9 +328,6 @@ fn unpack(p: &SVector<f64, P>) -> (Vector3<f64>, Matrix3<f64>) {
     (p.fixed_rows::<3>(0).into_owned(), a)
 }
 
-/// Entries of the upper triangle of a P×P matrix.
-const UPPER: usize = P * (P + 1) / 2;
-
 fn pass(
     raw: &[Vector3<f64>],
     w: &[f64],
@@ -339,9 +336,9 @@ fn pass(
     noise: Option<&Vector3<f64>>,
 ) -> Pass {
     let (c, a) = unpack(p);
-    // Per chunk: the upper triangle of JᵀWJ row by row, JᵀWr and Σwr², in plain arrays.
+    // Per chunk: JᵀWJ (all of it: fixed bounds let the products vectorise), JᵀWr and Σwr², in plain arrays.
     let chunk = |range: std::ops::Range<usize>| {
-        let (mut jtj, mut jtr, mut rss) = ([0.0; UPPER], [0.0; P], 0.0);
+        let (mut jtj, mut jtr, mut rss) = ([[0.0; P]; P], [0.0; P], 0.0);
         for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
             if wi == 0.0 {
                 continue;
@@ -355,36 +352,26 @@ fn pass(
                     (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
                 }
             }
-            let mut at = 0;
-            for x in 0..P {
-                for y in x..P {
-                    jtj[at] += wj[x] * j[y];
-                    at += 1;
+            for (row, wx) in jtj.iter_mut().zip(wj) {
+                for (e, jy) in row.iter_mut().zip(j) {
+                    *e += wx * jy;
                 }
             }
             rss += wi * r * r;
         }
         (jtj, jtr, rss)
     };
-    let (upper, jtr, rss) = chunks::fold(raw.len(), chunk, |x, y| {
+    let (jtj, jtr, rss) = chunks::fold(raw.len(), chunk, |x, y| {
         (
-            std::array::from_fn(|i| x.0[i] + y.0[i]),
+            std::array::from_fn(|r| std::array::from_fn(|c| x.0[r][c] + y.0[r][c])),
             std::array::from_fn(|i| x.1[i] + y.1[i]),
             x.2 + y.2,
         )
     })
     .unwrap_or_else(|| chunk(0..0));
-    let mut jtj = SMatrix::<f64, P, P>::zeros();
-    let mut at = 0;
-    for x in 0..P {
-        for y in x..P {
-            jtj[(x, y)] = upper[at];
-            jtj[(y, x)] = upper[at];
-            at += 1;
-        }
-    }
+    // Symmetric: the upper triangle as summed, mirrored.
     Pass {
-        jtj,
+        jtj: SMatrix::<f64, P, P>::from_fn(|x, y| jtj[x.min(y)][x.max(y)]),
         jtr: SVector::<f64, P>::from(jtr),
         rss,
     }
