@@ -96,6 +96,7 @@ fn perturbation(rec: &Recording, e: &Effect) -> Vec<[f64; 3]> {
                 world: Some(WorldContext {
                     sensor_to_ned: frames::quat_to_matrix(q[i]),
                     field_ned_ut: f,
+                    position_m: [0.0; 3],
                 }),
             };
             e.perturbation_ut(&ctx)

@@ -475,7 +475,7 @@ pub fn noise_source(noise: &NoiseFloor) -> String {
 /// What the diagnosis needs from a recording and its base calibration.
 fn diagnosis_input<'a>(
     rec: &'a Recording,
-    cal: &Calibration,
+    cal: &'a Calibration,
 ) -> Result<DiagnosisInput<'a>, CalibrateError> {
     let reference = match (&cal.fit, &rec.ref_ut, &rec.quat, cal.field.vector()) {
         (Fit::Vector(_), Some(r), _, _) => Reference::Field { expected_ut: r },
@@ -501,6 +501,8 @@ fn diagnosis_input<'a>(
             .collect(),
         reference,
         noise: cal.noise,
+        kept: Some(&cal.robust.kept),
+        scale_ut: cal.robust.scale_ut,
     })
 }
 

@@ -75,6 +75,8 @@ pub fn parse(spec: &str, defaults: &Defaults<'_>) -> Result<Effect, EffectSpecEr
         EffectId::BiasStep => &["t_s", "step_ut"],
         EffectId::BiasDrift => &["rate_ut_per_s", "t_ref_s"],
         EffectId::Disturbance => &["t0_s", "t1_s", "field_ned_ut"],
+        EffectId::BiasWindow => &["t0_s", "t1_s", "offset_ut"],
+        EffectId::MagnetNearby => &["position_m", "moment_am2"],
     };
     if let Some((name, _)) = values.iter().find(|(n, _)| !allowed.contains(n)) {
         return Err(err(format!(
@@ -145,6 +147,15 @@ pub fn parse(spec: &str, defaults: &Defaults<'_>) -> Result<Effect, EffectSpecEr
             t1_s: num("t1_s", None)?,
             field_ned_ut: vec3("field_ned_ut")?,
         },
+        EffectId::BiasWindow => Effect::BiasWindow {
+            t0_s: num("t0_s", None)?,
+            t1_s: num("t1_s", None)?,
+            offset_ut: vec3("offset_ut")?,
+        },
+        EffectId::MagnetNearby => Effect::MagnetNearby {
+            position_m: vec3("position_m")?,
+            moment_am2: vec3("moment_am2")?,
+        },
     })
 }
 
@@ -195,6 +206,15 @@ pub fn format(e: &Effect, currents: &[String]) -> String {
         } => {
             format!("t0_s={t0_s};t1_s={t1_s};field_ned_ut={}", v(field_ned_ut))
         }
+        Effect::BiasWindow {
+            t0_s,
+            t1_s,
+            offset_ut,
+        } => format!("t0_s={t0_s};t1_s={t1_s};offset_ut={}", v(offset_ut)),
+        Effect::MagnetNearby {
+            position_m,
+            moment_am2,
+        } => format!("position_m={};moment_am2={}", v(position_m), v(moment_am2)),
     };
     format!("{}:{params}", e.id())
 }

@@ -3,7 +3,7 @@
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
 //! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
-use magcal_calib::diagnosis::{Diagnosis, ParamValue, Verdict};
+use magcal_calib::diagnosis::{Diagnosis, ParamValue, SpanKind, Verdict};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
@@ -101,6 +101,18 @@ pub struct DiagnosisReport {
     pub located: LocatedReport,
     /// The noise floor the residuals are compared with, µT.
     pub noise_floor_ut: f64,
+    /// The reference's own error: the final model's residual on the clean samples beyond the sensor's noise, µT.
+    #[serde(default)]
+    pub reference_floor_ut: f64,
+    /// The spans where the residual departed grossly, what each was, and whether it was modelled or left out.
+    #[serde(default)]
+    pub spans: Vec<SpanReport>,
+    /// Effects the data suggested but the model does not hold, and why.
+    #[serde(default)]
+    pub rejected: Vec<RejectedReport>,
+    /// Samples left out of the calibration in gross spans.
+    #[serde(default)]
+    pub samples_excluded: usize,
     /// Samples the diagnosis used.
     pub samples_used: usize,
     /// Rows left out for a missing channel.
@@ -124,8 +136,44 @@ pub struct EffectReport {
     pub holdout_rms_after_ut: f64,
     /// Evidence (Wald statistic minus the complexity penalty).
     pub evidence: f64,
+    /// Its size: RMS per axis of its perturbation where it acts, µT.
+    #[serde(default)]
+    pub size_ut: f64,
     /// The finding in words.
     pub explanation: String,
+}
+
+/// A gross span.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpanReport {
+    /// First sample's time, s.
+    pub t0_s: f64,
+    /// Last sample's time, s.
+    pub t1_s: f64,
+    /// Samples in it.
+    pub samples: usize,
+    /// Largest residual in it under the base fit, µT.
+    pub peak_ut: f64,
+    /// The base fit's residual RMS in it, µT.
+    pub rms_ut: f64,
+    /// `sensor_fixed`, `room_fixed`, `moving` or `unexplained`.
+    pub kind: String,
+    /// The constant field that explains it: in sensor axes (`sensor_fixed`) or NED (`room_fixed`), µT.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field_ut: Option<[f64; 3]>,
+    /// Modelled (its samples kept, with an effect) or left out of the calibration.
+    pub modelled: bool,
+    /// In words.
+    pub explanation: String,
+}
+
+/// An effect rejected.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RejectedReport {
+    /// The effect id.
+    pub id: String,
+    /// Why.
+    pub why: String,
 }
 
 /// Two effects that explain the same residual.
@@ -223,6 +271,7 @@ impl DiagnosisReport {
                         holdout_rms_before_ut: e.holdout_rms_before_ut,
                         holdout_rms_after_ut: e.holdout_rms_after_ut,
                         evidence: e.evidence,
+                        size_ut: e.size_ut,
                         explanation: e.explanation.clone(),
                     }
                 })
@@ -266,6 +315,41 @@ impl DiagnosisReport {
                 }),
             },
             noise_floor_ut: d.noise_floor_ut,
+            reference_floor_ut: d.reference_floor_ut,
+            spans: d
+                .spans
+                .iter()
+                .map(|sp| {
+                    let (kind, field_ut) = match sp.kind {
+                        SpanKind::SensorFixed { offset_ut, .. } => {
+                            ("sensor_fixed", Some(offset_ut))
+                        }
+                        SpanKind::RoomFixed { field_ned_ut } => ("room_fixed", Some(field_ned_ut)),
+                        SpanKind::Moving => ("moving", None),
+                        SpanKind::Unexplained => ("unexplained", None),
+                    };
+                    SpanReport {
+                        t0_s: sp.t0_s,
+                        t1_s: sp.t1_s,
+                        samples: sp.samples,
+                        peak_ut: sp.peak_ut,
+                        rms_ut: sp.rms_ut,
+                        kind: kind.to_owned(),
+                        field_ut,
+                        modelled: sp.modelled,
+                        explanation: sp.explanation.clone(),
+                    }
+                })
+                .collect(),
+            rejected: d
+                .rejected
+                .iter()
+                .map(|r| RejectedReport {
+                    id: r.id.as_str().to_owned(),
+                    why: r.why.clone(),
+                })
+                .collect(),
+            samples_excluded: d.samples_excluded,
             samples_used: d.samples_used,
             samples_left_out: d.samples_left_out,
         }

@@ -38,11 +38,15 @@ pub enum EffectId {
     BiasDrift,
     /// A transient external field, fixed in the world frame.
     Disturbance,
+    /// A transient offset fixed to the sensor (something magnetic attached to the board for a while).
+    BiasWindow,
+    /// A magnet fixed in the room: its field depends on where the sensor is.
+    MagnetNearby,
 }
 
 impl EffectId {
     /// Every effect, in catalogue order.
-    pub const ALL: [EffectId; 11] = [
+    pub const ALL: [EffectId; 13] = [
         EffectId::TemperatureBias,
         EffectId::TemperatureScale,
         EffectId::CurrentBias,
@@ -54,6 +58,8 @@ impl EffectId {
         EffectId::BiasStep,
         EffectId::BiasDrift,
         EffectId::Disturbance,
+        EffectId::BiasWindow,
+        EffectId::MagnetNearby,
     ];
 
     /// The id used in reports, e.g. `"temperature_bias"`.
@@ -70,6 +76,8 @@ impl EffectId {
             EffectId::BiasStep => "bias_step",
             EffectId::BiasDrift => "bias_drift",
             EffectId::Disturbance => "disturbance",
+            EffectId::BiasWindow => "bias_window",
+            EffectId::MagnetNearby => "magnet_nearby",
         }
     }
 
@@ -82,11 +90,23 @@ impl EffectId {
     pub fn frame(self) -> Frame {
         match self {
             EffectId::TimeLag | EffectId::RateCoupling => Frame::Timing,
-            EffectId::FieldDrift | EffectId::FieldDirectionError | EffectId::Disturbance => {
-                Frame::World
-            }
+            EffectId::FieldDrift
+            | EffectId::FieldDirectionError
+            | EffectId::Disturbance
+            | EffectId::MagnetNearby => Frame::World,
             _ => Frame::Body,
         }
+    }
+}
+
+impl EffectId {
+    /// Whether the effect is an event of one recording (a disturbance that came and went) rather than a property
+    /// of the sensor or the bench: never a correction for other recordings.
+    pub fn is_transient(self) -> bool {
+        matches!(
+            self,
+            EffectId::Disturbance | EffectId::BiasWindow | EffectId::MagnetNearby
+        )
     }
 }
 
@@ -114,6 +134,8 @@ pub struct WorldContext {
     pub sensor_to_ned: Mat3,
     /// The world field the calibration assumes, NED, µT.
     pub field_ned_ut: [f64; 3],
+    /// Where the sensor is, NED, m (zero when not known: no recording holds it; the simulator does).
+    pub position_m: [f64; 3],
 }
 
 /// Everything an effect may depend on at one sample.
@@ -224,7 +246,27 @@ pub enum Effect {
         /// The disturbing field, NED, µT.
         field_ned_ut: [f64; 3],
     },
+    /// `δ = offset` for `t0 ≤ t < t1`, zero outside: a field fixed to the sensor for a while.
+    BiasWindow {
+        /// Start, s.
+        t0_s: f64,
+        /// End, s.
+        t1_s: f64,
+        /// The offset, µT per calibrated axis.
+        offset_ut: [f64; 3],
+    },
+    /// `δ = Rᵀ·μ0/(4π)·(3(m·r̂)r̂ − m)/|r|³`: the dipole field of a magnet at `position` with moment `m`, at the
+    /// sensor's position (`r` from the magnet to the sensor).
+    MagnetNearby {
+        /// Where the magnet is, NED, m.
+        position_m: [f64; 3],
+        /// Its magnetic moment, NED, A·m².
+        moment_am2: [f64; 3],
+    },
 }
+
+/// μ0/(4π) in µT·m³/(A·m²).
+const MU0_OVER_4PI_UT: f64 = 0.1;
 
 impl Effect {
     /// The effect's id.
@@ -241,6 +283,8 @@ impl Effect {
             Effect::BiasStep { .. } => EffectId::BiasStep,
             Effect::BiasDrift { .. } => EffectId::BiasDrift,
             Effect::Disturbance { .. } => EffectId::Disturbance,
+            Effect::BiasWindow { .. } => EffectId::BiasWindow,
+            Effect::MagnetNearby { .. } => EffectId::MagnetNearby,
         }
     }
 
@@ -333,6 +377,38 @@ impl Effect {
                 }
                 _ => [0.0; 3],
             },
+            Effect::BiasWindow {
+                t0_s,
+                t1_s,
+                offset_ut,
+            } => {
+                if ctx.t_s >= t0_s && ctx.t_s < t1_s {
+                    offset_ut
+                } else {
+                    [0.0; 3]
+                }
+            }
+            Effect::MagnetNearby {
+                position_m,
+                moment_am2,
+            } => match ctx.world {
+                Some(w) => {
+                    let r = frames::sub(w.position_m, position_m);
+                    let d = frames::norm(r);
+                    if d > 0.0 {
+                        let u = frames::scale(r, 1.0 / d);
+                        let radial = frames::scale(u, 3.0 * frames::dot(moment_am2, u));
+                        let field = frames::scale(
+                            frames::sub(radial, moment_am2),
+                            MU0_OVER_4PI_UT / (d * d * d),
+                        );
+                        frames::mat_t_vec(&w.sensor_to_ned, field)
+                    } else {
+                        [f64::NAN; 3]
+                    }
+                }
+                None => [0.0; 3],
+            },
         }
     }
 
@@ -363,7 +439,9 @@ impl Effect {
             }
             | Effect::Disturbance {
                 field_ned_ut: p, ..
-            } => (p, 3),
+            }
+            | Effect::BiasWindow { offset_ut: p, .. }
+            | Effect::MagnetNearby { moment_am2: p, .. } => (p, 3),
             Effect::TimeLag { lag_s } => ([lag_s, 0.0, 0.0], 1),
             Effect::FieldDirectionError {
                 declination_error_deg,
@@ -394,7 +472,9 @@ impl Effect {
             }
             | Effect::Disturbance {
                 field_ned_ut: q, ..
-            } => *q = p,
+            }
+            | Effect::BiasWindow { offset_ut: q, .. }
+            | Effect::MagnetNearby { moment_am2: q, .. } => *q = p,
             Effect::TimeLag { lag_s } => *lag_s = p[0],
             Effect::FieldDirectionError {
                 declination_error_deg,
@@ -438,6 +518,7 @@ mod tests {
                 [0.9, 0.1, -0.3, 0.2].map(|x| x / 0.9899494936611666),
             ),
             field_ned_ut: [20.0, 1.0, 45.0],
+            position_m: [0.3, -0.1, 0.2],
         };
         let currents = [0.7];
         let c = ctx(&currents, Some(world));
@@ -478,6 +559,15 @@ mod tests {
                 t1_s: 11.0,
                 field_ned_ut: [0.0; 3],
             },
+            Effect::BiasWindow {
+                t0_s: 9.0,
+                t1_s: 11.0,
+                offset_ut: [0.0; 3],
+            },
+            Effect::MagnetNearby {
+                position_m: [0.0, 0.1, 0.0],
+                moment_am2: [0.0; 3],
+            },
         ];
         for e in effects {
             assert!(e.is_linear());
@@ -506,6 +596,7 @@ mod tests {
         let world = WorldContext {
             sensor_to_ned: frames::IDENTITY,
             field_ned_ut: [20.0, 0.0, 40.0],
+            position_m: [0.0; 3],
         };
         let e = Effect::FieldDirectionError {
             declination_error_deg: 90.0,
@@ -528,5 +619,28 @@ mod tests {
             coef_ut_per_a: [1.0; 3],
         };
         assert!(current.perturbation_ut(&ctx(&[], None))[0].is_nan());
+    }
+
+    #[test]
+    fn a_magnet_nearby_is_a_dipole_falling_with_the_cube_of_distance() {
+        let at = |x: f64| {
+            let world = WorldContext {
+                sensor_to_ned: frames::IDENTITY,
+                field_ned_ut: [20.0, 0.0, 40.0],
+                position_m: [x, 0.0, 0.0],
+            };
+            Effect::MagnetNearby {
+                position_m: [0.0; 3],
+                moment_am2: [1.0, 0.0, 0.0],
+            }
+            .perturbation_ut(&ctx(&[], Some(world)))
+        };
+        // On the moment's axis: 2·μ0/(4π)·m/r³ = 0.2 µT·m³ / r³.
+        let near = at(0.1);
+        assert!(
+            (near[0] - 200.0).abs() < 1e-9 && near[1].abs() < 1e-12,
+            "{near:?}"
+        );
+        assert!((at(0.2)[0] - 25.0).abs() < 1e-9);
     }
 }

@@ -63,6 +63,7 @@ pub(crate) fn clean_reading(
         world: Some(WorldContext {
             sensor_to_ned: r,
             field_ned_ut,
+            position_m: pose.position_m,
         }),
     };
     let perturbed = effects
@@ -249,6 +250,7 @@ impl Hand {
             t_s: self.t_s,
             quat: to_array(&self.quat),
             omega_rad_s: [omega.x, omega.y, omega.z],
+            position_m: [0.0; 3],
         }
     }
 

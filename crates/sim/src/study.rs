@@ -140,6 +140,20 @@ pub fn random_effect(id: EffectId, s: &Scenario, seed: u64) -> Effect {
                 field_ned_ut: d2,
             }
         }
+        EffectId::BiasWindow => {
+            let len = rng.random_range(0.1..0.3) * t_end;
+            let t0_s = rng.random_range(0.1..0.9) * (t_end - len);
+            Effect::BiasWindow {
+                t0_s,
+                t1_s: t0_s + len,
+                offset_ut: d2,
+            }
+        }
+        // Half a metre from the wander's centre, the moment along a random direction.
+        EffectId::MagnetNearby => Effect::MagnetNearby {
+            position_m: frames::scale(d, 0.5),
+            moment_am2: d2,
+        },
     }
 }
 

@@ -13,6 +13,8 @@ pub struct Pose {
     pub quat: [f64; 4],
     /// Angular rate in sensor axes, rad/s.
     pub omega_rad_s: [f64; 3],
+    /// Where the sensor is, NED, m (the tumble wanders about the origin; the jig and the turntable stay there).
+    pub position_m: [f64; 3],
 }
 
 /// How the sensor is turned during the recording.
@@ -76,6 +78,7 @@ impl Trajectory {
                         t_s: t0 + i as f64 * dt,
                         quat: pose.quat,
                         omega_rad_s: [0.0; 3],
+                        position_m: [0.0; 3],
                     }));
                 }
                 out
@@ -100,6 +103,7 @@ impl Trajectory {
                             t_s: t,
                             quat: to_array(&q),
                             omega_rad_s: [w.x, w.y, w.z],
+                            position_m: [0.0; 3],
                         }
                     })
                     .collect()
@@ -181,9 +185,47 @@ pub(crate) fn random_attitude(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(start)
 }
 
+/// Sinusoids per axis of the tumble's wander through the room.
+const WANDER_TONES: usize = 3;
+/// RMS of the wander per axis, m: a sensor turned in the hand moves about the bench too.
+const WANDER_RMS_M: f64 = 0.15;
+
+/// Where a hand-held sensor is: per axis a sum of slow random sinusoids (0.01–0.1 Hz) about the origin.
+struct Wander {
+    tones: [[(f64, f64); WANDER_TONES]; 3],
+}
+
+impl Wander {
+    fn draw(rng: &mut impl RngExt) -> Wander {
+        Wander {
+            tones: std::array::from_fn(|_| {
+                std::array::from_fn(|_| {
+                    (
+                        rng.random_range(0.01..0.1),
+                        rng.random_range(0.0..std::f64::consts::TAU),
+                    )
+                })
+            }),
+        }
+    }
+
+    fn at(&self, t_s: f64) -> [f64; 3] {
+        // Each tone contributes a²/2 to the axis' mean square.
+        let amp = WANDER_RMS_M / (WANDER_TONES as f64 / 2.0).sqrt();
+        std::array::from_fn(|k| {
+            self.tones[k]
+                .iter()
+                .map(|(f, phi)| amp * (std::f64::consts::TAU * f * t_s + phi).sin())
+                .sum()
+        })
+    }
+}
+
 fn tumble(duration_s: f64, rate_rad_s: f64, dt: f64, rng: &mut impl RngExt) -> Vec<Pose> {
     let rate = TumbleRate::draw(rate_rad_s, rng);
     let mut q = random_attitude(rng);
+    // Drawn after the attitude's parts, so that the turning is what it was before positions existed.
+    let wander = Wander::draw(rng);
     let n = (duration_s / dt).round() as usize;
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
@@ -193,6 +235,7 @@ fn tumble(duration_s: f64, rate_rad_s: f64, dt: f64, rng: &mut impl RngExt) -> V
             t_s: t,
             quat: to_array(&q),
             omega_rad_s: [w.x, w.y, w.z],
+            position_m: wander.at(t),
         });
         rate.advance(&mut q, t, dt, TUMBLE_SUBSTEPS);
     }

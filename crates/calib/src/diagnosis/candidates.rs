@@ -23,10 +23,15 @@ pub(crate) struct Candidate {
     pub scan_penalty: f64,
     /// Profile intervals of the scanned times (start, and end for a window), s.
     pub scan: Option<ScanTimes>,
+    /// A gross span's effect: always in the model, not selected.
+    pub forced: bool,
+    /// Rows (one per sample and calibrated axis, or per sample for the scalar method) where its regressors are not
+    /// all zero, counted while accumulating.
+    pub active_rows: usize,
 }
 
 /// The typical time between samples, s.
-fn sample_interval_s(s: &Samples) -> f64 {
+pub(crate) fn sample_interval_s(s: &Samples) -> f64 {
     (s.t[s.len() - 1] - s.t[0]) / (s.len() - 1).max(1) as f64
 }
 
@@ -77,6 +82,18 @@ impl Candidate {
         self.first..self.first + self.n
     }
 
+    /// Whether the effect is local (a step, a window) or a curve of the field: such effects must stand out from the
+    /// reference's own error, which a smooth local wander of the reference can mimic.
+    pub fn local(&self) -> bool {
+        matches!(
+            self.id(),
+            EffectId::BiasStep
+                | EffectId::Disturbance
+                | EffectId::BiasWindow
+                | EffectId::Nonlinearity
+        )
+    }
+
     /// The regressors at one sample: column `k` is the perturbation per unit of parameter `k`, in calibrated axes.
     pub fn regressors(&self, ctx: &Context<'_>) -> [[f64; 3]; 3] {
         let mut out = [[0.0; 3]; 3];
@@ -119,6 +136,8 @@ pub(crate) struct Offer<'a> {
     pub current_names: &'a [&'a str],
     pub step: Option<Scan>,
     pub window: Option<Scan>,
+    /// The modelled gross spans: their effect with its times set, and the times' profile intervals.
+    pub spans: Vec<(Effect, ScanTimes)>,
 }
 
 /// Evidence demanded for the step time scanned over every sample (about 2·ln of the number of effectively
@@ -136,7 +155,7 @@ pub(crate) fn candidates(
     let mut out: Vec<Candidate> = Vec::new();
     let mut untestable = Vec::new();
     let mut column = first_column;
-    let mut push = |template: Effect, channel: Option<String>, supersedes, scan_penalty, scan| {
+    let mut add = |template: Effect, channel, supersedes, scan_penalty, scan, forced| {
         let n = template.params().1;
         out.push(Candidate {
             template,
@@ -146,8 +165,16 @@ pub(crate) fn candidates(
             supersedes,
             scan_penalty,
             scan,
+            forced,
+            active_rows: 0,
         });
         column += n;
+    };
+    for (effect, times) in &offer.spans {
+        add(*effect, None, None, 0.0, Some(*times), true);
+    }
+    let mut push = |template: Effect, channel: Option<String>, supersedes, scan_penalty, scan| {
+        add(template, channel, supersedes, scan_penalty, scan, false)
     };
     let mut refuse = |id: EffectId, why: &str| {
         untestable.push(Untestable {
@@ -255,8 +282,14 @@ pub(crate) fn candidates(
             refuse(EffectId::FieldDrift, why);
             refuse(EffectId::FieldDirectionError, why);
             refuse(EffectId::Disturbance, why);
+            refuse(EffectId::MagnetNearby, why);
         }
         (None, has_time) => {
+            refuse(
+                EffectId::MagnetNearby,
+                "needs where the sensor was, which no recording holds: such a magnet's spans are located and left out \
+                 instead",
+            );
             if has_time {
                 push(
                     Effect::FieldDrift {

@@ -101,6 +101,19 @@ pub(crate) fn explain(
             d[1],
             d[2]
         ),
+        Effect::BiasWindow {
+            t0_s,
+            t1_s,
+            offset_ut,
+        } => format!(
+            "a field of {} fixed to the sensor from t = {t0_s:.2} s to {t1_s:.2} s: something magnetic attached to \
+             the board (or carried with it) for that time",
+            along(offset_ut, "µT")
+        ),
+        Effect::MagnetNearby { moment_am2, .. } => format!(
+            "a magnet of {:.2} A·m² fixed in the room",
+            frames::norm(moment_am2)
+        ),
     };
     format!(
         "{what}; after modelling, held-out residual {:.3} → {:.3} µT, noise floor {floor_ut:.3} µT",

@@ -1,19 +1,25 @@
 //! The diagnosis: when a recording and the fitted model differ, find where, say which physics the model left out,
-//! model it, and show the fit improve on held-out data.
+//! model it, and show the fit improve on held-out data — and never make the calibration worse.
 //!
-//! 1. The base model's residual is compared with the noise floor measured from the recording ([`crate::noise`]) and
-//!    located: axes, time spans, orientations, and the recorded channel it follows.
-//! 2. Every effect of the catalogue ([`crate::effects`]) the recording can observe becomes a candidate, its regressors
-//!    computed by the effect's own definition (the one the simulator injects). Effects the recording cannot observe
-//!    are reported untestable with the reason; candidates the base model absorbs (projected on the base design, less
-//!    than 2 % remains) are reported as absorbed, with the part of the base fit they would bias.
-//! 3. Candidates are judged by a Wald test with a BIC penalty (plus a penalty for a scanned time) *and*
-//!    by blocked cross-validation over five contiguous time blocks, and chosen greedily. A candidate nearly as good as
-//!    the chosen one that the chosen one explains away is reported as ambiguous with it, with the experiment that
-//!    would separate them.
-//! 4. The chosen effects are fitted jointly with `A` and `b`: residual and held-out residual before and after, the
-//!    effects' parameters with standard errors, a sentence in physical terms, and the extended model (body-fixed
-//!    effects become corrections `apply` removes).
+//! A pipeline of stages, in order:
+//! 1. **Robust base fit** ([`crate::robust`], run by the caller): the 12-parameter (or scalar) fit that gross
+//!    disturbances cannot drag, and which samples it kept.
+//! 2. **Gross spans** and 3. **their classification** ([`gross`]): the runs of samples the base fit could not keep,
+//!    each a field fixed to the sensor (modelled: `bias_window`), fixed to the room (modelled: `disturbance`),
+//!    changing as the sensor moves (a magnet nearby: left out), or unexplained (left out).
+//! 4. **Candidates** ([`candidates`]): every effect of the catalogue ([`crate::effects`]) the recording can observe,
+//!    its regressors computed by the effect's own definition (the one the simulator injects), plus the modelled
+//!    spans' effects. Effects the recording cannot observe are untestable, with the reason; candidates the base
+//!    model absorbs are reported as absorbed.
+//! 5. **Selection** ([`select`]): a Wald test with a BIC penalty, blocked cross-validation on the clean samples, a
+//!    share of the residual it must explain, and for local effects a size above the reference's own error; greedy,
+//!    with ambiguity. The catalogue effects then come out of the residual and the spans are looked for again (a
+//!    timing lag's residual is not a disturbance), at most [`ROUNDS`] times.
+//! 6. **Plausibility and no harm** ([`guard`]): an effect stays only if the model stays physical (a non-linearity of
+//!    a few per cent at most, `apply` invertible over the measured range, gains near the base fit's), and the model
+//!    must fit the clean held-out samples no worse than the base fit.
+//! 7. **Report**: parameters with standard errors ([`fitted`]), findings in words ([`explain`]), where the mismatch is
+//!    ([`locate`]), the reference's own error as a figure of its own.
 //!
 //! The vector method's problem has three rows per sample (`A·B̂ + b − Σ G·θ = B0`, the raw readings centred and the
 //! errors-in-variables correction applied as in [`crate::vector`]); the scalar method's has one (the magnitude
@@ -21,6 +27,9 @@
 
 mod candidates;
 mod explain;
+mod fitted;
+mod gross;
+mod guard;
 mod locate;
 mod samples;
 mod scan;
@@ -30,6 +39,7 @@ mod stats;
 use nalgebra::DVector;
 
 pub use candidates::Untestable;
+pub use gross::SpanKind;
 pub use locate::{Located, Orientation, Segment};
 
 use crate::FitError;
@@ -37,10 +47,13 @@ use crate::effects::{Effect, EffectId, Frame};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 use crate::noise::NoiseFloor;
-use candidates::{Candidate, Offer};
+use crate::robust::{GROSS_SIGMA, RobustProblem};
+use candidates::{Candidate, Offer, ScanTimes};
+use fitted::{SYM, coefficient, linear_of, linear_se, not_excited, params_of};
+use gross::{Residual, Span};
 use samples::Samples;
-use select::{SetAside, select};
-use stats::{Batches, BlockStats, Problem};
+use select::{Selection, SetAside, select};
+use stats::{Batches, BlockStats, Problem, Rows};
 
 /// Fewest samples the diagnosis works on.
 pub const MIN_SAMPLES: usize = 50;
@@ -48,6 +61,8 @@ pub const MIN_SAMPLES: usize = 50;
 const CV_BLOCKS: usize = 5;
 /// Contiguous batches for the residual's autocorrelation (method of batch means).
 const AUTOCORRELATION_BATCHES: usize = 100;
+/// Passes of looking for gross spans (again after the catalogue's effects are out of the residual).
+pub const ROUNDS: usize = 3;
 
 /// The reference a recording offers.
 #[derive(Clone, Copy, Debug)]
@@ -86,14 +101,18 @@ pub struct DiagnosisInput<'a> {
     pub reference: Reference<'a>,
     /// The raw noise floor.
     pub noise: NoiseFloor,
+    /// Per recording row, whether the robust base fit kept it (not grossly off); all kept when absent.
+    pub kept: Option<&'a [bool]>,
+    /// The robust base fit's residual scale (per axis, or of |B|), µT; NaN to measure it here.
+    pub scale_ut: f64,
 }
 
 /// The overall finding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Verdict {
-    /// The residual is noise: nothing left out that this recording can show.
+    /// Nothing found: no effect, no gross span (a residual beyond the sensor's noise is the reference's own error).
     Consistent,
-    /// The model misses something: effects found, or a residual above the noise left unexplained.
+    /// The model misses something: effects found, or gross spans located.
     Mismatch,
 }
 
@@ -138,8 +157,40 @@ pub struct FoundEffect {
     pub holdout_rms_after_ut: f64,
     /// Evidence for it: the Wald statistic minus the complexity penalty, σ² units.
     pub evidence: f64,
+    /// Its size: the RMS per axis of its perturbation over the samples where it acts, µT.
+    pub size_ut: f64,
     /// The finding in words.
     pub explanation: String,
+}
+
+/// A span where the residual departed grossly from the rest, and what it was.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GrossSpan {
+    /// First and last sample's time, s (the sample indices without a time column).
+    pub t0_s: f64,
+    /// See `t0_s`.
+    pub t1_s: f64,
+    /// Samples in it.
+    pub samples: usize,
+    /// The largest residual in it under the base fit, µT.
+    pub peak_ut: f64,
+    /// The base fit's residual RMS in it (per axis, or of |B|), µT.
+    pub rms_ut: f64,
+    /// What explains it.
+    pub kind: SpanKind,
+    /// Whether it is modelled (its samples kept, with an effect), or left out of the calibration.
+    pub modelled: bool,
+    /// In words, with the reason it was left out when it was.
+    pub explanation: String,
+}
+
+/// An effect the data suggested but the model may not hold, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rejected {
+    /// The effect.
+    pub id: EffectId,
+    /// Why it was rejected.
+    pub why: String,
 }
 
 /// Two effects that explain the same residual.
@@ -153,7 +204,7 @@ pub struct Ambiguity {
     pub experiment: String,
 }
 
-/// A fit's linear part and residuals.
+/// A fit's linear part and residuals (on the clean samples).
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitSummary {
     /// `A`.
@@ -183,6 +234,8 @@ pub struct Residuals {
     pub extended: Vec<Vec<f64>>,
     /// The channels the residual was compared with (`temp`, `i_<name>`, `t`, `rotation_rate`), per sample.
     pub channels: Vec<(String, Vec<f64>)>,
+    /// Per sample, whether it was left out of the calibration (a gross span not modelled).
+    pub excluded: Vec<bool>,
 }
 
 /// What the diagnosis found.
@@ -196,9 +249,9 @@ pub struct Diagnosis {
     pub ambiguous: Vec<Ambiguity>,
     /// Effects this recording cannot test (including the absorbed ones).
     pub untestable: Vec<Untestable>,
-    /// Where the base model's residual departs from the noise.
+    /// Where the base model's residual departs from the noise; its segments are the gross spans.
     pub located: Located,
-    /// The 12-parameter (or scalar) base fit on the samples used.
+    /// The 12-parameter (or scalar) base fit on the clean samples (outside every gross span).
     pub base: FitSummary,
     /// The fit with the effects found.
     pub extended: FitSummary,
@@ -206,609 +259,997 @@ pub struct Diagnosis {
     pub model: Model,
     /// The noise floor in calibrated units, µT (per axis RMS, or of |B|).
     pub noise_floor_ut: f64,
+    /// The reference's own error: what the final model's residual on the clean samples holds beyond the sensor's
+    /// noise (attitude alignment, synchronisation, field gradients; for the scalar method, model errors), µT.
+    pub reference_floor_ut: f64,
+    /// The gross spans, in time order.
+    pub spans: Vec<GrossSpan>,
+    /// Effects suggested by the data but rejected, with why.
+    pub rejected: Vec<Rejected>,
     /// Samples used; rows left out for a missing channel.
     pub samples_used: usize,
+    /// Samples left out of the calibration in gross spans.
+    pub samples_excluded: usize,
     /// See `samples_used`.
     pub samples_left_out: usize,
     /// Per-sample residuals before and after.
     pub residuals: Residuals,
 }
 
-/// Diagnoses a recording against its base fit `base` (the linear model from [`crate::vector`] or [`crate::scalar`]).
+/// Diagnoses a recording against its base fit `base` (the linear model of the robust fit, [`crate::robust`]).
 pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, FitError> {
     let samples = Samples::gather(input, base);
-    let n = samples.len();
-    if n < MIN_SAMPLES {
+    if samples.len() < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
             needed: MIN_SAMPLES,
-            got: n,
+            got: samples.len(),
         });
     }
-    let vector = !matches!(input.reference, Reference::Magnitude { .. });
-    let field_ut = match input.reference {
-        Reference::Magnitude { field_ut } => field_ut,
-        _ => samples.field.iter().map(|f| frames::norm(*f)).sum::<f64>() / n as f64,
-    };
-    let raw_mean = samples.raw.iter().fold([0.0; 3], |s, m| frames::add(s, *m));
-    let raw_mean = frames::scale(raw_mean, 1.0 / n as f64);
-
-    // Base residuals, for the scans and for locating.
-    let residual: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            let cal = frames::add(frames::mat_vec(&base.a, samples.raw[i]), base.b_ut);
-            if vector {
-                frames::sub(cal, samples.field[i]).to_vec()
-            } else {
-                vec![frames::norm(cal) - field_ut]
-            }
-        })
-        .collect();
-    let dims = if vector { 3 } else { 1 };
-    let sigma2 = residual
-        .iter()
-        .map(|r| r.iter().map(|v| v * v).sum::<f64>())
-        .sum::<f64>()
-        / (n * dims) as f64;
-    let unit: Vec<[f64; 3]> = samples
-        .field
-        .iter()
-        .map(|f| frames::scale(*f, 1.0 / frames::norm(*f)))
-        .collect();
-    let residual3: Vec<[f64; 3]> = if vector {
-        residual.iter().map(|r| [r[0], r[1], r[2]]).collect()
+    let setup = Setup::new(input, &samples, base);
+    let base_residual = setup.residual(&base.a, base.b_ut, &[]);
+    let mut kept = samples.kept.clone();
+    let mut scale = if input.scale_ut > 0.0 {
+        input.scale_ut
     } else {
-        Vec::new()
+        setup.scale(&base_residual)
     };
-    let step = if !samples.has_time {
-        None
-    } else if vector {
-        scan::step_vector(&residual3, sigma2)
-    } else {
-        let rho: Vec<f64> = residual.iter().map(|r| r[0]).collect();
-        scan::step_scalar(&rho, &unit, sigma2)
-    };
-    let window = match (&samples.rot, vector && samples.has_time) {
-        (Some(rot), true) => scan::window(&residual3, rot, sigma2),
-        _ => None,
-    };
-
-    let n_base = if vector { 12 } else { 9 };
-    let current_names: Vec<&str> = input.currents.iter().map(|(name, _)| *name).collect();
-    let offer = Offer {
-        samples: &samples,
-        vector,
-        current_names: &current_names,
-        step,
-        window,
-    };
-    let (cands, mut untestable) = candidates::candidates(&offer, n_base);
-    let columns = cands.last().map_or(n_base, |c| c.first + c.n);
-
-    // Accumulate the normal equations per block.
-    let mut blocks: Vec<BlockStats> = (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
-    let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
-    let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
-    let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
-    for i in 0..n {
-        let block = &mut blocks[i * CV_BLOCKS / n];
-        let batch = i * AUTOCORRELATION_BATCHES / n;
-        block.samples += 1;
-        let ctx = samples.context(i);
-        for (c, cand) in cands.iter().enumerate() {
-            regs[c] = cand.regressors(&ctx);
+    let mut span_residual = base_residual.clone();
+    let mut left_out: Vec<(usize, usize)> = Vec::new();
+    let mut rejected = Vec::new();
+    let mut round = setup.round(&span_residual, &kept, scale, &left_out)?;
+    for _ in 1..ROUNDS {
+        // Guard first: effects that make the model unphysical go, and if modelling the spans harms the clean
+        // held-out fit, they are left out instead.
+        let harmful_spans = setup.guard(&mut round, &mut rejected);
+        if harmful_spans {
+            left_out.extend(
+                round
+                    .spans
+                    .iter()
+                    .filter(|s| s.modelled())
+                    .map(|s| (s.start, s.end)),
+            );
+            round = setup.round(&span_residual, &kept, scale, &left_out)?;
+            continue;
         }
-        let mc = frames::sub(samples.raw[i], raw_mean);
-        if vector {
-            for j in 0..3 {
-                entries.clear();
-                entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
-                entries.push((4 * j + 3, 1.0));
-                for (c, cand) in cands.iter().enumerate() {
-                    entries.extend((0..cand.n).map(|k| (cand.first + k, -regs[c][k][j])));
-                }
-                block.add_row(&entries, samples.field[i][j]);
-                batches.add_row(batch, j, &entries, samples.field[i][j]);
-            }
+        // The spans again, with the catalogue's effects out of the residual.
+        let (a, b) = linear_of(&round.sel.last, setup.vector, base, setup.raw_mean);
+        let effects = round.chosen_effects(false);
+        let residual = setup.residual(&a, b, &effects);
+        let scale2 = setup.scale(&residual);
+        let kept2: Vec<bool> = residual
+            .iter()
+            .map(|e| setup.size(e) <= GROSS_SIGMA * scale2)
+            .collect();
+        if kept2 == kept {
+            break;
+        }
+        (kept, scale, span_residual) = (kept2, scale2, residual);
+        round = setup.round(&span_residual, &kept, scale, &left_out)?;
+    }
+    if setup.guard(&mut round, &mut rejected) {
+        left_out.extend(
+            round
+                .spans
+                .iter()
+                .filter(|s| s.modelled())
+                .map(|s| (s.start, s.end)),
+        );
+        round = setup.round(&span_residual, &kept, scale, &left_out)?;
+        setup.guard(&mut round, &mut rejected);
+    }
+    Ok(setup.report(round, &base_residual, rejected, base))
+}
+
+/// What every stage shares: the samples and what the reference offers.
+struct Setup<'a> {
+    input: &'a DiagnosisInput<'a>,
+    samples: &'a Samples,
+    vector: bool,
+    /// The field magnitude (scalar: the fitted one; vector: the reference's mean), µT.
+    field_ut: f64,
+    raw_mean: [f64; 3],
+    /// The field direction per sample, sensor axes.
+    unit: Vec<[f64; 3]>,
+    current_names: Vec<&'a str>,
+    /// The noise floor in calibrated units (per axis RMS, or of |B|), µT.
+    noise_floor_ut: f64,
+    n_base: usize,
+    /// The base fit the samples' fields were computed with (the scalar method's linearisation point).
+    base: Model,
+}
+
+/// One pass of stages 2–5.
+struct Round {
+    spans: Vec<Span>,
+    /// Per sample: in the fits (clean, or in a modelled span's window).
+    included: Vec<bool>,
+    /// Per sample: outside every gross span.
+    clean: Vec<bool>,
+    cands: Vec<Candidate>,
+    untestable: Vec<Untestable>,
+    problem: Problem,
+    sel: Selection,
+}
+
+impl<'a> Setup<'a> {
+    fn new(input: &'a DiagnosisInput<'a>, samples: &'a Samples, base: &Model) -> Setup<'a> {
+        let n = samples.len();
+        let vector = !matches!(input.reference, Reference::Magnitude { .. });
+        let field_ut = match input.reference {
+            Reference::Magnitude { field_ut } => field_ut,
+            _ => samples.field.iter().map(|f| frames::norm(*f)).sum::<f64>() / n as f64,
+        };
+        let raw_mean = frames::scale(
+            samples.raw.iter().fold([0.0; 3], |s, m| frames::add(s, *m)),
+            1.0 / n as f64,
+        );
+        let unit: Vec<[f64; 3]> = samples
+            .field
+            .iter()
+            .map(|f| frames::scale(*f, 1.0 / frames::norm(*f)))
+            .collect();
+        let noise_floor_ut = if vector {
+            input.noise.calibrated_rms_ut(&base.a)
         } else {
-            // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
-            let u = unit[i];
-            entries.clear();
-            for (k, (r, s)) in SYM.iter().enumerate() {
-                let d = if r == s {
-                    u[*r] * mc[*s]
-                } else {
-                    u[*r] * mc[*s] + u[*s] * mc[*r]
-                };
-                entries.push((k, d));
-            }
-            entries.extend((0..3).map(|k| (6 + k, u[k])));
-            for (c, cand) in cands.iter().enumerate() {
-                entries.extend((0..cand.n).map(|k| (cand.first + k, -frames::dot(u, regs[c][k]))));
-            }
-            let y = -residual[i][0];
-            block.add_row(&entries, y);
-            batches.add_row(batch, 0, &entries, y);
+            // |B| noise: the calibrated noise along the field direction, averaged.
+            let f = input.noise.floor_ut;
+            let along: f64 = unit
+                .iter()
+                .map(|u| {
+                    let au = frames::mat_t_vec(&base.a, *u);
+                    (0..3).map(|k| (au[k] * f[k]).powi(2)).sum::<f64>()
+                })
+                .sum::<f64>()
+                / n as f64;
+            along.sqrt()
+        };
+        Setup {
+            input,
+            samples,
+            vector,
+            field_ut,
+            raw_mean,
+            unit,
+            current_names: input.currents.iter().map(|(name, _)| *name).collect(),
+            noise_floor_ut,
+            n_base: if vector { 12 } else { 9 },
+            base: *base,
         }
     }
-    let correction: Vec<DVector<f64>> = blocks
-        .iter()
-        .map(|b| {
-            let mut c = DVector::zeros(columns);
-            if vector {
+
+    /// The residual per sample of `A·B̂ + b − Σδ` against the reference: three components (vector), or the
+    /// magnitude's in the first (scalar).
+    fn residual(&self, a: &Mat3, b: [f64; 3], effects: &[Effect]) -> Vec<[f64; 3]> {
+        let s = self.samples;
+        (0..s.len())
+            .map(|i| {
+                let ctx = s.context(i);
+                let delta = effects
+                    .iter()
+                    .fold([0.0; 3], |acc, e| frames::add(acc, e.perturbation_ut(&ctx)));
+                let cal = frames::sub(frames::add(frames::mat_vec(a, s.raw[i]), b), delta);
+                if self.vector {
+                    frames::sub(cal, s.field[i])
+                } else {
+                    [frames::norm(cal) - self.field_ut, 0.0, 0.0]
+                }
+            })
+            .collect()
+    }
+
+    /// A residual's size, as the robust fit judges it.
+    fn size(&self, e: &[f64; 3]) -> f64 {
+        if self.vector {
+            frames::norm(*e)
+        } else {
+            e[0].abs()
+        }
+    }
+
+    /// The residual's scale: its median size as a standard deviation (per axis, or of |B|).
+    fn scale(&self, residual: &[[f64; 3]]) -> f64 {
+        let mut v: Vec<f64> = residual.iter().map(|e| self.size(e)).collect();
+        let mid = v.len() / 2;
+        let median = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+        median
+            / if self.vector {
+                <crate::vector::VectorProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
+            } else {
+                <crate::scalar::ScalarProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
+            }
+    }
+
+    /// Stages 2–5 on the spans of `residual`'s gross samples (those not `kept`), with the spans overlapping
+    /// `left_out` not modelled.
+    fn round(
+        &self,
+        residual: &[[f64; 3]],
+        kept: &[bool],
+        scale: f64,
+        left_out: &[(usize, usize)],
+    ) -> Result<Round, FitError> {
+        let s = self.samples;
+        let n = s.len();
+        let rho: Vec<f64> = residual.iter().map(|e| e[0]).collect();
+        let view = if self.vector {
+            Residual::Vector {
+                e: residual,
+                rot: s.rot.as_deref(),
+            }
+        } else {
+            Residual::Magnitude {
+                rho: &rho,
+                unit: &self.unit,
+            }
+        };
+        let times = s.has_time.then_some(s.t.as_slice());
+        let mut spans = gross::spans(&view, kept, times, scale, &self.unit);
+        let mut included = vec![true; n];
+        let mut clean = vec![true; n];
+        let mut span_effects = Vec::new();
+        for span in &mut spans {
+            clean[span.start..span.end].fill(false);
+            included[span.start..span.end].fill(false);
+            if left_out
+                .iter()
+                .any(|&(a, b)| a < span.end && span.start < b)
+            {
+                span.kind = SpanKind::Unexplained;
+            }
+            if !span.modelled() || !s.has_time {
+                continue;
+            }
+            let (a, b) = if self.vector {
+                gross::refine_edges(span, residual, s.rot.as_deref(), scale)
+            } else {
+                (span.start, span.end)
+            };
+            included[a..b].fill(true);
+            let (t0_s, t1_s) = (candidates::between(s, a), candidates::between(s, b));
+            let effect = match span.kind {
+                SpanKind::RoomFixed { .. } => Effect::Disturbance {
+                    t0_s,
+                    t1_s,
+                    field_ned_ut: [0.0; 3],
+                },
+                _ => Effect::BiasWindow {
+                    t0_s,
+                    t1_s,
+                    offset_ut: [0.0; 3],
+                },
+            };
+            let times = ScanTimes {
+                start_s: (t0_s, t0_s),
+                end_s: Some((t1_s, t1_s)),
+                sample_interval_s: candidates::sample_interval_s(s),
+            };
+            span_effects.push((effect, times));
+        }
+        // Scans for small steps and windows run on the clean samples.
+        let clean_idx: Vec<usize> = (0..n).filter(|&i| clean[i]).collect();
+        let back = |k: usize| clean_idx.get(k).copied().unwrap_or(n);
+        let remap = |sc: scan::Scan| scan::Scan {
+            start: back(sc.start),
+            end: back(sc.end),
+            stat: sc.stat,
+            start_interval: (back(sc.start_interval.0), back(sc.start_interval.1)),
+            end_interval: (back(sc.end_interval.0), back(sc.end_interval.1)),
+        };
+        let sigma2 = clean_idx
+            .iter()
+            .map(|&i| frames::dot(residual[i], residual[i]))
+            .sum::<f64>()
+            / (clean_idx.len().max(1) * if self.vector { 3 } else { 1 }) as f64;
+        let e_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| residual[i]).collect();
+        let step = if !s.has_time {
+            None
+        } else if self.vector {
+            scan::step_vector(&e_clean, sigma2)
+        } else {
+            let rho_clean: Vec<f64> = e_clean.iter().map(|e| e[0]).collect();
+            let u_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| self.unit[i]).collect();
+            scan::step_scalar(&rho_clean, &u_clean, sigma2)
+        };
+        let window = match (&s.rot, self.vector && s.has_time) {
+            (Some(rot), true) => {
+                let rot_clean: Vec<Mat3> = clean_idx.iter().map(|&i| rot[i]).collect();
+                scan::window(&e_clean, &rot_clean, sigma2)
+            }
+            _ => None,
+        };
+        let offer = Offer {
+            samples: s,
+            vector: self.vector,
+            current_names: &self.current_names,
+            step: step.map(remap),
+            window: window.map(remap),
+            spans: span_effects,
+        };
+        let (mut cands, untestable) = candidates::candidates(&offer, self.n_base);
+        let problem = self.accumulate(&mut cands, &included, &clean);
+        let mut base_columns: Vec<usize> = (0..self.n_base).collect();
+        for c in cands.iter().filter(|c| c.forced) {
+            base_columns.extend(c.columns());
+        }
+        let sel = select(
+            &problem,
+            &base_columns,
+            &cands,
+            &self.a_columns(),
+            self.noise_floor_ut.powi(2),
+        )
+        .ok_or(FitError::Singular(
+            "the diagnosis' base problem has no solution",
+        ))?;
+        Ok(Round {
+            spans,
+            included,
+            clean,
+            cands,
+            untestable,
+            problem,
+            sel,
+        })
+    }
+
+    /// The columns of `A` in the design.
+    fn a_columns(&self) -> Vec<usize> {
+        if self.vector {
+            (0..3)
+                .flat_map(|j| (0..3).map(move |k| 4 * j + k))
+                .collect()
+        } else {
+            (0..6).collect()
+        }
+    }
+
+    /// The normal equations of the included samples per block (and of the clean ones apart), counting where each
+    /// candidate acts.
+    fn accumulate(&self, cands: &mut [Candidate], included: &[bool], clean: &[bool]) -> Problem {
+        let s = self.samples;
+        let n = s.len();
+        let columns = cands.last().map_or(self.n_base, |c| c.first + c.n);
+        let dims = if self.vector { 3 } else { 1 };
+        let mut blocks: Vec<BlockStats> =
+            (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
+        let mut clean_blocks = blocks.clone();
+        let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
+        let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
+        let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
+        let mut active = vec![0usize; cands.len()];
+        let base = (0..n).map(|i| self.base_rho(i));
+        for (i, rho) in base.enumerate() {
+            if !included[i] {
+                continue;
+            }
+            let b = i * CV_BLOCKS / n;
+            let batch = i * AUTOCORRELATION_BATCHES / n;
+            blocks[b].samples += 1;
+            if clean[i] {
+                clean_blocks[b].samples += 1;
+            }
+            let ctx = s.context(i);
+            for (c, cand) in cands.iter().enumerate() {
+                regs[c] = cand.regressors(&ctx);
+            }
+            let mc = frames::sub(s.raw[i], self.raw_mean);
+            let mut add = |entries: &[(usize, f64)], dim: usize, y: f64| {
+                blocks[b].add_row(entries, y);
+                if clean[i] {
+                    clean_blocks[b].add_row(entries, y);
+                }
+                batches.add_row(batch, dim, entries, y);
+            };
+            if self.vector {
                 for j in 0..3 {
-                    for k in 0..3 {
-                        c[4 * j + k] = b.samples as f64 * input.noise.floor_ut[k].powi(2);
+                    entries.clear();
+                    entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
+                    entries.push((4 * j + 3, 1.0));
+                    for (c, cand) in cands.iter().enumerate() {
+                        let row: Vec<f64> = (0..cand.n).map(|k| -regs[c][k][j]).collect();
+                        if row.iter().any(|v| *v != 0.0) {
+                            active[c] += 1;
+                        }
+                        entries.extend(row.iter().enumerate().map(|(k, v)| (cand.first + k, *v)));
+                    }
+                    add(&entries, j, s.field[i][j]);
+                }
+            } else {
+                // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
+                let u = self.unit[i];
+                entries.clear();
+                for (k, (r, q)) in SYM.iter().enumerate() {
+                    let d = if r == q {
+                        u[*r] * mc[*q]
+                    } else {
+                        u[*r] * mc[*q] + u[*q] * mc[*r]
+                    };
+                    entries.push((k, d));
+                }
+                entries.extend((0..3).map(|k| (6 + k, u[k])));
+                for (c, cand) in cands.iter().enumerate() {
+                    let row: Vec<f64> = (0..cand.n).map(|k| -frames::dot(u, regs[c][k])).collect();
+                    if row.iter().any(|v| *v != 0.0) {
+                        active[c] += 1;
+                    }
+                    entries.extend(row.iter().enumerate().map(|(k, v)| (cand.first + k, *v)));
+                }
+                add(&entries, 0, -rho);
+            }
+        }
+        for (c, cand) in cands.iter_mut().enumerate() {
+            cand.active_rows = active[c];
+        }
+        let mut noise_var = DVector::zeros(columns);
+        if self.vector {
+            for j in 0..3 {
+                for k in 0..3 {
+                    noise_var[4 * j + k] = self.input.noise.floor_ut[k].powi(2);
+                }
+            }
+        }
+        Problem::new(blocks, clean_blocks, batches, noise_var)
+    }
+
+    /// The scalar method's base residual of sample `i` (zero for the vector method, whose rows need none).
+    fn base_rho(&self, i: usize) -> f64 {
+        if self.vector {
+            0.0
+        } else {
+            frames::norm(self.samples.field[i]) - self.field_ut
+        }
+    }
+
+    /// Stage 6: drops the chosen effects that make the model unphysical, then, while the clean held-out samples fit
+    /// worse than with the base fit alone, the catalogue's effects last first. Returns whether the modelled spans
+    /// themselves still do harm (then they are to be left out).
+    fn guard(&self, round: &mut Round, rejected: &mut Vec<Rejected>) -> bool {
+        let linear: Vec<usize> = (0..self.n_base).collect();
+        let Some(base12) = round.problem.solve_on(Rows::Clean, &linear, None, true) else {
+            return false;
+        };
+        let (a_base, _) = linear_of(&base12, self.vector, &self.base, self.raw_mean);
+        loop {
+            let chosen = round.chosen_steps();
+            let mut drop = chosen.iter().find_map(|&c| {
+                let effect = round.fitted_effect(c, &round.sel.last);
+                guard::implausible(&effect, self.samples, self.field_ut).map(|why| (c, why))
+            });
+            if drop.is_none()
+                && let Some(&last) = chosen.last()
+            {
+                let (a, _) = linear_of(&round.sel.last, self.vector, &self.base, self.raw_mean);
+                let change = guard::gain_change(&a, &a_base);
+                if change > guard::MAX_GAIN_CHANGE {
+                    drop = Some((last, guard::gains_why(change)));
+                }
+            }
+            if drop.is_none() {
+                let problem = &round.problem;
+                let cv_base = problem.cv_rss_on(Rows::Clean, &linear);
+                let cv_final = problem.cv_rss(&round.sel.last.columns);
+                if let (Some(cv_base), Some(cv_final)) = (cv_base, cv_final)
+                    && cv_final > cv_base
+                {
+                    let rows = problem.clean_total.rows.max(1) as f64;
+                    let rms = |x: f64| (x / rows).sqrt();
+                    match chosen.last() {
+                        Some(&last) => {
+                            let id = round.cands[last].id();
+                            drop = Some((last, guard::harm_why(id, rms(cv_final), rms(cv_base))));
+                        }
+                        None => return round.spans.iter().any(|s| s.modelled()),
                     }
                 }
             }
-            c
-        })
-        .collect();
-    let problem = Problem::new(blocks, batches, correction);
-    let base_columns: Vec<usize> = (0..n_base).collect();
-    let a_columns: Vec<usize> = if vector {
-        (0..3)
-            .flat_map(|j| (0..3).map(move |k| 4 * j + k))
-            .collect()
-    } else {
-        (0..6).collect()
-    };
-    let noise_floor_ut = if vector {
-        input.noise.calibrated_rms_ut(&base.a)
-    } else {
-        // |B| noise: the calibrated noise along the field direction, averaged.
-        let f = input.noise.floor_ut;
-        let along: f64 = unit
-            .iter()
-            .map(|u| {
-                let au = frames::mat_t_vec(&base.a, *u);
-                (0..3).map(|k| (au[k] * f[k]).powi(2)).sum::<f64>()
-            })
-            .sum::<f64>()
-            / n as f64;
-        along.sqrt()
-    };
-    let sel = select(
-        &problem,
-        &base_columns,
-        &cands,
-        &a_columns,
-        noise_floor_ut.powi(2),
-    )
-    .ok_or(FitError::Singular(
-        "the diagnosis' base problem has no solution",
-    ))?;
-
-    let rows = problem.total.rows as f64;
-    let rms = |rss: f64| (rss / rows).sqrt();
-    // The final joint fit's parameters.
-    let last = &sel.last;
-    let dof = (rows - last.columns.len() as f64).max(1.0);
-    // Standard errors allow for residuals that are alike from sample to sample (see `select`): the variance per row
-    // is scaled by the autocorrelation factor.
-    let tau_last = problem.autocorrelation(last);
-    let sigma2_last = last.rss / dof * tau_last;
-    let coef = |col: usize| {
-        last.columns
-            .iter()
-            .position(|&c| c == col)
-            .map(|p| (last.beta[p], (last.inverse[(p, p)] * sigma2_last).sqrt()))
-    };
-    // A and b of a solution, back from the centred readings (and, for the scalar method, from the linearisation).
-    let linear_of = |sol: &stats::Solution| -> (Mat3, [f64; 3]) {
-        let get = |col: usize| {
-            sol.columns
-                .iter()
-                .position(|&c| c == col)
-                .map(|p| sol.beta[p])
-        };
-        if vector {
-            let a: Mat3 =
-                std::array::from_fn(|j| std::array::from_fn(|k| get(4 * j + k).unwrap_or(0.0)));
-            let b_c: [f64; 3] = std::array::from_fn(|j| get(4 * j + 3).unwrap_or(0.0));
-            // Back from centred readings: b = b' − A·mean.
-            (a, frames::sub(b_c, frames::mat_vec(&a, raw_mean)))
-        } else {
-            let mut a = base.a;
-            for (k, (r, s)) in SYM.iter().enumerate() {
-                let d = get(k).unwrap_or(0.0);
-                a[*r][*s] += d;
-                if r != s {
-                    a[*s][*r] += d;
-                }
-            }
-            // b' = b + A·mean was linearised; b = b' − A·mean with the updated A.
-            let b_c0 = frames::add(base.b_ut, frames::mat_vec(&base.a, raw_mean));
-            let b_c: [f64; 3] = std::array::from_fn(|k| b_c0[k] + get(6 + k).unwrap_or(0.0));
-            (a, frames::sub(b_c, frames::mat_vec(&a, raw_mean)))
+            let Some((c, why)) = drop else {
+                return false;
+            };
+            rejected.push(Rejected {
+                id: round.cands[c].id(),
+                why,
+            });
+            round.remove(c);
         }
-    };
-    let (base_a, base_b) = linear_of(&sel.base);
-    let (ext_a, ext_b) = linear_of(last);
-
-    let mut model = Model::linear(ext_a, ext_b);
-    let mut effects = Vec::new();
-    // The chosen effects with their fitted parameters (steps replaced later — a lag generalised to per-axis lags —
-    // are not in the final model).
-    let mut chosen: Vec<(&select::Step, Candidate, Effect, [f64; 3])> = Vec::new();
-    for step in &sel.steps {
-        if sel.steps.iter().any(|s| s.replaced == Some(step.cand)) {
-            continue;
-        }
-        let cand = cands[step.cand].clone();
-        let mut p = [0.0; 3];
-        let mut se = [0.0; 3];
-        for k in 0..cand.n {
-            let (v, s) = coef(cand.first + k).unwrap_or((0.0, f64::NAN));
-            p[k] = v;
-            se[k] = s;
-        }
-        let effect = cand.template.with_params(p);
-        chosen.push((step, cand, effect, se));
     }
-    // A scanned time was located on the base residual, which the base fit had partly bent to the effect; locate it
-    // again on the extended fit's residual with every other effect removed.
-    for k in 0..chosen.len() {
-        let scanned = matches!(
-            chosen[k].2,
-            Effect::BiasStep { .. } | Effect::Disturbance { .. }
-        );
-        if !scanned {
-            continue;
+}
+
+impl Round {
+    /// The selected catalogue candidates still in the model, in the order they were chosen.
+    fn chosen_steps(&self) -> Vec<usize> {
+        self.sel
+            .steps
+            .iter()
+            .filter(|step| !self.sel.steps.iter().any(|s| s.replaced == Some(step.cand)))
+            .map(|step| step.cand)
+            .collect()
+    }
+
+    /// Candidate `c` with its parameters from a solution.
+    fn fitted_effect(&self, c: usize, sol: &stats::Solution) -> Effect {
+        let cand = &self.cands[c];
+        let p: [f64; 3] = std::array::from_fn(|k| {
+            if k < cand.n {
+                coefficient(sol, cand.first + k, 0.0).map_or(0.0, |(v, _)| v)
+            } else {
+                0.0
+            }
+        });
+        cand.template.with_params(p)
+    }
+
+    /// The effects in the final model: the catalogue's chosen ones, and with `spans` the modelled spans' too.
+    fn chosen_effects(&self, spans: bool) -> Vec<Effect> {
+        let forced = self
+            .cands
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.forced && spans);
+        forced
+            .map(|(c, _)| c)
+            .chain(self.chosen_steps())
+            .map(|c| self.fitted_effect(c, &self.sel.last))
+            .collect()
+    }
+
+    /// Takes candidate `c` out of the model: its step goes, and the last solution is solved again without it.
+    fn remove(&mut self, c: usize) {
+        let cols: Vec<usize> = self.cands[c].columns().collect();
+        let keep: Vec<usize> = self
+            .sel
+            .last
+            .columns
+            .iter()
+            .copied()
+            .filter(|x| !cols.contains(x))
+            .collect();
+        self.sel.steps.retain(|s| s.cand != c);
+        if let Some(sol) = self.problem.solve(&keep, None, true) {
+            self.sel.last_cv = self.problem.cv_rss(&keep).unwrap_or(self.sel.last_cv);
+            self.sel.last = sol;
         }
-        let partial: Vec<[f64; 3]> = (0..n)
-            .map(|i| {
-                let ctx = samples.context(i);
-                let others = chosen
-                    .iter()
-                    .enumerate()
-                    .filter(|(j, _)| *j != k)
-                    .fold([0.0; 3], |acc, (_, c)| {
-                        frames::add(acc, c.2.perturbation_ut(&ctx))
-                    });
-                frames::sub(
-                    frames::add(frames::mat_vec(&ext_a, samples.raw[i]), ext_b),
-                    others,
-                )
+    }
+}
+
+impl Setup<'_> {
+    /// Stage 7: the report of a round.
+    fn report(
+        &self,
+        mut round: Round,
+        base_residual: &[[f64; 3]],
+        rejected: Vec<Rejected>,
+        base: &Model,
+    ) -> Diagnosis {
+        let s = self.samples;
+        let n = s.len();
+        let problem = &round.problem;
+        let vector = self.vector;
+        let linear: Vec<usize> = (0..self.n_base).collect();
+        let clean_rows = problem.clean_total.rows.max(1) as f64;
+        let rms = |rss: f64| (rss / clean_rows).sqrt();
+        let last = round.sel.last.clone();
+        let rows = problem.total.rows as f64;
+        let dof = (rows - last.columns.len() as f64).max(1.0);
+        // Standard errors allow for residuals that are alike from sample to sample (see `select`): the variance per
+        // row is scaled by the autocorrelation factor.
+        let tau_last = problem.autocorrelation(&last);
+        let sigma2_last = last.rss / dof * tau_last;
+        let (ext_a, ext_b) = linear_of(&last, vector, base, self.raw_mean);
+        // The base fit on the clean samples alone, and its held-out residual there.
+        let base12 = problem
+            .solve_on(Rows::Clean, &linear, None, true)
+            .unwrap_or_else(|| round.sel.base.clone());
+        let base_cv = problem
+            .cv_rss_on(Rows::Clean, &linear)
+            .unwrap_or(round.sel.base_cv);
+        let (base_a, base_b) = linear_of(&base12, vector, base, self.raw_mean);
+
+        // The effects with their fitted parameters: the modelled spans', then the catalogue's in the order chosen.
+        let forced: Vec<usize> = (0..round.cands.len())
+            .filter(|&c| round.cands[c].forced)
+            .collect();
+        let steps: Vec<select::Step> = round
+            .sel
+            .steps
+            .iter()
+            .filter(|st| !round.sel.steps.iter().any(|o| o.replaced == Some(st.cand)))
+            .cloned()
+            .collect();
+        let mut chosen: Vec<(usize, Effect, [f64; 3])> = forced
+            .iter()
+            .copied()
+            .chain(steps.iter().map(|st| st.cand))
+            .map(|c| {
+                let cand = &round.cands[c];
+                let mut se = [0.0; 3];
+                for (k, x) in se.iter_mut().enumerate().take(cand.n) {
+                    *x = coefficient(&last, cand.first + k, sigma2_last)
+                        .map_or(f64::NAN, |(_, s)| s);
+                }
+                (c, round.fitted_effect(c, &last), se)
             })
             .collect();
-        let rescan = match (chosen[k].2, vector) {
-            (Effect::BiasStep { .. }, true) => {
-                let e: Vec<[f64; 3]> = (0..n)
-                    .map(|i| frames::sub(partial[i], samples.field[i]))
-                    .collect();
-                scan::step_vector(&e, last.rss / rows)
+        self.relocate(
+            &mut round.cands,
+            &round.clean,
+            &mut chosen,
+            &ext_a,
+            ext_b,
+            last.rss / rows,
+        );
+
+        let mut model = Model::linear(ext_a, ext_b);
+        let mut effects = Vec::new();
+        let all: Vec<Effect> = chosen.iter().map(|c| c.1).collect();
+        let final_residual = self.residual(&ext_a, ext_b, &all);
+        let sizes = self.sizes(&chosen, &final_residual);
+        for (k, (c, effect, se)) in chosen.iter().enumerate() {
+            let cand = &round.cands[*c];
+            if effect.id().frame() == Frame::Body && !effect.id().is_transient() {
+                model.add_correction(*effect).expect(
+                    "candidates are limited so that every body-fixed effect fits in a model",
+                );
             }
-            (Effect::BiasStep { .. }, false) => {
-                let rho: Vec<f64> = partial
-                    .iter()
-                    .map(|c| frames::norm(*c) - field_ut)
-                    .collect();
-                scan::step_scalar(&rho, &unit, last.rss / rows)
-            }
-            (_, _) => samples.rot.as_ref().and_then(|rot| {
-                let e: Vec<[f64; 3]> = (0..n)
-                    .map(|i| frames::sub(partial[i], samples.field[i]))
-                    .collect();
-                scan::window(&e, rot, last.rss / rows)
-            }),
+            let (rss, cv, evidence) = match steps.iter().find(|st| st.cand == *c) {
+                Some(st) => (st.rss, st.cv, st.evidence),
+                // A span's effect: its samples are not in the clean held-out set, so its figures are the residual
+                // inside the span under the base fit and under the final model.
+                None => {
+                    let inside = sizes[k].1;
+                    let before = round
+                        .spans
+                        .iter()
+                        .find(|sp| {
+                            sp.modelled() && {
+                                let (t0, t1) = span_time(s, sp);
+                                t0 <= effect_t1(effect) && effect_t0(effect) <= t1
+                            }
+                        })
+                        .map_or(inside, |sp| sp.rms_ut);
+                    let sq = |x: f64| x * x * clean_rows;
+                    // Its evidence as a selected effect's would be: the Wald statistic less the BIC penalty.
+                    let evidence = select::wald(&last, cand, false, rows) / tau_last
+                        - cand.n as f64 * (rows / tau_last).ln();
+                    ((sq(before), sq(inside)), (sq(before), sq(inside)), evidence)
+                }
+            };
+            let holdout = (rms(cv.0), rms(cv.1));
+            effects.push(FoundEffect {
+                explanation: explain::explain(
+                    effect,
+                    cand.channel.as_deref(),
+                    holdout,
+                    self.noise_floor_ut,
+                    self.field_ut,
+                ),
+                params: params_of(effect, *se, cand, last.rss / rows * tau_last),
+                effect: *effect,
+                channel: cand.channel.clone(),
+                rms_before_ut: rms(rss.0),
+                rms_after_ut: rms(rss.1),
+                holdout_rms_before_ut: holdout.0,
+                holdout_rms_after_ut: holdout.1,
+                evidence,
+                size_ut: sizes[k].0,
+            });
+        }
+        let ambiguous = round
+            .sel
+            .ambiguous
+            .iter()
+            .map(|&(a, b)| {
+                let ids = [round.cands[a].id(), round.cands[b].id()];
+                let (why, experiment) = explain::separate(ids[0], ids[1]);
+                Ambiguity {
+                    ids,
+                    why,
+                    experiment,
+                }
+            })
+            .collect();
+        let mut untestable = std::mem::take(&mut round.untestable);
+        for (c, why) in &round.sel.set_aside {
+            let cand = &round.cands[*c];
+            let name = cand
+                .channel
+                .as_deref()
+                .map_or(String::new(), |ch| format!(" ({ch})"));
+            untestable.push(Untestable {
+                id: cand.id(),
+                why: match why {
+                    SetAside::NotExcited => {
+                        format!("not excited{name}: {}", not_excited(cand.id()))
+                    }
+                    SetAside::Absorbed {
+                        unabsorbed,
+                        takes_up,
+                    } => format!(
+                        "absorbed — not testable with this data{name}: the base fit takes up {:.1} % of it, so it \
+                         would bias {takes_up}",
+                        100.0 * (1.0 - unabsorbed)
+                    ),
+                },
+            });
+        }
+
+        let channels = self.channels();
+        let floor_axes: Vec<f64> = if vector {
+            self.input.noise.calibrated_ut(&base.a).to_vec()
+        } else {
+            vec![self.noise_floor_ut]
         };
-        if let Some(w) = rescan {
-            let (_, cand, effect, _) = &mut chosen[k];
-            cand.scan = Some(candidates::scan_times(
-                &samples,
-                &w,
-                matches!(effect, Effect::Disturbance { .. }),
-            ));
-            match effect {
-                Effect::BiasStep { t_s, .. } => *t_s = candidates::between(&samples, w.start),
+        let dims = if vector { 3 } else { 1 };
+        let as_rows =
+            |r: &[[f64; 3]]| -> Vec<Vec<f64>> { r.iter().map(|e| e[..dims].to_vec()).collect() };
+        let base_rows = as_rows(base_residual);
+        // Where the mismatch is, on the samples the calibration used; its segments are the gross spans.
+        let used: Vec<usize> = (0..n).filter(|&i| round.included[i]).collect();
+        let pick = |v: &[f64]| used.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let used_channels: Vec<(&str, Vec<f64>)> = channels
+            .iter()
+            .map(|(name, v)| (name.as_str(), pick(v)))
+            .collect();
+        let used_rows: Vec<Vec<f64>> = used.iter().map(|&i| base_rows[i].clone()).collect();
+        let used_dirs: Vec<[f64; 3]> = used.iter().map(|&i| self.unit[i]).collect();
+        let mut located = locate::locate(
+            &used_rows,
+            &floor_axes,
+            s.has_time.then(|| pick(&s.t)).as_deref(),
+            &used_dirs,
+            &used_channels,
+        );
+        let spans: Vec<GrossSpan> = round.spans.iter().map(|sp| self.gross_span(sp)).collect();
+        located.segments = spans
+            .iter()
+            .map(|sp| Segment {
+                t0_s: sp.t0_s,
+                t1_s: sp.t1_s,
+                rms_ut: sp.rms_ut,
+            })
+            .collect();
+        let extended = as_rows(&final_residual);
+        let reference_floor_ut = (rms(problem.clean_rss(&last)).powi(2)
+            - self.noise_floor_ut.powi(2))
+        .max(0.0)
+        .sqrt();
+        let verdict = if effects.is_empty() && spans.is_empty() {
+            Verdict::Consistent
+        } else {
+            Verdict::Mismatch
+        };
+        let excluded: Vec<bool> = round.included.iter().map(|i| !i).collect();
+        Diagnosis {
+            verdict,
+            effects,
+            ambiguous,
+            untestable,
+            located,
+            base: FitSummary {
+                a: base_a,
+                b_ut: base_b,
+                se: vector.then(|| linear_se(problem, &base12, rows, self.raw_mean)),
+                rms_ut: rms(problem.clean_rss(&base12)),
+                holdout_rms_ut: rms(base_cv),
+            },
+            extended: FitSummary {
+                a: ext_a,
+                b_ut: ext_b,
+                se: vector.then(|| linear_se(problem, &last, rows, self.raw_mean)),
+                rms_ut: rms(problem.clean_rss(&last)),
+                holdout_rms_ut: rms(round.sel.last_cv),
+            },
+            model,
+            noise_floor_ut: self.noise_floor_ut,
+            reference_floor_ut,
+            spans,
+            rejected,
+            samples_used: used.len(),
+            samples_excluded: n - used.len(),
+            samples_left_out: s.left_out,
+            residuals: Residuals {
+                rows: s.rows.clone(),
+                t_s: s.t.clone(),
+                direction: self.unit.clone(),
+                base: base_rows,
+                extended,
+                channels,
+                excluded,
+            },
+        }
+    }
+
+    /// A scanned time was located on the base residual, which the base fit had partly bent to the effect; locate it
+    /// again on the extended fit's residual with every other effect removed.
+    fn relocate(
+        &self,
+        cands: &mut [Candidate],
+        clean: &[bool],
+        chosen: &mut [(usize, Effect, [f64; 3])],
+        ext_a: &Mat3,
+        ext_b: [f64; 3],
+        sigma2: f64,
+    ) {
+        let s = self.samples;
+        for k in 0..chosen.len() {
+            let (c, effect, _) = chosen[k];
+            let scanned = matches!(effect, Effect::BiasStep { .. } | Effect::Disturbance { .. })
+                && !cands[c].forced;
+            if !scanned {
+                continue;
+            }
+            let others: Vec<Effect> = chosen
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != k)
+                .map(|(_, x)| x.1)
+                .collect();
+            let partial = self.residual(ext_a, ext_b, &others);
+            let clean_idx: Vec<usize> = (0..s.len()).filter(|&i| clean[i]).collect();
+            let e: Vec<[f64; 3]> = clean_idx.iter().map(|&i| partial[i]).collect();
+            let rescan = match (effect, self.vector) {
+                (Effect::BiasStep { .. }, true) => scan::step_vector(&e, sigma2),
+                (Effect::BiasStep { .. }, false) => {
+                    let rho: Vec<f64> = e.iter().map(|x| x[0]).collect();
+                    let u: Vec<[f64; 3]> = clean_idx.iter().map(|&i| self.unit[i]).collect();
+                    scan::step_scalar(&rho, &u, sigma2)
+                }
+                _ => s.rot.as_ref().and_then(|rot| {
+                    let r: Vec<Mat3> = clean_idx.iter().map(|&i| rot[i]).collect();
+                    scan::window(&e, &r, sigma2)
+                }),
+            };
+            let Some(w) = rescan else { continue };
+            let back = |x: usize| clean_idx.get(x).copied().unwrap_or(s.len());
+            let w = scan::Scan {
+                start: back(w.start),
+                end: back(w.end),
+                stat: w.stat,
+                start_interval: (back(w.start_interval.0), back(w.start_interval.1)),
+                end_interval: (back(w.end_interval.0), back(w.end_interval.1)),
+            };
+            let is_window = matches!(effect, Effect::Disturbance { .. });
+            cands[c].scan = Some(candidates::scan_times(s, &w, is_window));
+            match &mut chosen[k].1 {
+                Effect::BiasStep { t_s, .. } => *t_s = candidates::between(s, w.start),
                 Effect::Disturbance { t0_s, t1_s, .. } => {
-                    *t0_s = candidates::between(&samples, w.start);
-                    *t1_s = candidates::between(&samples, w.end);
+                    *t0_s = candidates::between(s, w.start);
+                    *t1_s = candidates::between(s, w.end);
                 }
                 _ => {}
             }
         }
     }
-    for (step, cand, effect, se) in &chosen {
-        let effect = *effect;
-        if effect.id().frame() == Frame::Body {
-            model
-                .add_correction(effect)
-                .expect("candidates are limited so that every body-fixed effect fits in a model");
+
+    /// Each effect's size (RMS per axis of its perturbation where it acts), and the final model's residual RMS per
+    /// axis where it acts (`residual`: the final model's, per sample).
+    fn sizes(
+        &self,
+        chosen: &[(usize, Effect, [f64; 3])],
+        residual: &[[f64; 3]],
+    ) -> Vec<(f64, f64)> {
+        let s = self.samples;
+        let dims = if self.vector { 3.0 } else { 1.0 };
+        chosen
+            .iter()
+            .map(|(_, effect, _)| {
+                let (mut sum, mut left, mut count) = (0.0, 0.0, 0usize);
+                for i in 0..s.len() {
+                    let d = effect.perturbation_ut(&s.context(i));
+                    let d2 = frames::dot(d, d);
+                    if d2 > 0.0 && d2.is_finite() {
+                        sum += d2 / 3.0;
+                        left += frames::dot(residual[i], residual[i]) / dims;
+                        count += 1;
+                    }
+                }
+                let c = count.max(1) as f64;
+                ((sum / c).sqrt(), (left / c).sqrt())
+            })
+            .collect()
+    }
+
+    /// The channels the residual is compared with, per sample.
+    fn channels(&self) -> Vec<(String, Vec<f64>)> {
+        let s = self.samples;
+        let n = s.len();
+        let mut channels: Vec<(String, Vec<f64>)> = Vec::new();
+        if s.has_temp {
+            channels.push(("temp".to_owned(), s.temp.clone()));
         }
-        let holdout = (rms(step.cv.0), rms(step.cv.1));
-        effects.push(FoundEffect {
-            explanation: explain::explain(
-                &effect,
-                cand.channel.as_deref(),
-                holdout,
-                noise_floor_ut,
-                field_ut,
+        for (k, name) in self.current_names.iter().enumerate() {
+            channels.push((
+                (*name).to_owned(),
+                (0..n).map(|i| s.currents[i * s.n_currents + k]).collect(),
+            ));
+        }
+        if s.has_time {
+            channels.push(("t".to_owned(), s.t.clone()));
+        }
+        if self.vector && s.has_time {
+            channels.push((
+                "rotation_rate".to_owned(),
+                s.rate.iter().map(|r| frames::norm(*r)).collect(),
+            ));
+        }
+        channels
+    }
+
+    /// A span as the report gives it.
+    fn gross_span(&self, sp: &Span) -> GrossSpan {
+        let (t0_s, t1_s) = span_time(self.samples, sp);
+        let when = if self.samples.has_time {
+            format!("{t0_s:.2}–{t1_s:.2} s")
+        } else {
+            format!("samples {}–{}", sp.start, sp.end)
+        };
+        let explanation = match sp.kind {
+            SpanKind::SensorFixed {
+                offset_ut,
+                told_apart,
+            } => format!(
+                "{when}: a field of {:.1} µT fixed to the sensor{} — modelled (bias_window), its samples kept",
+                frames::norm(offset_ut),
+                if told_apart {
+                    ""
+                } else {
+                    " (or to the room: the sensor hardly turned, so the two cannot be told apart)"
+                }
             ),
-            params: params_of(&effect, *se, cand, last.rss / rows * tau_last),
-            effect,
-            channel: cand.channel.clone(),
-            rms_before_ut: rms(step.rss.0),
-            rms_after_ut: rms(step.rss.1),
-            holdout_rms_before_ut: holdout.0,
-            holdout_rms_after_ut: holdout.1,
-            evidence: step.evidence,
-        });
-    }
-    let ambiguous = sel
-        .ambiguous
-        .iter()
-        .map(|&(a, b)| {
-            let ids = [cands[a].id(), cands[b].id()];
-            let (why, experiment) = explain::separate(ids[0], ids[1]);
-            Ambiguity {
-                ids,
-                why,
-                experiment,
-            }
-        })
-        .collect();
-    for (c, why) in &sel.set_aside {
-        let cand = &cands[*c];
-        let name = cand
-            .channel
-            .as_deref()
-            .map_or(String::new(), |ch| format!(" ({ch})"));
-        untestable.push(Untestable {
-            id: cand.id(),
-            why: match why {
-                SetAside::NotExcited => format!("not excited{name}: {}", not_excited(cand.id())),
-                SetAside::Absorbed { unabsorbed, takes_up } => format!(
-                    "absorbed — not testable with this data{name}: the base fit takes up {:.1} % of it, so it would \
-                     bias {takes_up}",
-                    100.0 * (1.0 - unabsorbed)
-                ),
-            },
-        });
-    }
-
-    let directions = unit;
-    let mut channels: Vec<(&str, Vec<f64>)> = Vec::new();
-    if samples.has_temp {
-        channels.push(("temp", samples.temp.clone()));
-    }
-    for (k, name) in current_names.iter().enumerate() {
-        channels.push((
-            name,
-            (0..n)
-                .map(|i| samples.currents[i * samples.n_currents + k])
-                .collect(),
-        ));
-    }
-    if samples.has_time {
-        channels.push(("t", samples.t.clone()));
-    }
-    if vector && samples.has_time {
-        channels.push((
-            "rotation_rate",
-            samples.rate.iter().map(|r| frames::norm(*r)).collect(),
-        ));
-    }
-    let floor_axes: Vec<f64> = if vector {
-        input.noise.calibrated_ut(&base.a).to_vec()
-    } else {
-        vec![noise_floor_ut]
-    };
-    let located = locate::locate(
-        &residual,
-        &floor_axes,
-        samples.has_time.then_some(samples.t.as_slice()),
-        &directions,
-        &channels,
-    );
-    // The extended fit's residual per sample, from the effects' own definitions.
-    let extended: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            let ctx = samples.context(i);
-            let delta = effects.iter().fold([0.0; 3], |acc, f| {
-                frames::add(acc, f.effect.perturbation_ut(&ctx))
-            });
-            let cal = frames::sub(
-                frames::add(frames::mat_vec(&ext_a, samples.raw[i]), ext_b),
-                delta,
-            );
-            if vector {
-                frames::sub(cal, samples.field[i]).to_vec()
-            } else {
-                vec![frames::norm(cal) - field_ut]
-            }
-        })
-        .collect();
-    let unexplained = rms(sel.last.rss) > 1.2 * noise_floor_ut && !located.axes.is_empty();
-    let verdict = if effects.is_empty() && !unexplained {
-        Verdict::Consistent
-    } else {
-        Verdict::Mismatch
-    };
-    Ok(Diagnosis {
-        verdict,
-        effects,
-        ambiguous,
-        untestable,
-        located,
-        base: FitSummary {
-            a: base_a,
-            b_ut: base_b,
-            se: vector.then(|| linear_se(&problem, &sel.base, rows, raw_mean)),
-            rms_ut: rms(sel.base.rss),
-            holdout_rms_ut: rms(sel.base_cv),
-        },
-        extended: FitSummary {
-            a: ext_a,
-            b_ut: ext_b,
-            se: vector.then(|| linear_se(&problem, &sel.last, rows, raw_mean)),
-            rms_ut: rms(sel.last.rss),
-            holdout_rms_ut: rms(sel.last_cv),
-        },
-        model,
-        noise_floor_ut,
-        samples_used: n,
-        samples_left_out: samples.left_out,
-        residuals: Residuals {
-            rows: samples.rows,
-            t_s: samples.t,
-            direction: directions,
-            base: residual,
-            extended,
-            channels: channels
-                .into_iter()
-                .map(|(name, v)| (name.to_owned(), v))
-                .collect(),
-        },
-    })
-}
-
-/// Standard errors of `A` and `b` from a vector-method solution on centred readings (allowing for autocorrelated
-/// residuals, as the effects' are): `b = b' − A·mean`, so
-/// `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the covariance of row `j`'s `(a_j, b'_j)`.
-fn linear_se(
-    problem: &Problem,
-    sol: &stats::Solution,
-    rows: f64,
-    raw_mean: [f64; 3],
-) -> (Mat3, [f64; 3]) {
-    let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0) * problem.autocorrelation(sol);
-    let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
-    let cov = |c: usize, d: usize| match (pos(c), pos(d)) {
-        (Some(p), Some(q)) => sol.inverse[(p, q)] * s2,
-        _ => 0.0,
-    };
-    let a_se: Mat3 =
-        std::array::from_fn(|j| std::array::from_fn(|k| cov(4 * j + k, 4 * j + k).sqrt()));
-    let b_se = std::array::from_fn(|j| {
-        let g = [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0];
-        let mut v = 0.0;
-        for r in 0..4 {
-            for c in 0..4 {
-                v += g[r] * cov(4 * j + r, 4 * j + c) * g[c];
-            }
-        }
-        v.max(0.0).sqrt()
-    });
-    (a_se, b_se)
-}
-
-/// Index pairs of the scalar method's symmetric `A` parameters (as in [`crate::scalar`]).
-const SYM: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
-
-fn not_excited(id: EffectId) -> &'static str {
-    match id {
-        EffectId::TemperatureBias | EffectId::TemperatureScale => {
-            "the temperature did not change during the recording"
-        }
-        EffectId::CurrentBias => "the current did not change during the recording",
-        EffectId::TimeLag | EffectId::RateCoupling => {
-            "the attitude did not change while samples were taken (static poses only)"
-        }
-        _ => "its signature is zero throughout this recording",
-    }
-}
-
-/// The report parameters of a fitted effect, with standard errors (`se` per fitted parameter; `sigma2` the residual
-/// variance per row, µT²).
-fn params_of(e: &Effect, se: [f64; 3], cand: &Candidate, sigma2: f64) -> Vec<Param> {
-    let num = |name, v: f64, s: f64| Param {
-        name,
-        value: ParamValue::Number(v),
-        se: Some(ParamValue::Number(s)),
-    };
-    let vec3 = |name, v: [f64; 3]| Param {
-        name,
-        value: ParamValue::Vector(v),
-        se: Some(ParamValue::Vector(se)),
-    };
-    let fixed = |name, v: f64| Param {
-        name,
-        value: ParamValue::Number(v),
-        se: None,
-    };
-    // A scanned time's uncertainty. A change point is not a regular parameter and its profile interval under-covers;
-    // the location error of a jump Δ in white noise σ spreads like the argmax of a two-sided random walk with drift,
-    // whose standard deviation is √26·σ²/|Δ|² samples (Yao, Ann. Statist. 15, 1987). The larger of the two, and at
-    // least half a sample interval.
-    let jump2 = match *e {
-        Effect::BiasStep { step_ut, .. } => frames::dot(step_ut, step_ut),
-        Effect::Disturbance { field_ned_ut, .. } => frames::dot(field_ned_ut, field_ned_ut),
-        _ => f64::INFINITY,
-    };
-    let half = |(lo, hi): (f64, f64)| {
-        let dt = cand.scan.map_or(0.0, |s| s.sample_interval_s);
-        ((hi - lo) / 2.0)
-            .max(26f64.sqrt() * sigma2 / jump2 * dt)
-            .max(dt / 2.0)
-    };
-    match *e {
-        Effect::TemperatureBias {
-            coef_ut_per_c,
-            t_ref_c,
-        } => {
-            vec![
-                vec3("coef_ut_per_c", coef_ut_per_c),
-                fixed("t_ref_c", t_ref_c),
-            ]
-        }
-        Effect::TemperatureScale {
-            coef_per_c,
-            t_ref_c,
-        } => vec![vec3("coef_per_c", coef_per_c), fixed("t_ref_c", t_ref_c)],
-        Effect::CurrentBias { coef_ut_per_a, .. } => vec![
-            Param {
-                name: "channel",
-                value: ParamValue::Text(cand.channel.clone().unwrap_or_default()),
-                se: None,
-            },
-            vec3("coef_ut_per_a", coef_ut_per_a),
-        ],
-        Effect::TimeLag { lag_s } => vec![num("lag_s", lag_s, se[0])],
-        Effect::RateCoupling { lag_axis_s } => vec![vec3("lag_axis_s", lag_axis_s)],
-        Effect::FieldDrift {
-            rate_ut_per_s,
-            t_ref_s,
-        } => vec![
-            vec3("rate_ut_per_s", rate_ut_per_s),
-            fixed("t_ref_s", t_ref_s),
-        ],
-        Effect::FieldDirectionError {
-            declination_error_deg,
-            inclination_error_deg,
-        } => vec![
-            num("declination_error_deg", declination_error_deg, se[0]),
-            num("inclination_error_deg", inclination_error_deg, se[1]),
-        ],
-        Effect::Nonlinearity { cubic_per_ut2 } => vec![vec3("cubic_per_ut2", cubic_per_ut2)],
-        Effect::BiasStep { t_s, step_ut } => vec![
-            num("t_s", t_s, cand.scan.map_or(f64::NAN, |s| half(s.start_s))),
-            vec3("step_ut", step_ut),
-        ],
-        Effect::BiasDrift {
-            rate_ut_per_s,
-            t_ref_s,
-        } => vec![
-            vec3("rate_ut_per_s", rate_ut_per_s),
-            fixed("t_ref_s", t_ref_s),
-        ],
-        Effect::Disturbance {
+            SpanKind::RoomFixed { field_ned_ut } => format!(
+                "{when}: a field of {:.1} µT fixed in the room — modelled (disturbance), its samples kept",
+                frames::norm(field_ned_ut)
+            ),
+            SpanKind::Moving => format!(
+                "{when}: up to {:.1} µT, changing as the sensor moved — a magnet or steel nearby; left out of the \
+                 calibration",
+                sp.peak_ut
+            ),
+            SpanKind::Unexplained => format!(
+                "{when}: up to {:.1} µT, {} — left out of the calibration",
+                sp.peak_ut,
+                if sp.end - sp.start <= 3 {
+                    "a glitch of a few samples"
+                } else {
+                    "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
+                     it), or its model would make the clean part fit worse"
+                }
+            ),
+        };
+        GrossSpan {
             t0_s,
             t1_s,
-            field_ned_ut,
-        } => vec![
-            num(
-                "t0_s",
-                t0_s,
-                cand.scan.map_or(f64::NAN, |s| half(s.start_s)),
-            ),
-            num(
-                "t1_s",
-                t1_s,
-                cand.scan.and_then(|s| s.end_s).map_or(f64::NAN, half),
-            ),
-            vec3("field_ned_ut", field_ned_ut),
-        ],
+            samples: sp.end - sp.start,
+            peak_ut: sp.peak_ut,
+            rms_ut: sp.rms_ut,
+            kind: sp.kind,
+            modelled: sp.modelled(),
+            explanation,
+        }
+    }
+}
+
+/// A span's first and last sample's time (their indices without a time column).
+fn span_time(s: &Samples, sp: &Span) -> (f64, f64) {
+    if s.has_time {
+        (s.t[sp.start], s.t[sp.end - 1])
+    } else {
+        (sp.start as f64, (sp.end - 1) as f64)
+    }
+}
+
+/// The start of a windowed effect, s.
+fn effect_t0(e: &Effect) -> f64 {
+    match *e {
+        Effect::BiasWindow { t0_s, .. } | Effect::Disturbance { t0_s, .. } => t0_s,
+        _ => f64::INFINITY,
+    }
+}
+
+/// The end of a windowed effect, s.
+fn effect_t1(e: &Effect) -> f64 {
+    match *e {
+        Effect::BiasWindow { t1_s, .. } | Effect::Disturbance { t1_s, .. } => t1_s,
+        _ => f64::NEG_INFINITY,
     }
 }

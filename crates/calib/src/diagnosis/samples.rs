@@ -32,6 +32,8 @@ pub(crate) struct Samples {
     pub n_currents: usize,
     /// Rows of the recording left out (a channel missing).
     pub left_out: usize,
+    /// Kept by the robust base fit (not grossly off).
+    pub kept: Vec<bool>,
 }
 
 impl Samples {
@@ -51,6 +53,7 @@ impl Samples {
                 (Some(r), Some(f)) => Some(WorldContext {
                     sensor_to_ned: r[i],
                     field_ned_ut: f,
+                    position_m: [0.0; 3],
                 }),
                 _ => None,
             },
@@ -109,6 +112,10 @@ impl Samples {
             currents.extend(input.currents.iter().map(|(_, c)| c[i]));
         }
         Samples {
+            kept: index
+                .iter()
+                .map(|&i| input.kept.is_none_or(|k| k[i]))
+                .collect(),
             left_out: n - index.len(),
             temp: match input.temp_c {
                 Some(tc) => index.iter().map(|&i| tc[i]).collect(),

@@ -25,6 +25,16 @@ pub(crate) const ABSORBED_BELOW: f64 = 0.02;
 /// held-out data: a statistically clear but physically marginal fit to some structure of the residual is not offered
 /// as the missing physics.
 const MIN_EXCESS_SHARE: f64 = 0.05;
+/// …and at least this share of the current held-out residual variance itself: an improvement nobody could notice
+/// (0.357 → 0.356 µT) is not a finding, however significant.
+const MIN_GAIN_SHARE: f64 = 0.01;
+/// A local effect (a step, a window, a curve of the response) must be at least this many times the reference's
+/// own error (the clean residual's excess over the sensor's noise): a smooth wander of the reference mimics one up
+/// to about that size.
+pub(crate) const LOCAL_OVER_REFERENCE: f64 = 3.0;
+/// The noise floor is measured to a few per cent: a residual variance within this share above it is noise, not
+/// the reference's error.
+const NOISE_FLOOR_SLACK: f64 = 0.1;
 /// Two candidates whose evidence differs by less than this (σ² units, plus a share of the evidence) are ambiguous.
 const AMBIGUITY_MARGIN: f64 = 10.0;
 const AMBIGUITY_SHARE: f64 = 0.02;
@@ -108,7 +118,7 @@ pub(crate) fn select(
 
     let mut set_aside = Vec::new();
     let mut eligible = Vec::new();
-    for (c, cand) in cands.iter().enumerate() {
+    for (c, cand) in cands.iter().enumerate().filter(|(_, c)| !c.forced) {
         let cols: Vec<usize> = cand.columns().collect();
         let energy: f64 = cols.iter().map(|&i| problem.total.xtx[(i, i)]).sum();
         if energy <= 1e-18 * rows {
@@ -177,8 +187,21 @@ pub(crate) fn select(
             t.judge(tau, rows, cands[t.cand].scan_penalty);
         }
         let significant: Vec<Trial> = trials.into_iter().filter(|t| t.evidence > 0.0).collect();
-        let excess = (current_cv / rows - floor2).max(0.0);
-        let material = |t: &Trial| (current_cv - t.cv) / rows >= MIN_EXCESS_SHARE * excess;
+        let clean_rows = problem.clean_total.rows.max(1) as f64;
+        let excess = (current_cv / clean_rows - floor2).max(0.0);
+        // The reference's own error with the candidate in the model: what would remain beyond the noise (less the
+        // noise floor's own uncertainty).
+        let reference2 = |t: &Trial| {
+            (problem.clean_rss(&t.sol) / clean_rows - (1.0 + NOISE_FLOOR_SLACK) * floor2).max(0.0)
+        };
+        let material = |t: &Trial| {
+            let gain = current_cv - t.cv;
+            gain / clean_rows >= MIN_EXCESS_SHARE * excess
+                && gain >= MIN_GAIN_SHARE * current_cv
+                && (!cands[t.cand].local()
+                    || size2(&t.sol, &cands[t.cand], problem)
+                        >= LOCAL_OVER_REFERENCE.powi(2) * reference2(t))
+        };
         let Some(best) = significant
             .iter()
             .filter(|t| t.cv < current_cv && material(t))
@@ -231,9 +254,25 @@ pub(crate) fn select(
     })
 }
 
+/// The mean square per row of a candidate's perturbation in a fit, over the rows where it acts (µT²).
+pub(crate) fn size2(sol: &Solution, cand: &Candidate, problem: &Problem) -> f64 {
+    let idx: Vec<(usize, usize)> = cand
+        .columns()
+        .filter_map(|c| sol.columns.iter().position(|&x| x == c).map(|p| (p, c)))
+        .collect();
+    let x = &problem.total.xtx;
+    let mut quad = 0.0;
+    for &(p, i) in &idx {
+        for &(q, j) in &idx {
+            quad += sol.beta[p] * x[(i, j)] * sol.beta[q];
+        }
+    }
+    quad / cand.active_rows.max(1) as f64
+}
+
 /// The Wald statistic of a candidate's parameters in a fit: all zero, or — when it replaces an effect it generalises
 /// (per-axis lags replacing one lag) — all equal.
-fn wald(sol: &Solution, cand: &Candidate, generalises: bool, rows: f64) -> f64 {
+pub(crate) fn wald(sol: &Solution, cand: &Candidate, generalises: bool, rows: f64) -> f64 {
     let idx: Vec<usize> = cand
         .columns()
         .filter_map(|c| sol.columns.iter().position(|&x| x == c))

@@ -128,6 +128,21 @@ impl Batches {
     }
 }
 
+/// The residual sum of squares of a block's rows under a solution.
+fn rss_of(block: &BlockStats, sol: &Solution) -> f64 {
+    let k = sol.columns.len();
+    let mut quad = 0.0;
+    let mut lin = 0.0;
+    for r in 0..k {
+        let i = sol.columns[r];
+        lin += sol.beta[r] * block.xty[i];
+        for s in 0..k {
+            quad += sol.beta[r] * block.xtx[(i, sol.columns[s])] * sol.beta[s];
+        }
+    }
+    (block.yty - 2.0 * lin + quad).max(0.0)
+}
+
 /// A least-squares solution on a subset of columns.
 #[derive(Clone, Debug)]
 pub(crate) struct Solution {
@@ -141,50 +156,80 @@ pub(crate) struct Solution {
     pub rss: f64,
 }
 
+/// Which rows a fit uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Rows {
+    /// Every included row: the clean ones and those of modelled disturbances.
+    All,
+    /// The clean rows only (outside every gross span).
+    Clean,
+}
+
 /// The blocks of a problem and the correction to apply to the normal matrix when fitting (errors in variables).
 #[derive(Clone, Debug)]
 pub(crate) struct Problem {
+    /// Per cross-validation block, every included row.
     pub blocks: Vec<BlockStats>,
+    /// Per block, the clean rows (a subset of `blocks`): what held-out residuals are judged on.
+    pub clean: Vec<BlockStats>,
     pub batches: Batches,
+    /// All included rows.
     pub total: BlockStats,
-    /// Per block, a diagonal correction subtracted from `XᵀX` when fitting (not when evaluating residuals).
-    pub correction: Vec<DVector<f64>>,
+    /// The clean rows.
+    pub clean_total: BlockStats,
+    /// Per column, the variance subtracted per sample from `XᵀX` when fitting (the raw noise on `A`'s columns).
+    pub noise_var: DVector<f64>,
 }
 
 impl Problem {
     pub fn new(
         mut blocks: Vec<BlockStats>,
+        mut clean: Vec<BlockStats>,
         batches: Batches,
-        correction: Vec<DVector<f64>>,
+        noise_var: DVector<f64>,
     ) -> Problem {
-        for b in &mut blocks {
-            b.symmetrise();
-        }
-        let mut total = BlockStats::new(blocks[0].xty.len());
-        for b in &blocks {
-            total.add(b);
-        }
+        let columns = noise_var.len();
+        let sum = |bs: &mut Vec<BlockStats>| {
+            let mut total = BlockStats::new(columns);
+            for b in bs.iter_mut() {
+                b.symmetrise();
+                total.add(b);
+            }
+            total
+        };
+        let total = sum(&mut blocks);
+        let clean_total = sum(&mut clean);
         Problem {
             blocks,
+            clean,
             batches,
             total,
-            correction,
+            clean_total,
+            noise_var,
         }
     }
 
-    /// Least squares on `columns` over every block except `held_out`; with `corrected`, the errors-in-variables
-    /// correction is subtracted from the normal matrix (for parameter estimates; tests compare plain least squares).
-    /// Columns without support in the fitted blocks (zero throughout them, e.g. a transient inside the held-out
-    /// block) are left out of that fit, their coefficient zero.
-    pub fn solve(
+    fn set(&self, rows: Rows) -> &[BlockStats] {
+        match rows {
+            Rows::All => &self.blocks,
+            Rows::Clean => &self.clean,
+        }
+    }
+
+    /// Least squares on `columns` over the `rows` of every block except `held_out`; with `corrected`, the
+    /// errors-in-variables correction is subtracted from the normal matrix (for parameter estimates; tests compare
+    /// plain least squares). Columns without support in the fitted blocks (zero throughout them, e.g. a transient
+    /// inside the held-out block) are left out of that fit, their coefficient zero.
+    pub fn solve_on(
         &self,
+        rows: Rows,
         columns: &[usize],
         held_out: Option<usize>,
         corrected: bool,
     ) -> Option<Solution> {
+        let set = self.set(rows);
         let fitted = || {
-            self.blocks
-                .iter()
+            set.iter()
                 .enumerate()
                 .filter(move |(b, _)| Some(*b) != held_out)
         };
@@ -197,14 +242,14 @@ impl Problem {
         let mut xtx = DMatrix::zeros(k, k);
         let mut xty = DVector::zeros(k);
         let mut yty = 0.0;
-        for (b, block) in fitted() {
+        for (_, block) in fitted() {
             for (r, &i) in supported.iter().enumerate() {
                 xty[r] += block.xty[i];
                 for (s, &j) in supported.iter().enumerate() {
                     xtx[(r, s)] += block.xtx[(i, j)];
                 }
                 if corrected {
-                    xtx[(r, r)] -= self.correction[b][i];
+                    xtx[(r, r)] -= block.samples as f64 * self.noise_var[i];
                 }
             }
             yty += block.yty;
@@ -232,20 +277,24 @@ impl Problem {
         })
     }
 
-    /// Residual sum of squares of block `b` under a solution.
+    /// [`Problem::solve_on`] every included row.
+    pub fn solve(
+        &self,
+        columns: &[usize],
+        held_out: Option<usize>,
+        corrected: bool,
+    ) -> Option<Solution> {
+        self.solve_on(Rows::All, columns, held_out, corrected)
+    }
+
+    /// Residual sum of squares of the clean rows of block `b` under a solution.
     pub fn block_rss(&self, b: usize, sol: &Solution) -> f64 {
-        let block = &self.blocks[b];
-        let k = sol.columns.len();
-        let mut quad = 0.0;
-        let mut lin = 0.0;
-        for r in 0..k {
-            let i = sol.columns[r];
-            lin += sol.beta[r] * block.xty[i];
-            for s in 0..k {
-                quad += sol.beta[r] * block.xtx[(i, sol.columns[s])] * sol.beta[s];
-            }
-        }
-        (block.yty - 2.0 * lin + quad).max(0.0)
+        rss_of(&self.clean[b], sol)
+    }
+
+    /// Residual sum of squares of all clean rows under a solution.
+    pub fn clean_rss(&self, sol: &Solution) -> f64 {
+        rss_of(&self.clean_total, sol)
     }
 
     /// The residual's autocorrelation factor under a solution, at least 1 (see [`Batches::autocorrelation`]).
@@ -254,15 +303,20 @@ impl Problem {
         self.batches.autocorrelation(sol, sigma2).max(1.0)
     }
 
-    /// Blocked cross-validation: the held-out residual sum of squares, summed over the blocks, each predicted by a
-    /// fit on the others.
-    pub fn cv_rss(&self, columns: &[usize]) -> Option<f64> {
+    /// Blocked cross-validation: the held-out residual sum of squares of the clean rows, summed over the blocks,
+    /// each predicted by a fit on the other blocks' `rows`.
+    pub fn cv_rss_on(&self, rows: Rows, columns: &[usize]) -> Option<f64> {
         (0..self.blocks.len())
             .map(|b| {
-                self.solve(columns, Some(b), true)
+                self.solve_on(rows, columns, Some(b), true)
                     .map(|s| self.block_rss(b, &s))
             })
             .sum()
+    }
+
+    /// [`Problem::cv_rss_on`] fitted on every included row.
+    pub fn cv_rss(&self, columns: &[usize]) -> Option<f64> {
+        self.cv_rss_on(Rows::All, columns)
     }
 
     /// Of the columns `cand`, the largest fraction of any combination that is NOT explained by the columns `base`:
@@ -318,7 +372,12 @@ mod tests {
             blocks[i / 10].add_row(&[(0, 1.0), (1, x), (2, 2.0)], 2.0 + 3.0 * x + noise);
             blocks[i / 10].samples += 1;
         }
-        Problem::new(blocks, Batches::new(1, 1, 3), vec![DVector::zeros(3); 4])
+        Problem::new(
+            blocks.clone(),
+            blocks,
+            Batches::new(1, 1, 3),
+            DVector::zeros(3),
+        )
     }
 
     #[test]

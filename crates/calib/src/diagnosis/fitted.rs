@@ -1,0 +1,232 @@
+//! What a solution of the diagnosis' problem says: the linear part `A`, `b` (back from centred readings, and for
+//! the scalar method from the linearisation), their standard errors, and each effect's parameters in report form.
+
+use crate::effects::{Effect, EffectId};
+use crate::frames::{self, Mat3};
+use crate::model::Model;
+
+use super::candidates::Candidate;
+use super::stats::{Problem, Solution};
+use super::{Param, ParamValue};
+
+/// The linear part of a solution: `A` and `b`, back from centred readings (`raw_mean`) and, for the scalar method,
+/// from the linearisation about `base`.
+pub(crate) fn linear_of(
+    sol: &Solution,
+    vector: bool,
+    base: &Model,
+    raw_mean: [f64; 3],
+) -> (Mat3, [f64; 3]) {
+    let get = |col: usize| {
+        sol.columns
+            .iter()
+            .position(|&c| c == col)
+            .map(|p| sol.beta[p])
+    };
+    if vector {
+        let a: Mat3 =
+            std::array::from_fn(|j| std::array::from_fn(|k| get(4 * j + k).unwrap_or(0.0)));
+        let b_c: [f64; 3] = std::array::from_fn(|j| get(4 * j + 3).unwrap_or(0.0));
+        // Back from centred readings: b = b' − A·mean.
+        (a, frames::sub(b_c, frames::mat_vec(&a, raw_mean)))
+    } else {
+        let mut a = base.a;
+        for (k, (r, s)) in SYM.iter().enumerate() {
+            let d = get(k).unwrap_or(0.0);
+            a[*r][*s] += d;
+            if r != s {
+                a[*s][*r] += d;
+            }
+        }
+        // b' = b + A·mean was linearised; b = b' − A·mean with the updated A.
+        let b_c0 = frames::add(base.b_ut, frames::mat_vec(&base.a, raw_mean));
+        let b_c: [f64; 3] = std::array::from_fn(|k| b_c0[k] + get(6 + k).unwrap_or(0.0));
+        (a, frames::sub(b_c, frames::mat_vec(&a, raw_mean)))
+    }
+}
+
+/// A coefficient and its standard error (the residual variance per row `sigma2`, autocorrelation included).
+pub(crate) fn coefficient(sol: &Solution, col: usize, sigma2: f64) -> Option<(f64, f64)> {
+    sol.columns
+        .iter()
+        .position(|&c| c == col)
+        .map(|p| (sol.beta[p], (sol.inverse[(p, p)] * sigma2).sqrt()))
+}
+
+/// Standard errors of `A` and `b` from a vector-method solution on centred readings (allowing for autocorrelated
+/// residuals, as the effects' are): `b = b' − A·mean`, so
+/// `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the covariance of row `j`'s `(a_j, b'_j)`.
+pub(crate) fn linear_se(
+    problem: &Problem,
+    sol: &Solution,
+    rows: f64,
+    raw_mean: [f64; 3],
+) -> (Mat3, [f64; 3]) {
+    let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0) * problem.autocorrelation(sol);
+    let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
+    let cov = |c: usize, d: usize| match (pos(c), pos(d)) {
+        (Some(p), Some(q)) => sol.inverse[(p, q)] * s2,
+        _ => 0.0,
+    };
+    let a_se: Mat3 =
+        std::array::from_fn(|j| std::array::from_fn(|k| cov(4 * j + k, 4 * j + k).sqrt()));
+    let b_se = std::array::from_fn(|j| {
+        let g = [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0];
+        let mut v = 0.0;
+        for r in 0..4 {
+            for c in 0..4 {
+                v += g[r] * cov(4 * j + r, 4 * j + c) * g[c];
+            }
+        }
+        v.max(0.0).sqrt()
+    });
+    (a_se, b_se)
+}
+
+/// Index pairs of the scalar method's symmetric `A` parameters (as in [`crate::scalar`]).
+pub(crate) const SYM: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
+
+pub(crate) fn not_excited(id: EffectId) -> &'static str {
+    match id {
+        EffectId::TemperatureBias | EffectId::TemperatureScale => {
+            "the temperature did not change during the recording"
+        }
+        EffectId::CurrentBias => "the current did not change during the recording",
+        EffectId::TimeLag | EffectId::RateCoupling => {
+            "the attitude did not change while samples were taken (static poses only)"
+        }
+        _ => "its signature is zero throughout this recording",
+    }
+}
+
+/// The report parameters of a fitted effect, with standard errors (`se` per fitted parameter; `sigma2` the residual
+/// variance per row, µT²).
+pub(crate) fn params_of(e: &Effect, se: [f64; 3], cand: &Candidate, sigma2: f64) -> Vec<Param> {
+    let num = |name, v: f64, s: f64| Param {
+        name,
+        value: ParamValue::Number(v),
+        se: Some(ParamValue::Number(s)),
+    };
+    let vec3 = |name, v: [f64; 3]| Param {
+        name,
+        value: ParamValue::Vector(v),
+        se: Some(ParamValue::Vector(se)),
+    };
+    let fixed = |name, v: f64| Param {
+        name,
+        value: ParamValue::Number(v),
+        se: None,
+    };
+    // A scanned time's uncertainty. A change point is not a regular parameter and its profile interval under-covers;
+    // the location error of a jump Δ in white noise σ spreads like the argmax of a two-sided random walk with drift,
+    // whose standard deviation is √26·σ²/|Δ|² samples (Yao, Ann. Statist. 15, 1987). The larger of the two, and at
+    // least half a sample interval.
+    let jump2 = match *e {
+        Effect::BiasStep { step_ut, .. } => frames::dot(step_ut, step_ut),
+        Effect::Disturbance { field_ned_ut, .. } => frames::dot(field_ned_ut, field_ned_ut),
+        Effect::BiasWindow { offset_ut, .. } => frames::dot(offset_ut, offset_ut),
+        _ => f64::INFINITY,
+    };
+    let half = |(lo, hi): (f64, f64)| {
+        let dt = cand.scan.map_or(0.0, |s| s.sample_interval_s);
+        ((hi - lo) / 2.0)
+            .max(26f64.sqrt() * sigma2 / jump2 * dt)
+            .max(dt / 2.0)
+    };
+    match *e {
+        Effect::TemperatureBias {
+            coef_ut_per_c,
+            t_ref_c,
+        } => {
+            vec![
+                vec3("coef_ut_per_c", coef_ut_per_c),
+                fixed("t_ref_c", t_ref_c),
+            ]
+        }
+        Effect::TemperatureScale {
+            coef_per_c,
+            t_ref_c,
+        } => vec![vec3("coef_per_c", coef_per_c), fixed("t_ref_c", t_ref_c)],
+        Effect::CurrentBias { coef_ut_per_a, .. } => vec![
+            Param {
+                name: "channel",
+                value: ParamValue::Text(cand.channel.clone().unwrap_or_default()),
+                se: None,
+            },
+            vec3("coef_ut_per_a", coef_ut_per_a),
+        ],
+        Effect::TimeLag { lag_s } => vec![num("lag_s", lag_s, se[0])],
+        Effect::RateCoupling { lag_axis_s } => vec![vec3("lag_axis_s", lag_axis_s)],
+        Effect::FieldDrift {
+            rate_ut_per_s,
+            t_ref_s,
+        } => vec![
+            vec3("rate_ut_per_s", rate_ut_per_s),
+            fixed("t_ref_s", t_ref_s),
+        ],
+        Effect::FieldDirectionError {
+            declination_error_deg,
+            inclination_error_deg,
+        } => vec![
+            num("declination_error_deg", declination_error_deg, se[0]),
+            num("inclination_error_deg", inclination_error_deg, se[1]),
+        ],
+        Effect::Nonlinearity { cubic_per_ut2 } => vec![vec3("cubic_per_ut2", cubic_per_ut2)],
+        Effect::BiasStep { t_s, step_ut } => vec![
+            num("t_s", t_s, cand.scan.map_or(f64::NAN, |s| half(s.start_s))),
+            vec3("step_ut", step_ut),
+        ],
+        Effect::BiasDrift {
+            rate_ut_per_s,
+            t_ref_s,
+        } => vec![
+            vec3("rate_ut_per_s", rate_ut_per_s),
+            fixed("t_ref_s", t_ref_s),
+        ],
+        Effect::Disturbance {
+            t0_s,
+            t1_s,
+            field_ned_ut,
+        } => vec![
+            num(
+                "t0_s",
+                t0_s,
+                cand.scan.map_or(f64::NAN, |s| half(s.start_s)),
+            ),
+            num(
+                "t1_s",
+                t1_s,
+                cand.scan.and_then(|s| s.end_s).map_or(f64::NAN, half),
+            ),
+            vec3("field_ned_ut", field_ned_ut),
+        ],
+        Effect::BiasWindow {
+            t0_s,
+            t1_s,
+            offset_ut,
+        } => vec![
+            num(
+                "t0_s",
+                t0_s,
+                cand.scan.map_or(f64::NAN, |s| half(s.start_s)),
+            ),
+            num(
+                "t1_s",
+                t1_s,
+                cand.scan.and_then(|s| s.end_s).map_or(f64::NAN, half),
+            ),
+            vec3("offset_ut", offset_ut),
+        ],
+        Effect::MagnetNearby {
+            position_m,
+            moment_am2,
+        } => vec![
+            Param {
+                name: "position_m",
+                value: ParamValue::Vector(position_m),
+                se: None,
+            },
+            vec3("moment_am2", moment_am2),
+        ],
+    }
+}

@@ -1,0 +1,290 @@
+//! Gross disturbances: the spans where the residual departs grossly from the rest, and what each one is.
+//!
+//! Input: the per-sample residual of a model, which samples it kept (the robust fit's verdict: within
+//! [`crate::robust::GROSS_SIGMA`] of the scale), and the scale. Output: spans (sample ranges), each classified by
+//! what explains it:
+//! - **fixed to the sensor** — a constant in sensor axes (something magnetic attached to the board): modelled as a
+//!   `bias_window`, the samples inside kept;
+//! - **fixed to the room** — a constant in NED seen through the attitude (a magnet placed on the bench and taken
+//!   away): modelled as a `disturbance`;
+//! - **moving** — neither, while the sensor moved: a field that changes with where the sensor is (a magnet or
+//!   steel nearby): excluded, reported with its span and peak;
+//! - **unexplained** — neither, and the sensor did not move (something moved near it), or a glitch of a few
+//!   samples: excluded, with the reason.
+//!
+//! A constant explains a span when what it leaves is at the scale of the rest of the recording (or is a small
+//! part of the span's energy). The frame is told by the attitude: when the sensor hardly turned during the span the
+//! two constants are the same, and the span is modelled as fixed to the sensor with that said.
+
+use crate::frames::{self, Mat3};
+
+use super::scan;
+
+/// A gross sample's neighbours down to this many scales above the rest belong to its span (the ramp of a magnet
+/// brought close by hand).
+const RAMP_SIGMA: f64 = 3.0;
+/// Gross samples closer than this in time are one span, s; without time, this many samples.
+const GAP_S: f64 = 0.5;
+const GAP_SAMPLES: usize = 5;
+/// A constant explains a span when it leaves at most this many times the scale's variance per axis…
+const EXPLAINED_SCALES2: f64 = 4.0;
+/// …or at most this fraction of the span's residual energy.
+const EXPLAINED_SHARE: f64 = 0.1;
+/// The other frame is told apart when it leaves at least this many times what the chosen one leaves.
+const FRAME_MARGIN: f64 = 2.0;
+/// The sensor turned during a span when the field direction in sensor axes moved by more than this, degrees.
+const TURNED_DEG: f64 = 10.0;
+/// Spans this short (samples) are glitches.
+const GLITCH_SAMPLES: usize = 3;
+
+/// What a span is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SpanKind {
+    /// A constant in sensor axes: `offset_ut` (sensor axes, µT).
+    SensorFixed {
+        /// The offset, µT.
+        offset_ut: [f64; 3],
+        /// Whether the sensor turned enough to tell it from a field fixed to the room.
+        told_apart: bool,
+    },
+    /// A constant field in the room, NED, µT.
+    RoomFixed {
+        /// The field, NED, µT.
+        field_ned_ut: [f64; 3],
+    },
+    /// A field that changed as the sensor moved: a magnet or steel nearby.
+    Moving,
+    /// Neither, with the sensor still, or a glitch.
+    Unexplained,
+}
+
+/// A gross span of samples `[start, end)` (indices into the diagnosis' samples).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Span {
+    pub start: usize,
+    pub end: usize,
+    /// The largest residual size in it, µT.
+    pub peak_ut: f64,
+    /// RMS of the residual per axis in it, µT.
+    pub rms_ut: f64,
+    pub kind: SpanKind,
+}
+
+impl Span {
+    /// Whether its samples are modelled (kept, with an effect) rather than excluded.
+    pub fn modelled(&self) -> bool {
+        matches!(
+            self.kind,
+            SpanKind::SensorFixed { .. } | SpanKind::RoomFixed { .. }
+        )
+    }
+}
+
+/// The residual of one sample as classification sees it.
+pub(crate) enum Residual<'a> {
+    /// Three components in sensor axes, and the attitude when known.
+    Vector {
+        e: &'a [[f64; 3]],
+        rot: Option<&'a [Mat3]>,
+    },
+    /// The magnitude's residual and the field direction (sensor axes).
+    Magnitude {
+        rho: &'a [f64],
+        unit: &'a [[f64; 3]],
+    },
+}
+
+impl Residual<'_> {
+    fn size(&self, i: usize) -> f64 {
+        match self {
+            Residual::Vector { e, .. } => frames::norm(e[i]),
+            Residual::Magnitude { rho, .. } => rho[i].abs(),
+        }
+    }
+
+    fn dims(&self) -> f64 {
+        match self {
+            Residual::Vector { .. } => 3.0,
+            Residual::Magnitude { .. } => 1.0,
+        }
+    }
+}
+
+/// The gross spans: runs of samples not `kept`, merged across short gaps and widened over their ramps, classified.
+/// `t` is the time (None without one), `scale_ut` the residual's scale per axis, `directions` the field direction
+/// in sensor axes per sample.
+pub(crate) fn spans(
+    residual: &Residual<'_>,
+    kept: &[bool],
+    t: Option<&[f64]>,
+    scale_ut: f64,
+    directions: &[[f64; 3]],
+) -> Vec<Span> {
+    let n = kept.len();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for i in (0..n).filter(|&i| !kept[i]) {
+        let near = |end: usize| match t {
+            Some(t) => t[i] - t[end - 1] <= GAP_S,
+            None => i - end < GAP_SAMPLES,
+        };
+        match runs.last_mut() {
+            Some(run) if near(run.1) => run.1 = i + 1,
+            _ => runs.push((i, i + 1)),
+        }
+    }
+    // Widen over the ramps, without running into the next span (sizes against the scale per axis, as the robust
+    // fit judges them).
+    let ramp = RAMP_SIGMA * scale_ut;
+    let mut out: Vec<Span> = Vec::new();
+    for k in 0..runs.len() {
+        let (mut a, mut b) = runs[k];
+        let floor = out.last().map_or(0, |s: &Span| s.end);
+        let ceiling = runs.get(k + 1).map_or(n, |r| r.0);
+        while a > floor && residual.size(a - 1) > ramp {
+            a -= 1;
+        }
+        while b < ceiling && residual.size(b) > ramp {
+            b += 1;
+        }
+        out.push(classify(residual, a, b, scale_ut, directions));
+    }
+    out
+}
+
+/// What explains the residual of samples `[a, b)`.
+fn classify(
+    residual: &Residual<'_>,
+    a: usize,
+    b: usize,
+    scale_ut: f64,
+    directions: &[[f64; 3]],
+) -> Span {
+    let n = (b - a) as f64;
+    let peak_ut = (a..b).map(|i| residual.size(i)).fold(0.0, f64::max);
+    let energy: f64 = (a..b).map(|i| residual.size(i).powi(2)).sum();
+    let rms_ut = (energy / (n * residual.dims())).sqrt();
+    let explained = |rss: f64| {
+        rss <= EXPLAINED_SCALES2 * scale_ut * scale_ut * n * residual.dims()
+            || rss <= EXPLAINED_SHARE * energy
+    };
+    let turned = turned_deg(&directions[a..b]) > TURNED_DEG;
+    let unexplained = if b - a <= GLITCH_SAMPLES || !turned {
+        SpanKind::Unexplained
+    } else {
+        SpanKind::Moving
+    };
+    let kind = match residual {
+        Residual::Vector { e, rot } => {
+            let (body, rss_body) = constant(&e[a..b], None);
+            let world = rot.map(|r| constant(&e[a..b], Some(&r[a..b])));
+            match world {
+                Some((field, rss_world)) if rss_world < rss_body && explained(rss_world) => {
+                    SpanKind::RoomFixed {
+                        field_ned_ut: field,
+                    }
+                }
+                _ if explained(rss_body) => SpanKind::SensorFixed {
+                    offset_ut: body,
+                    told_apart: world.is_none_or(|(_, w)| w >= FRAME_MARGIN * rss_body) && turned,
+                },
+                _ => unexplained,
+            }
+        }
+        Residual::Magnitude { rho, unit } => match along(&rho[a..b], &unit[a..b]) {
+            Some((offset, rss)) if explained(rss) => SpanKind::SensorFixed {
+                offset_ut: offset,
+                told_apart: false,
+            },
+            _ => unexplained,
+        },
+    };
+    Span {
+        start: a,
+        end: b,
+        peak_ut,
+        rms_ut,
+        kind,
+    }
+}
+
+/// The constant that best explains residuals `e` — in sensor axes, or in NED through `rot` — and what it leaves.
+fn constant(e: &[[f64; 3]], rot: Option<&[Mat3]>) -> ([f64; 3], f64) {
+    let frame = |i: usize| match rot {
+        Some(r) => frames::mat_vec(&r[i], e[i]),
+        None => e[i],
+    };
+    let n = e.len() as f64;
+    let mean = (0..e.len()).fold([0.0; 3], |s, i| frames::add(s, frame(i)));
+    let mean = frames::scale(mean, 1.0 / n);
+    let rss = (0..e.len())
+        .map(|i| {
+            let d = frames::sub(frame(i), mean);
+            frames::dot(d, d)
+        })
+        .sum();
+    (mean, rss)
+}
+
+/// The offset `δ` (sensor axes) that best explains magnitude residuals `ρ ≈ u·δ`, and what it leaves; None when
+/// the directions do not determine it.
+fn along(rho: &[f64], unit: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
+    let mut m = nalgebra::Matrix3::<f64>::zeros();
+    let mut v = nalgebra::Vector3::<f64>::zeros();
+    for (r, u) in rho.iter().zip(unit) {
+        let u = nalgebra::Vector3::from(*u);
+        m += u * u.transpose();
+        v += u * *r;
+    }
+    // A span with a single direction determines only the component along it: regularise the others to zero.
+    let trace = m.trace().max(f64::MIN_POSITIVE);
+    let d = (m + nalgebra::Matrix3::identity() * (1e-6 * trace)).try_inverse()? * v;
+    let rss = rho
+        .iter()
+        .zip(unit)
+        .map(|(r, u)| (r - frames::dot(*u, [d.x, d.y, d.z])).powi(2))
+        .sum();
+    Some(([d.x, d.y, d.z], rss))
+}
+
+/// The largest angle between the field directions of a span and their mean, degrees.
+fn turned_deg(directions: &[[f64; 3]]) -> f64 {
+    let mean = directions.iter().fold([0.0; 3], |s, d| frames::add(s, *d));
+    let m = frames::norm(mean);
+    if m == 0.0 {
+        return 180.0;
+    }
+    let mean = frames::scale(mean, 1.0 / m);
+    directions
+        .iter()
+        .map(|d| {
+            let c = frames::dot(*d, mean) / frames::norm(*d).max(f64::MIN_POSITIVE);
+            c.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The edges of a modelled span located again by a scan of the constant's window over the span and a margin of
+/// half its length on either side: the first sample inside and one past the last.
+pub(crate) fn refine_edges(
+    span: &Span,
+    e: &[[f64; 3]],
+    rot: Option<&[Mat3]>,
+    scale_ut: f64,
+) -> (usize, usize) {
+    let n = e.len();
+    let len = span.end - span.start;
+    let lo = span.start.saturating_sub(len / 2);
+    let hi = (span.end + len / 2).min(n);
+    let body_rot;
+    let rot = match (span.kind, rot) {
+        (SpanKind::RoomFixed { .. }, Some(r)) => &r[lo..hi],
+        _ => {
+            body_rot = vec![frames::IDENTITY; hi - lo];
+            &body_rot[..]
+        }
+    };
+    match scan::window(&e[lo..hi], rot, scale_ut * scale_ut) {
+        Some(w) => (lo + w.start, lo + w.end),
+        None => (span.start, span.end),
+    }
+}

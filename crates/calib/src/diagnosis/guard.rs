@@ -1,0 +1,108 @@
+//! The last stage before the report: an effect stays in the model only if the model stays physical, and the model
+//! as a whole must fit the clean held-out data no worse than the base fit.
+//!
+//! - A sensor non-linearity worth more than [`NONLINEARITY_MAX_SHARE`] of the field at full field is not a
+//!   non-linearity (a cubic that large is soaking up something else: a disturbance, a wrong field).
+//! - `apply` must be able to invert the model over the whole measured range: the corrections' derivative with
+//!   respect to the field must stay well below one ([`MAX_CONTRACTION`]) at every sample, or the fixed-point
+//!   iteration diverges.
+//! - The extended model's gains (`A`'s singular values) stay within [`MAX_GAIN_CHANGE`] of the base fit's: an effect
+//!   that needs the gains bent by more is not the physics the data show.
+
+use crate::effects::{Context, Effect, EffectId};
+use crate::frames::Mat3;
+
+use super::samples::Samples;
+
+/// A non-linearity may be worth at most this share of the field at full field.
+pub(crate) const NONLINEARITY_MAX_SHARE: f64 = 0.03;
+/// The corrections' derivative with respect to the field must stay below this for `apply` to converge surely.
+const MAX_CONTRACTION: f64 = 0.3;
+/// The gains may move by at most this share from the base fit's.
+pub(crate) const MAX_GAIN_CHANGE: f64 = 0.05;
+/// Samples looked at for the invertibility check.
+const CHECKED_SAMPLES: usize = 2_000;
+
+/// Why a found body-fixed effect would make the model unphysical, if it would.
+pub(crate) fn implausible(effect: &Effect, samples: &Samples, field_ut: f64) -> Option<String> {
+    if let Effect::Nonlinearity { cubic_per_ut2 } = *effect {
+        let worst = cubic_per_ut2
+            .iter()
+            .map(|k| k.abs() * field_ut.powi(3))
+            .fold(0.0, f64::max);
+        if worst > NONLINEARITY_MAX_SHARE * field_ut {
+            return Some(format!(
+                "a cubic worth {worst:.2} µT at ±{field_ut:.0} µT ({:.1} % of the field) is more than a sensor's \
+                 non-linearity ({:.0} % at most): it bends to something else in the residual",
+                100.0 * worst / field_ut,
+                100.0 * NONLINEARITY_MAX_SHARE
+            ));
+        }
+    }
+    if effect.id().frame() != crate::effects::Frame::Body || effect.id().is_transient() {
+        return None;
+    }
+    let stride = (samples.len() / CHECKED_SAMPLES).max(1);
+    let worst = (0..samples.len())
+        .step_by(stride)
+        .map(|i| contraction(effect, &samples.context(i)))
+        .fold(0.0, f64::max);
+    (worst >= MAX_CONTRACTION).then(|| {
+        format!(
+            "its correction changes by {worst:.2} µT per µT of field somewhere in the measured range: the model could \
+             not be inverted there (apply would diverge)"
+        )
+    })
+}
+
+/// The largest absolute entry of `∂δ/∂B` at one sample (central differences of 1 µT).
+fn contraction(effect: &Effect, ctx: &Context<'_>) -> f64 {
+    let mut worst: f64 = 0.0;
+    for k in 0..3 {
+        let shifted = |d: f64| {
+            let mut c = *ctx;
+            c.field_ut[k] += d;
+            effect.perturbation_ut(&c)
+        };
+        let (plus, minus) = (shifted(1.0), shifted(-1.0));
+        for j in 0..3 {
+            worst = worst.max(((plus[j] - minus[j]) / 2.0).abs());
+        }
+    }
+    if worst.is_nan() { 0.0 } else { worst }
+}
+
+/// The largest relative change of `A`'s singular values from the base fit's.
+pub(crate) fn gain_change(a: &Mat3, base: &Mat3) -> f64 {
+    let sv = |m: &Mat3| {
+        let mut v: Vec<f64> = nalgebra::Matrix3::from_fn(|j, k| m[j][k])
+            .singular_values()
+            .iter()
+            .copied()
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v
+    };
+    let (now, was) = (sv(a), sv(base));
+    (0..3)
+        .map(|k| (now[k] / was[k] - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The words for an effect rejected because the gains would move.
+pub(crate) fn gains_why(change: f64) -> String {
+    format!(
+        "with it, the gains would move by {:.1} % from the base fit's (more than {:.0} %): the data do not show it \
+         as physics of the sensor",
+        100.0 * change,
+        100.0 * MAX_GAIN_CHANGE
+    )
+}
+
+/// The words for effects dropped so that the clean held-out data fit no worse than with the base fit.
+pub(crate) fn harm_why(id: EffectId, with: f64, without: f64) -> String {
+    format!(
+        "with {id} the clean part of the recording, held out, fits worse than with the base fit alone ({with:.3} \
+         against {without:.3} µT): left out, so the calibration is no worse for the diagnosis"
+    )
+}
