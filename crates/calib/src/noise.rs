@@ -455,6 +455,25 @@ mod tests {
     }
 
     #[test]
+    fn rows_of_independent_attitudes_are_no_still_segment() {
+        // Issue 11's failure case: every row its own attitude. Windows of such rows spread as much as their
+        // differences allow, but they are not still: their spread is the rotation's.
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let noise = Normal::new(0.0, 0.1).unwrap();
+        let raw: Vec<[f64; 3]> = (0..20_000)
+            .map(|_| {
+                let d: [f64; 3] = rand_distr::UnitSphere.sample(&mut rng);
+                d.map(|v| 50.0 * v + noise.sample(&mut rng))
+            })
+            .collect();
+        let f = estimate(&raw, None);
+        assert!(!matches!(f.source, NoiseSource::Still { .. }), "{f:?}");
+        let reference: Vec<[f64; 3]> = raw.iter().map(|m| m.map(|v| v + 1.0)).collect();
+        let f = estimate(&raw, Some(&reference));
+        assert!(!matches!(f.source, NoiseSource::Still { .. }), "{f:?}");
+    }
+
+    #[test]
     fn a_few_jumps_among_many_samples_do_not_pass_for_noise() {
         let mut data = rotating(5000, 50.0, 0.1, None, 8);
         for (i, m) in data.iter_mut().enumerate() {
