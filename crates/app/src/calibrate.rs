@@ -4,6 +4,7 @@ use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::directions::recorded_fraction;
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
+use rayon::prelude::*;
 use std::borrow::Cow;
 
 use magcal_calib::robust;
@@ -283,7 +284,8 @@ pub fn expected_field(
             "this recording has the attitude but no world field vector",
         ));
     };
-    Ok(q.iter()
+    Ok(q.par_iter()
+        .with_min_len(1 << 12)
         .map(|q| frames::expected_sensor_field(*q, f))
         .collect())
 }

@@ -37,6 +37,22 @@ impl Coverage {
         Coverage::from_covariance(&cov)
     }
 
+    /// [`Coverage::of`] readings held as vectors, summed on all threads.
+    pub(crate) fn of_vectors(raw: &[Vector3<f64>]) -> Coverage {
+        let n = raw.len().max(1) as f64;
+        let sum =
+            |r: std::ops::Range<usize>| raw[r].iter().fold(Vector3::zeros(), |acc, m| acc + m);
+        let mean = crate::chunks::fold(raw.len(), sum, |a, b| a + b).unwrap_or_default() / n;
+        let products = |r: std::ops::Range<usize>| {
+            raw[r].iter().fold(Matrix3::zeros(), |acc, m| {
+                let d = m - mean;
+                acc + d * d.transpose()
+            })
+        };
+        let cov = crate::chunks::fold(raw.len(), products, |a, b| a + b).unwrap_or_default() / n;
+        Coverage::from_covariance(&cov)
+    }
+
     /// The spread along the principal directions of the readings' covariance matrix (µT²).
     pub(crate) fn from_covariance(cov: &Matrix3<f64>) -> Coverage {
         let eig = SymmetricEigen::new(*cov);

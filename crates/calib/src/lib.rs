@@ -16,6 +16,8 @@ pub mod frames;
 pub mod model;
 
 #[cfg(feature = "std")]
+mod chunks;
+#[cfg(feature = "std")]
 pub mod coverage;
 #[cfg(feature = "std")]
 pub mod diagnosis;

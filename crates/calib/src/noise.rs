@@ -15,6 +15,8 @@
 //! residual allows (see [`crate::vector`]). Readings on a grid (the chip's LSB) are detected, and when the noise is
 //! below the LSB the quantisation floor `LSB/√12` is added.
 
+use crate::chunks;
+
 /// How the noise floor was obtained.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum NoiseSource {
@@ -97,11 +99,9 @@ const POSES_MIN_DOF: usize = 20;
 /// Estimates the noise floor of raw readings (µT). `reference`, when given, is the expected field (or any
 /// per-sample reference) in sample order: runs of identical references are poses, and their spread is the noise.
 pub fn estimate(raw_ut: &[[f64; 3]], reference: Option<&[[f64; 3]]>) -> NoiseFloor {
-    let column = |k: usize| raw_ut.iter().map(|m| m[k]).collect::<Vec<f64>>();
-    let columns = [column(0), column(1), column(2)];
     let mut best = (f64::INFINITY, 1, [f64::NAN; 3]);
     for order in 1..=4 {
-        let s: [f64; 3] = std::array::from_fn(|k| difference_sigma(&columns[k], order));
+        let s = difference_sigma(raw_ut, order);
         let total = s.iter().map(|x| x * x).sum::<f64>();
         if total < best.0 {
             best = (total, order, s);
@@ -111,13 +111,14 @@ pub fn estimate(raw_ut: &[[f64; 3]], reference: Option<&[[f64; 3]]>) -> NoiseFlo
     let poses = reference.and_then(|r| pose_sigma(raw_ut, r));
     let (sigma_ut, source) = match poses {
         Some((sigma, runs, dof)) => (sigma, NoiseSource::Poses { runs, dof }),
-        None => match still_segment(&columns, diff_sigma) {
+        None => match still_segment(raw_ut, diff_sigma) {
             Some((start, end, s)) => (s, NoiseSource::Still { start, end }),
             None => (diff_sigma, NoiseSource::Differences { order }),
         },
     };
+    let probe = &raw_ut[..raw_ut.len().min(LSB_PROBE)];
     let lsb: [Option<f64>; 3] =
-        std::array::from_fn(|k| grid_step(&columns[k][..columns[k].len().min(LSB_PROBE)]));
+        std::array::from_fn(|k| grid_step(&probe.iter().map(|m| m[k]).collect::<Vec<f64>>()));
     let lsb_ut = if lsb.iter().all(Option::is_some) {
         Some(lsb.map(|x| x.unwrap_or_default()))
     } else {
@@ -148,42 +149,86 @@ fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// The noise σ from `order`-th differences, robust to jumps: the median absolute difference sets a scale, and the
-/// RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its variance there, corrected) is the
-/// estimate. Where most differences are exactly zero (readings on a coarse grid) the scale falls back to five times
-/// the plain RMS.
-fn difference_sigma(x: &[f64], order: usize) -> f64 {
-    if x.len() <= order + 2 {
-        return f64::NAN;
+/// The noise σ per axis from `order`-th differences, robust to jumps: the median absolute difference sets a scale,
+/// and the RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its variance there, corrected)
+/// is the estimate. Where most differences are exactly zero (readings on a coarse grid) the scale falls back to five
+/// times the plain RMS. One pass over the readings (two on a coarse grid), on all threads, for the three axes at once.
+fn difference_sigma(raw_ut: &[[f64; 3]], order: usize) -> [f64; 3] {
+    if raw_ut.len() <= order + 2 {
+        return [f64::NAN; 3];
     }
     let coef: Vec<f64> = (0..=order)
         .map(|j| binomial(order, j) * if j % 2 == 0 { 1.0 } else { -1.0 })
         .collect();
-    let count = x.len() - order;
-    let diff = |i: usize| -> f64 { coef.iter().zip(&x[i..]).map(|(c, v)| c * v).sum() };
-    let rms_within = |limit: f64| {
-        let (sum, n) = (0..count)
-            .map(diff)
-            .filter(|d| d.abs() <= limit)
-            .fold((0.0, 0usize), |(s, n), d| (s + d * d, n + 1));
-        if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+    let count = raw_ut.len() - order;
+    let diff = |i: usize| -> [f64; 3] {
+        std::array::from_fn(|k| coef.iter().zip(&raw_ut[i..]).map(|(c, v)| c * v[k]).sum())
+    };
+    let rms_within = |limit: [f64; 3]| -> [f64; 3] {
+        let (sum, n) = chunks::fold(
+            count,
+            |range| {
+                let (mut sum, mut n) = ([0.0; 3], [0usize; 3]);
+                for i in range {
+                    let d = diff(i);
+                    for k in 0..3 {
+                        if d[k].abs() <= limit[k] {
+                            sum[k] += d[k] * d[k];
+                            n[k] += 1;
+                        }
+                    }
+                }
+                (sum, n)
+            },
+            |(s, n), (t, m)| {
+                (
+                    std::array::from_fn(|k| s[k] + t[k]),
+                    std::array::from_fn(|k| n[k] + m[k]),
+                )
+            },
+        )
+        .unwrap_or_default();
+        std::array::from_fn(|k| {
+            if n[k] == 0 {
+                0.0
+            } else {
+                (sum[k] / n[k] as f64).sqrt()
+            }
+        })
     };
     let stride = count.div_ceil(MEDIAN_PROBE).max(1);
-    let mut probe: Vec<f64> = (0..count)
-        .step_by(stride)
-        .map(|i| diff(i).abs())
-        .filter(|d| d.is_finite())
-        .collect();
-    let mad = median(&mut probe);
+    let probe: Vec<[f64; 3]> = (0..count).step_by(stride).map(diff).collect();
+    let mad: [f64; 3] = std::array::from_fn(|k| {
+        let mut abs: Vec<f64> = probe
+            .iter()
+            .map(|d| d[k].abs())
+            .filter(|d| d.is_finite())
+            .collect();
+        median(&mut abs)
+    });
     let norm = binomial(2 * order, order).sqrt();
-    if mad > 0.0 {
-        // Truncating a Gaussian at ±4σ keeps 99.893 % of its variance.
-        const KEPT_AT_4_SIGMA: f64 = 0.998_93;
-        let scale = mad / 0.674_489_75;
-        rms_within(4.0 * scale) / KEPT_AT_4_SIGMA.sqrt() / norm
+    // Truncating a Gaussian at ±4σ keeps 99.893 % of its variance.
+    const KEPT_AT_4_SIGMA: f64 = 0.998_93;
+    let limit = mad.map(|m| {
+        if m > 0.0 {
+            4.0 * m / 0.674_489_75
+        } else {
+            f64::INFINITY
+        }
+    });
+    let within = rms_within(limit);
+    let coarse = if mad.iter().all(|m| *m > 0.0) {
+        [0.0; 3]
     } else {
-        rms_within(5.0 * rms_within(f64::INFINITY)) / norm
-    }
+        rms_within(within.map(|r| 5.0 * r))
+    };
+    std::array::from_fn(|k| {
+        if mad[k] > 0.0 {
+            within[k] / KEPT_AT_4_SIGMA.sqrt() / norm
+        } else {
+            coarse[k] / norm
+        }
+    })
 }
 
 /// The pooled spread inside runs of consecutive samples whose reference is identical, if they give enough degrees of
@@ -216,20 +261,17 @@ fn pose_sigma(raw_ut: &[[f64; 3]], reference: &[[f64; 3]]) -> Option<([f64; 3], 
 
 /// The longest run of windows whose spread (no motion removed) is no more than the difference-based noise allows,
 /// if long enough.
-fn still_segment(
-    columns: &[Vec<f64>; 3],
-    diff_sigma: [f64; 3],
-) -> Option<(usize, usize, [f64; 3])> {
-    let n = columns[0].len();
+fn still_segment(raw_ut: &[[f64; 3]], diff_sigma: [f64; 3]) -> Option<(usize, usize, [f64; 3])> {
+    let n = raw_ut.len();
     let windows = n / STILL_WINDOW;
     // Still means small against the rotation too: rows in random order also have windows whose spread matches their
     // differences, and they are not still.
-    let rotation = columns.iter().map(|c| plain_sigma(c)).fold(0.0, f64::max);
+    let rotation = plain_sigma(raw_ut).into_iter().fold(0.0, f64::max);
+    let window = |w: usize| plain_sigma(&raw_ut[w * STILL_WINDOW..(w + 1) * STILL_WINDOW]);
     let still = |w: usize| {
+        let spread = window(w);
         (0..3).all(|k| {
-            let seg = &columns[k][w * STILL_WINDOW..(w + 1) * STILL_WINDOW];
-            let spread = plain_sigma(seg);
-            spread <= 1.3 * diff_sigma[k].max(1e-9) && spread <= STILL_OF_ROTATION * rotation
+            spread[k] <= 1.3 * diff_sigma[k].max(1e-9) && spread[k] <= STILL_OF_ROTATION * rotation
         })
     };
     let (mut best, mut run_start) = ((0, 0), None);
@@ -248,21 +290,23 @@ fn still_segment(
     if best.1 - best.0 < STILL_MIN_WINDOWS {
         return None;
     }
-    let sigma = std::array::from_fn(|k| {
-        let var = (best.0..best.1)
-            .map(|w| plain_sigma(&columns[k][w * STILL_WINDOW..(w + 1) * STILL_WINDOW]).powi(2))
-            .sum::<f64>()
-            / (best.1 - best.0) as f64;
-        var.sqrt()
+    let var = (best.0..best.1).map(window).fold([0.0; 3], |acc, s| {
+        std::array::from_fn(|k| acc[k] + s[k].powi(2))
     });
+    let sigma = var.map(|v| (v / (best.1 - best.0) as f64).sqrt());
     Some((best.0 * STILL_WINDOW, best.1 * STILL_WINDOW, sigma))
 }
 
-/// Sample standard deviation.
-fn plain_sigma(x: &[f64]) -> f64 {
+/// Sample standard deviation per axis, on all threads.
+fn plain_sigma(x: &[[f64; 3]]) -> [f64; 3] {
+    let add = |a: [f64; 3], b: [f64; 3]| std::array::from_fn(|k| a[k] + b[k]);
+    let sum = |f: &(dyn Fn(&[f64; 3]) -> [f64; 3] + Sync)| {
+        chunks::fold(x.len(), |r| x[r].iter().map(f).fold([0.0; 3], add), add).unwrap_or_default()
+    };
     let n = x.len() as f64;
-    let mean = x.iter().sum::<f64>() / n;
-    (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    let mean = sum(&|v| *v).map(|s| s / n);
+    let ss = sum(&|v| std::array::from_fn(|k| (v[k] - mean[k]).powi(2)));
+    ss.map(|s| (s / (n - 1.0)).sqrt())
 }
 
 /// The step of the grid the values lie on, if they lie on one.
@@ -408,6 +452,25 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn rows_of_independent_attitudes_are_no_still_segment() {
+        // Issue 11's failure case: every row its own attitude. Windows of such rows spread as much as their
+        // differences allow, but they are not still: their spread is the rotation's.
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let noise = Normal::new(0.0, 0.1).unwrap();
+        let raw: Vec<[f64; 3]> = (0..20_000)
+            .map(|_| {
+                let d: [f64; 3] = rand_distr::UnitSphere.sample(&mut rng);
+                d.map(|v| 50.0 * v + noise.sample(&mut rng))
+            })
+            .collect();
+        let f = estimate(&raw, None);
+        assert!(!matches!(f.source, NoiseSource::Still { .. }), "{f:?}");
+        let reference: Vec<[f64; 3]> = raw.iter().map(|m| m.map(|v| v + 1.0)).collect();
+        let f = estimate(&raw, Some(&reference));
+        assert!(!matches!(f.source, NoiseSource::Still { .. }), "{f:?}");
     }
 
     #[test]

@@ -128,13 +128,17 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     };
     // On all samples: reweight from the best seed, then exclude the gross spans and fit the rest plainly.
     let mut fit = seed;
+    // Each per-sample vector is dropped before the next is made: memory stays at about two of them.
     let mut residual_ut = problem.residuals(&fit);
     for _ in 0..FULL_ITERATIONS {
         let w = biweight(&residual_ut, scale::<P>(&residual_ut));
-        match problem.quick_fit(&w) {
+        let quick = problem.quick_fit(&w);
+        drop(w);
+        match quick {
             Ok(f) if plausible(&P::model(&f).a) || !plausible(&P::model(&fit).a) => fit = f,
             _ => break,
         }
+        drop(std::mem::take(&mut residual_ut));
         residual_ut = problem.residuals(&fit);
     }
     let mut sigma_ut = scale::<P>(&residual_ut);
@@ -300,13 +304,23 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
 /// sample counts as much as the next, so the state the recording is in most of the time sets it — still stretches
 /// included, which is what tells a clean state from a magnet attached while the sensor was turned most.
 fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
-    let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
+    // The median by the keys `f64::total_cmp` orders by, compared as integers (the same order, found faster).
+    let key = |x: f64| {
+        let bits = x.to_bits() as i64;
+        bits ^ (((bits >> 63) as u64) >> 1) as i64
+    };
+    let mut v: Vec<i64> = e
+        .iter()
+        .filter(|x| x.is_finite())
+        .map(|x| key(*x))
+        .collect();
     if v.is_empty() {
         return f64::NAN;
     }
     let mid = v.len() / 2;
-    let median = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
-    median / P::MEDIAN_OF_UNIT
+    let median = *v.select_nth_unstable(mid).1;
+    // The key is its own inverse.
+    f64::from_bits(key(f64::from_bits(median as u64)) as u64) / P::MEDIAN_OF_UNIT
 }
 
 /// Tukey's biweight of residual sizes `e` against the scale `s`.
@@ -425,6 +439,18 @@ mod tests {
         );
         assert_eq!(r.excluded(), 900);
         assert!(r.kept[..500].iter().all(|k| *k) && r.kept[500..1400].iter().all(|k| !*k));
+    }
+
+    #[test]
+    fn the_scale_is_the_median_by_total_order() {
+        let e: Vec<f64> = (0..1001)
+            .map(|i| ((i * 7919) % 1009) as f64 * 0.37 - 50.0)
+            .chain([f64::NAN, f64::INFINITY, -0.0, 0.0])
+            .collect();
+        let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
+        let mid = v.len() / 2;
+        let median = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+        assert_eq!(scale::<Line>(&e), median / Line::MEDIAN_OF_UNIT);
     }
 
     #[test]

@@ -27,6 +27,7 @@ use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3, Vect
 use std::borrow::Cow;
 
 use crate::FitError;
+use crate::chunks;
 use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe};
 use crate::frames::Mat3;
 use crate::model::Model;
@@ -206,10 +207,10 @@ impl RobustProblem for ScalarProblem<'_> {
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
         let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
         let b = Vector3::from(fit.b_ut);
-        self.raw_ut
-            .iter()
-            .map(|m| ((a * Vector3::from(*m) + b).norm() - fit.field_ut).abs())
-            .collect()
+        let raw = &self.raw_ut;
+        chunks::map(raw.len(), |i| {
+            ((a * Vector3::from(raw[i]) + b).norm() - fit.field_ut).abs()
+        })
     }
 
     fn model(fit: &ScalarFit) -> Model {
@@ -335,30 +336,45 @@ fn pass(
     noise: Option<&Vector3<f64>>,
 ) -> Pass {
     let (c, a) = unpack(p);
-    let mut jtj = SMatrix::<f64, P, P>::zeros();
-    let mut jtr = SVector::<f64, P>::zeros();
-    let mut rss = 0.0;
-    for (m, &wi) in raw.iter().zip(w) {
-        if wi == 0.0 {
-            continue;
-        }
-        let (r, j) = residual(m, &a, &c, field_ut);
-        let correction = noise.map(|s2| noise_score(m, &a, &c, s2, &j));
-        for x in 0..P {
-            let wj = wi * j[x];
-            jtr[x] += wj * r - correction.map_or(0.0, |k| wi * k[x]);
-            for y in x..P {
-                jtj[(x, y)] += wj * j[y];
+    // Per chunk: JᵀWJ (all of it: fixed bounds let the products vectorise), JᵀWr and Σwr², in plain arrays.
+    let chunk = |range: std::ops::Range<usize>| {
+        let (mut jtj, mut jtr, mut rss) = ([[0.0; P]; P], [0.0; P], 0.0);
+        for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
+            if wi == 0.0 {
+                continue;
             }
+            let (r, j) = residual(m, &a, &c, field_ut);
+            let wj = j.map(|v| wi * v);
+            match noise {
+                None => (0..P).for_each(|x| jtr[x] += wj[x] * r),
+                Some(s2) => {
+                    let k = noise_score(m, &a, &c, s2, &j);
+                    (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
+                }
+            }
+            for (row, wx) in jtj.iter_mut().zip(wj) {
+                for (e, jy) in row.iter_mut().zip(j) {
+                    *e += wx * jy;
+                }
+            }
+            rss += wi * r * r;
         }
-        rss += wi * r * r;
+        (jtj, jtr, rss)
+    };
+    let (jtj, jtr, rss) = chunks::fold(raw.len(), chunk, |x, y| {
+        (
+            std::array::from_fn(|r| std::array::from_fn(|c| x.0[r][c] + y.0[r][c])),
+            std::array::from_fn(|i| x.1[i] + y.1[i]),
+            x.2 + y.2,
+        )
+    })
+    .unwrap_or_else(|| chunk(0..0));
+    // Symmetric: the upper triangle as summed, mirrored.
+    Pass {
+        jtj: SMatrix::<f64, P, P>::from_fn(|x, y| jtj[x.min(y)][x.max(y)]),
+        jtr: SVector::<f64, P>::from(jtr),
+        rss,
     }
-    for x in 0..P {
-        for y in 0..x {
-            jtj[(x, y)] = jtj[(y, x)];
-        }
-    }
-    Pass { jtj, jtr, rss }
 }
 
 /// The shape prior's precision (per unit of `A`'s mean gain²): free centre and overall scale, each gain's departure
@@ -380,19 +396,29 @@ fn shape_precision(gain: f64) -> SMatrix<f64, P, P> {
 
 /// A weighted linear sphere fit: `|m|² = 2·c·m + k`, centred for conditioning. Returns the centre and radius.
 fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
-    let w_sum: f64 = w.iter().sum();
-    let mean = raw
-        .iter()
-        .zip(w)
-        .fold(Vector3::zeros(), |s, (m, wi)| s + m * *wi)
-        / w_sum;
-    let (mut xtx, mut xty) = (nalgebra::Matrix4::<f64>::zeros(), Vector4::<f64>::zeros());
-    for (m, &wi) in raw.iter().zip(w) {
-        let d = m - mean;
-        let x = Vector4::new(2.0 * d.x, 2.0 * d.y, 2.0 * d.z, 1.0);
-        xtx += x * x.transpose() * wi;
-        xty += x * (d.norm_squared() * wi);
-    }
+    let sum = |range: std::ops::Range<usize>| {
+        raw[range.clone()]
+            .iter()
+            .zip(&w[range])
+            .fold((Vector3::zeros(), 0.0), |(s, n), (m, wi)| {
+                (s + m * *wi, n + wi)
+            })
+    };
+    let (sum, w_sum) =
+        chunks::fold(raw.len(), sum, |x, y| (x.0 + y.0, x.1 + y.1)).unwrap_or_else(|| sum(0..0));
+    let mean = sum / w_sum;
+    let products = |range: std::ops::Range<usize>| {
+        let (mut xtx, mut xty) = (nalgebra::Matrix4::<f64>::zeros(), Vector4::<f64>::zeros());
+        for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
+            let d = m - mean;
+            let x = Vector4::new(2.0 * d.x, 2.0 * d.y, 2.0 * d.z, 1.0);
+            xtx += x * x.transpose() * wi;
+            xty += x * (d.norm_squared() * wi);
+        }
+        (xtx, xty)
+    };
+    let (xtx, xty) = chunks::fold(raw.len(), products, |x, y| (x.0 + y.0, x.1 + y.1))
+        .unwrap_or_else(|| products(0..0));
     let sol = xtx.cholesky()?.solve(&xty);
     let c = Vector3::new(sol[0], sol[1], sol[2]);
     let r2 = sol[3] + c.norm_squared();
@@ -407,13 +433,10 @@ fn direction_weights(
     centre: &Vector3<f64>,
     grid: &SphereGrid,
 ) -> (Vec<f64>, Vec<usize>, usize) {
-    let cell: Vec<usize> = raw
-        .iter()
-        .map(|m| {
-            let d = m - centre;
-            grid.cell([d.x, d.y, d.z]).unwrap_or(0)
-        })
-        .collect();
+    let cell: Vec<usize> = chunks::map(raw.len(), |i| {
+        let d = raw[i] - centre;
+        grid.cell([d.x, d.y, d.z]).unwrap_or(0)
+    });
     let w = capped_cell_weights(&cell, base, grid.len());
     let mut occupied = vec![false; grid.len()];
     for (c, wi) in cell.iter().zip(base) {
@@ -456,21 +479,23 @@ impl Problem {
         pass(&self.raw, &self.w, p, self.target, noise)
     }
 
-    /// Levenberg–Marquardt on the magnitude residual plus the prior weighted by `sigma2`, from `p`.
+    /// Levenberg–Marquardt on the magnitude residual plus the prior weighted by `sigma2`, from `p` (where the
+    /// accumulation is `at`). Stops when a step's predicted decrease is at the rounding level of the sum of `n`
+    /// squares (`√n·ε` of it): such a step cannot be told from rounding by evaluating it, so it is not evaluated.
     fn minimise(
         &self,
         mut p: SVector<f64, P>,
+        mut at: Pass,
         sigma2: f64,
         iterations: &mut usize,
     ) -> (SVector<f64, P>, Pass) {
         let q = &self.q;
         let objective =
             |at: &Pass, p: &SVector<f64, P>| at.rss + sigma2 * (p.transpose() * q * p)[(0, 0)];
-        let mut at = self.pass(&p, None);
+        let rounding = f64::EPSILON * (self.raw.len() as f64).sqrt();
         let mut phi = objective(&at, &p);
         let mut lambda = 1e-3;
         while *iterations < MAX_ITERATIONS {
-            *iterations += 1;
             let h = at.jtj + q * sigma2;
             let g = at.jtr + q * p * sigma2;
             let mut damped = h;
@@ -478,17 +503,22 @@ impl Problem {
                 damped[(k, k)] += lambda * h[(k, k)].max(1e-300);
             }
             let Some(step) = damped.cholesky().map(|ch| ch.solve(&(-g))) else {
+                *iterations += 1;
                 lambda *= 10.0;
                 if lambda > 1e12 {
                     break;
                 }
                 continue;
             };
+            // What the quadratic model promises: a decrease at the rounding level of the sum means we are there.
+            let predicted = -(g.dot(&step)) - 0.5 * (step.transpose() * h * step)[(0, 0)];
+            if predicted.abs() <= rounding * phi {
+                break;
+            }
+            *iterations += 1;
             let trial = p + step;
             let t = self.pass(&trial, None);
             let t_phi = objective(&t, &trial);
-            // What the quadratic model promised: a decrease at the rounding level of the sum means we are there.
-            let predicted = -(g.dot(&step)) - 0.5 * (step.transpose() * h * step)[(0, 0)];
             if t_phi.is_finite() && t_phi <= phi {
                 let decrease = phi - t_phi;
                 (p, at, phi) = (trial, t, t_phi);
@@ -511,10 +541,10 @@ impl Problem {
     fn settle(&self, p0: SVector<f64, P>, rounds: usize) -> Solution {
         let mut iterations = 0;
         let mut p = p0;
-        let mut sigma2 = (self.pass(&p, None).rss / self.dof).max(f64::MIN_POSITIVE);
         let mut at = self.pass(&p, None);
+        let mut sigma2 = (at.rss / self.dof).max(f64::MIN_POSITIVE);
         for _ in 0..rounds {
-            (p, at) = self.minimise(p, sigma2, &mut iterations);
+            (p, at) = self.minimise(p, at, sigma2, &mut iterations);
             let settled = (at.rss / self.dof).max(f64::MIN_POSITIVE);
             let change = (settled / sigma2 - 1.0).abs();
             sigma2 = settled;
@@ -534,15 +564,22 @@ impl Problem {
     /// makes through `A` is at most the residual variance.
     fn bounded_noise(&self, sol: &Solution, raw_var: Vector3<f64>) -> Vector3<f64> {
         let (c, a) = unpack(&sol.p);
-        let radial: f64 = self
-            .raw
-            .iter()
-            .zip(&self.w)
-            .map(|(m, wi)| {
-                let au = a * (a * (m - c)).normalize();
-                wi * (0..3).map(|k| au[k] * au[k] * raw_var[k]).sum::<f64>()
-            })
-            .sum::<f64>()
+        let (raw, w) = (&self.raw, &self.w);
+        let radial = chunks::fold(
+            raw.len(),
+            |range| {
+                raw[range.clone()]
+                    .iter()
+                    .zip(&w[range])
+                    .map(|(m, wi)| {
+                        let au = a * (a * (m - c)).normalize();
+                        wi * (0..3).map(|k| au[k] * au[k] * raw_var[k]).sum::<f64>()
+                    })
+                    .sum::<f64>()
+            },
+            |x, y| x + y,
+        )
+        .unwrap_or_default()
             / self.w_sum;
         if radial > 0.0 {
             raw_var * (sol.sigma2 / radial).min(1.0)
@@ -590,21 +627,32 @@ impl Problem {
         let h = sol.at.jtj + self.q * sol.sigma2;
         let h_inv = h.try_inverse()?;
         let model_based = h_inv * sol.sigma2;
-        let mut scores = vec![SVector::<f64, P>::zeros(); self.grid.len()];
-        let mut info = vec![SMatrix::<f64, P, P>::zeros(); self.grid.len()];
-        for (k, m) in self.raw.iter().enumerate() {
-            if self.w[k] == 0.0 {
-                continue;
+        // Per cell of direction: the score and the information, summed over the chunks of samples.
+        let cells_of = |range: std::ops::Range<usize>| {
+            let mut scores = vec![SVector::<f64, P>::zeros(); self.grid.len()];
+            let mut info = vec![SMatrix::<f64, P, P>::zeros(); self.grid.len()];
+            for k in range {
+                let (m, wk) = (&self.raw[k], self.w[k]);
+                if wk == 0.0 {
+                    continue;
+                }
+                let (r, j) = residual(m, &a, &c, self.target);
+                let jv = SVector::<f64, P>::from(j);
+                let mut score = jv * r;
+                if let Some(s2) = noise {
+                    score -= SVector::<f64, P>::from(noise_score(m, &a, &c, s2, &j));
+                }
+                scores[self.cell[k]] += score * wk;
+                info[self.cell[k]] += jv * jv.transpose() * wk;
             }
-            let (r, j) = residual(m, &a, &c, self.target);
-            let jv = SVector::<f64, P>::from(j);
-            let mut score = jv * r;
-            if let Some(s2) = noise {
-                score -= SVector::<f64, P>::from(noise_score(m, &a, &c, s2, &j));
-            }
-            scores[self.cell[k]] += score * self.w[k];
-            info[self.cell[k]] += jv * jv.transpose() * self.w[k];
-        }
+            (scores, info)
+        };
+        let (scores, info) = chunks::fold(self.raw.len(), cells_of, |mut x, y| {
+            x.0.iter_mut().zip(&y.0).for_each(|(a, b)| *a += b);
+            x.1.iter_mut().zip(&y.1).for_each(|(a, b)| *a += b);
+            x
+        })
+        .unwrap_or_else(|| cells_of(0..0));
         let cells: Vec<usize> = (0..self.grid.len())
             .filter(|&k| scores[k].iter().any(|v| *v != 0.0))
             .collect();
@@ -708,7 +756,7 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         .iter()
         .map(|&i| opts.weights.map_or(1.0, |w| w[i]))
         .collect();
-    let coverage = Coverage::of(&rows.iter().map(|&i| raw_ut[i]).collect::<Vec<_>>());
+    let coverage = Coverage::of_vectors(&raw);
     if !opts.skip_coverage_check {
         coverage.check()?;
     }

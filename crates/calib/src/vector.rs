@@ -22,6 +22,7 @@ use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3, Vector4};
 use std::borrow::Cow;
 
 use crate::FitError;
+use crate::chunks;
 use crate::coverage::{Coverage, SphereGrid};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
@@ -36,6 +37,9 @@ pub struct VectorOptions<'a> {
     pub skip_coverage_check: bool,
     /// A weight per sample in `[0, 1]` (zero leaves a sample out), for robust refits; all ones when absent.
     pub weights: Option<&'a [f64]>,
+    /// `A`, `b` and the residual only, from one pass of sums (for the reweighting passes of a robust fit): no
+    /// standard errors (zero), no cells of direction.
+    pub estimates_only: bool,
 }
 
 /// The result of a vector fit.
@@ -125,15 +129,11 @@ impl RobustProblem for VectorProblem<'_> {
     }
 
     fn residuals(&self, fit: &VectorFit) -> Vec<f64> {
-        let model = fit.model();
-        self.raw_ut
-            .iter()
-            .zip(self.expected_ut.iter())
-            .map(|(m, r)| {
-                let cal = frames::add(frames::mat_vec(&model.a, *m), model.b_ut);
-                frames::norm(frames::sub(cal, *r))
-            })
-            .collect()
+        let (raw, expected) = (&self.raw_ut, &self.expected_ut);
+        chunks::map(raw.len(), |i| {
+            let cal = frames::add(frames::mat_vec(&fit.a, raw[i]), fit.b_ut);
+            frames::norm(frames::sub(cal, expected[i]))
+        })
     }
 
     fn model(fit: &VectorFit) -> Model {
@@ -142,16 +142,57 @@ impl RobustProblem for VectorProblem<'_> {
 }
 
 impl VectorProblem<'_> {
-    fn fit_with(&self, weights: &[f64], skip_coverage_check: bool) -> Result<VectorFit, FitError> {
+    fn fit_with(&self, weights: &[f64], quick: bool) -> Result<VectorFit, FitError> {
         fit(
             &self.raw_ut,
             &self.expected_ut,
             &VectorOptions {
                 raw_noise_var_ut2: self.raw_noise_var_ut2,
-                skip_coverage_check,
+                skip_coverage_check: quick,
                 weights: Some(weights),
+                estimates_only: quick,
             },
         )
+    }
+}
+
+/// Weighted sums of the readings `d` and references `e` (shifted by the first usable sample), and their products.
+#[derive(Clone, Copy, Debug)]
+struct Sums {
+    n: usize,
+    w_sum: f64,
+    sm: Vector3<f64>,
+    sr: Vector3<f64>,
+    smm: Matrix3<f64>,
+    srm: Matrix3<f64>,
+    srr: Matrix3<f64>,
+}
+
+impl Default for Sums {
+    fn default() -> Sums {
+        Sums {
+            n: 0,
+            w_sum: 0.0,
+            sm: Vector3::zeros(),
+            sr: Vector3::zeros(),
+            smm: Matrix3::zeros(),
+            srm: Matrix3::zeros(),
+            srr: Matrix3::zeros(),
+        }
+    }
+}
+
+impl Sums {
+    fn merge(self, o: Sums) -> Sums {
+        Sums {
+            n: self.n + o.n,
+            w_sum: self.w_sum + o.w_sum,
+            sm: self.sm + o.sm,
+            sr: self.sr + o.sr,
+            smm: self.smm + o.smm,
+            srm: self.srm + o.srm,
+            srr: self.srr + o.srr,
+        }
     }
 }
 
@@ -195,24 +236,39 @@ pub fn fit(
         Vector3::from(raw_ut[first]),
         Vector3::from(expected_ut[first]),
     );
-    let (mut n, mut w_sum) = (0usize, 0.0);
-    let (mut sm, mut sr) = (Vector3::zeros(), Vector3::zeros());
-    let (mut smm, mut srm, mut srr) = (Matrix3::zeros(), Matrix3::zeros(), Matrix3::zeros());
-    for i in first..raw_ut.len() {
-        let w = weight(i);
-        if w == 0.0 {
-            continue;
-        }
-        let d = Vector3::from(raw_ut[i]) - m0;
-        let e = Vector3::from(expected_ut[i]) - r0;
-        n += 1;
-        w_sum += w;
-        sm += d * w;
-        sr += e * w;
-        smm += d * d.transpose() * w;
-        srm += e * d.transpose() * w;
-        srr += e * e.transpose() * w;
-    }
+    let sums = chunks::fold(
+        raw_ut.len(),
+        |range| {
+            let mut s = Sums::default();
+            for i in range {
+                let w = weight(i);
+                if w == 0.0 {
+                    continue;
+                }
+                let d = Vector3::from(raw_ut[i]) - m0;
+                let e = Vector3::from(expected_ut[i]) - r0;
+                s.n += 1;
+                s.w_sum += w;
+                s.sm += d * w;
+                s.sr += e * w;
+                s.smm += d * d.transpose() * w;
+                s.srm += e * d.transpose() * w;
+                s.srr += e * e.transpose() * w;
+            }
+            s
+        },
+        Sums::merge,
+    )
+    .unwrap_or_default();
+    let Sums {
+        n,
+        w_sum,
+        sm,
+        sr,
+        smm,
+        srm,
+        srr,
+    } = sums;
     if n < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
             needed: MIN_SAMPLES,
@@ -259,27 +315,64 @@ pub fn fit(
     let a = s_rm * s_inv;
     let b = r_mean - a * m_mean;
 
+    let a_arr: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| a[(j, k)]));
+    if opts.estimates_only {
+        // The residual from the sums: Σw·e·eᵀ = S_rr − A·S_rmᵀ − S_rm·Aᵀ + A·S_mm·Aᵀ (centred; the intercept fits the
+        // means exactly).
+        let rss_matrix =
+            s_rr - a * s_rm.transpose() - s_rm * a.transpose() + a * s_mm * a.transpose();
+        return Ok(VectorFit {
+            a: a_arr,
+            b_ut: [b[0], b[1], b[2]],
+            a_se: [[0.0; 3]; 3],
+            b_se_ut: [0.0; 3],
+            covariance: [[[0.0; 4]; 4]; 3],
+            residual_rms_ut: std::array::from_fn(|j| (rss_matrix[(j, j)].max(0.0) / w_sum).sqrt()),
+            condition_number: coverage.spread_ut[0] / coverage.spread_ut[2],
+            n,
+            skipped: raw_ut.len() - n,
+            coverage,
+            noise_bound,
+            direction_cells: 0,
+        });
+    }
+
     // Second pass: residuals, and their scores per cell of field direction.
     let grid = SphereGrid::new(DIRECTION_CELLS);
-    let mut cells: Vec<[Vector4<f64>; 3]> = vec![[Vector4::zeros(); 3]; grid.len()];
-    let mut cell_weight = vec![0.0; grid.len()];
-    let mut rss = Vector3::zeros();
-    for i in first..raw_ut.len() {
-        let w = weight(i);
-        if w == 0.0 {
-            continue;
+    let cells_of = |range: std::ops::Range<usize>| {
+        let mut cells: Vec<[Vector4<f64>; 3]> = vec![[Vector4::zeros(); 3]; grid.len()];
+        let mut cell_weight = vec![0.0; grid.len()];
+        let mut rss = Vector3::zeros();
+        for i in range {
+            let w = weight(i);
+            if w == 0.0 {
+                continue;
+            }
+            let m = Vector3::from(raw_ut[i]);
+            let e = a * m + b - Vector3::from(expected_ut[i]);
+            rss += e.component_mul(&e) * w;
+            let c = grid.cell(expected_ut[i]).unwrap_or(0);
+            let x = m - m_mean;
+            let xt = Vector4::new(x[0], x[1], x[2], 1.0);
+            for j in 0..3 {
+                cells[c][j] -= xt * (w * e[j]);
+            }
+            cell_weight[c] += w;
         }
-        let m = Vector3::from(raw_ut[i]);
-        let e = a * m + b - Vector3::from(expected_ut[i]);
-        rss += e.component_mul(&e) * w;
-        let c = grid.cell(expected_ut[i]).unwrap_or(0);
-        let x = m - m_mean;
-        let xt = Vector4::new(x[0], x[1], x[2], 1.0);
-        for j in 0..3 {
-            cells[c][j] -= xt * (w * e[j]);
+        (cells, cell_weight, rss)
+    };
+    let (cells, cell_weight, rss) = chunks::fold(raw_ut.len(), cells_of, |mut x, y| {
+        for (c, d) in x.0.iter_mut().zip(&y.0) {
+            for j in 0..3 {
+                c[j] += d[j];
+            }
         }
-        cell_weight[c] += w;
-    }
+        for (c, d) in x.1.iter_mut().zip(&y.1) {
+            *c += d;
+        }
+        (x.0, x.1, x.2 + y.2)
+    })
+    .unwrap_or_else(|| cells_of(0..0));
     let clusters: Vec<usize> = (0..grid.len()).filter(|&c| cell_weight[c] > 0.0).collect();
     let g = clusters.len() as f64;
 
@@ -323,7 +416,6 @@ pub fn fit(
         let c = to_b * Matrix4::from_column_slice(larger.as_slice()) * to_b.transpose();
         covariance[j] = std::array::from_fn(|r| std::array::from_fn(|s| c[(r, s)]));
     }
-    let a_arr: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| a[(j, k)]));
     Ok(VectorFit {
         a: a_arr,
         b_ut: [b[0], b[1], b[2]],

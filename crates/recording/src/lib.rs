@@ -50,6 +50,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod blocks;
 mod error;
 mod layout;
 pub mod limits;
@@ -57,6 +58,7 @@ mod line_ends;
 mod metadata;
 mod read;
 mod recording;
+mod rows;
 mod sample;
 mod write;
 

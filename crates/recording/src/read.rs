@@ -1,29 +1,28 @@
-//! The reader: what the file is (text, not compressed or binary), metadata lines by hand, then the header and data
-//! rows with the `csv` crate, parsed straight into the column vectors. Line ends (`\n`, `\r\n`, `\r`) are made one
-//! on the way in; columns are separated by commas, or by `;` or tabs when the header row names `mx,my,mz` that way.
+//! The reader: what the file is (text, not compressed or binary), metadata lines by hand, the header row with the
+//! `csv` crate, then the data rows on both cores ([`crate::blocks`]), parsed straight into the column vectors. Line
+//! ends (`\n`, `\r\n`, `\r`) are made one on the way in; columns are separated by commas, or by `;` or tabs when the
+//! header row names `mx,my,mz` that way.
 
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::Path;
 
-use csv::{ByteRecord, ReaderBuilder, Terminator};
+use csv::ByteRecord;
 
+use crate::blocks::{Rows, Split, csv_reader};
 use crate::error::{ColumnRef, ReadError, ReadErrorKind, excerpt};
 use crate::layout::{Header, MAG, Role};
-use crate::limits::{self, Limit};
+use crate::limits;
 use crate::line_ends::LineEnds;
 use crate::metadata::{MetaLine, Metadata, MetadataBuilder, classify_line};
 use crate::recording::Recording;
-use crate::sample::{group_or_nan, normalise_quat};
+use crate::rows::RowParser;
 
-/// Buffer size for reading; large enough that the per-read overhead does not show.
+/// Buffer size for reading the start of a file (its kind, the metadata).
 const BUFFER_BYTES: usize = 256 * 1024;
 
 /// The UTF-8 byte order mark some editors put at the start of a file.
 const BOM: &[u8] = b"\xef\xbb\xbf";
-
-/// A problem in a data row: the 0-based column, if it is in one field, and what.
-type RowProblem = (Option<usize>, ReadErrorKind);
 
 impl Recording {
     /// Reads a recording from a file; errors name the file as given.
@@ -37,97 +36,110 @@ impl Recording {
 
     /// Reads a recording from any byte source; `name` stands for the file in errors.
     pub fn from_reader<R: Read>(name: &str, reader: R) -> Result<Recording, ReadError> {
-        let mut raw = BufReader::with_capacity(BUFFER_BYTES, reader);
-        let start = raw
-            .fill_buf()
-            .map_err(|e| ReadError::new(name, None, None, ReadErrorKind::Io(e)))?;
-        if let Some(kind) = not_text(start) {
-            return Err(ReadError::new(name, None, None, kind));
-        }
-        let mut input = BufReader::with_capacity(BUFFER_BYTES, LineEnds::new(raw));
-        let (meta, header_text, header_line) = read_metadata(name, &mut input)?;
-        let separator = separator(&header_text)
-            .map_err(|kind| ReadError::new(name, Some(header_line), None, kind))?;
-        // Counted before the csv reader splits the row, which would take memory for every name.
-        let columns = column_count(&header_text, separator);
-        if columns > limits::MAX_COLUMNS {
-            let kind = ReadErrorKind::TooManyColumns {
-                found: columns,
-                max: limits::MAX_COLUMNS,
-            };
-            return Err(ReadError::new(name, Some(header_line), None, kind));
-        }
-        let column_ref = |names: &[String], i: usize| ColumnRef {
-            index: i + 1,
-            name: names[i].clone(),
+        read_split(name, reader, Split::DEFAULT)
+    }
+}
+
+/// [`Recording::from_reader`] with the data cut for the threads as `split` says.
+pub(crate) fn read_split<R: Read>(
+    name: &str,
+    reader: R,
+    split: Split,
+) -> Result<Recording, ReadError> {
+    let mut raw = BufReader::with_capacity(BUFFER_BYTES, reader);
+    let start = raw
+        .fill_buf()
+        .map_err(|e| ReadError::new(name, None, None, ReadErrorKind::Io(e)))?;
+    if let Some(kind) = not_text(start) {
+        return Err(ReadError::new(name, None, None, kind));
+    }
+    let mut input = BufReader::with_capacity(BUFFER_BYTES, LineEnds::new(raw));
+    let (meta, header_text, header_line) = read_metadata(name, &mut input)?;
+    let separator = separator(&header_text)
+        .map_err(|kind| ReadError::new(name, Some(header_line), None, kind))?;
+    // Counted before the csv reader splits the row, which would take memory for every name.
+    let columns = column_count(&header_text, separator);
+    if columns > limits::MAX_COLUMNS {
+        let kind = ReadErrorKind::TooManyColumns {
+            found: columns,
+            max: limits::MAX_COLUMNS,
         };
+        return Err(ReadError::new(name, Some(header_line), None, kind));
+    }
+    let column_ref = |names: &[String], i: usize| ColumnRef {
+        index: i + 1,
+        name: names[i].clone(),
+    };
+    let io_error = |e: io::Error| ReadError::new(name, None, None, ReadErrorKind::Io(e));
 
-        // The csv reader starts at the header line. Only '\n' ends a row (every line end is one by now), and a final
-        // '\n' is added so that every row, the last one too, ends with one: the reader's line count after a row is
-        // then always one past the row's last line.
-        let rest = io::Cursor::new(header_text).chain(input).chain(&b"\n"[..]);
-        let mut csv = ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .delimiter(separator)
-            .terminator(Terminator::Any(b'\n'))
-            .buffer_capacity(BUFFER_BYTES)
-            .from_reader(rest);
-        let mut record = ByteRecord::new();
-        let read_error =
-            |e: csv::Error| ReadError::new(name, None, None, ReadErrorKind::Io(e.into()));
-
-        csv.read_byte_record(&mut record).map_err(read_error)?;
-        let mut names = Vec::with_capacity(record.len());
-        for (i, field) in record.iter().enumerate() {
-            let Ok(text) = std::str::from_utf8(field.trim_ascii()) else {
-                let column = ColumnRef {
-                    index: i + 1,
-                    name: String::from_utf8_lossy(field).into_owned(),
-                };
-                return Err(ReadError::new(
-                    name,
-                    Some(header_line),
-                    Some(column),
-                    ReadErrorKind::InvalidUtf8,
-                ));
+    // A header with a quote may go on over several lines: the csv reader then reads the whole file from the header
+    // on, as it would any file with quotes; otherwise it reads the header line alone and the rows are read in blocks.
+    let quoted = header_text.contains(&b'"') || split.sequential;
+    let (mut csv, mut input): (_, Option<Box<dyn Read>>) = if quoted {
+        let all = io::Cursor::new(header_text).chain(input).chain(&b"\n"[..]);
+        (csv_reader(Box::new(all) as Box<dyn Read>, separator), None)
+    } else {
+        let header = Box::new(io::Cursor::new(header_text)) as Box<dyn Read>;
+        (
+            csv_reader(header, separator),
+            Some(Box::new(input) as Box<dyn Read>),
+        )
+    };
+    let mut record = ByteRecord::new();
+    csv.read_byte_record(&mut record)
+        .map_err(|e| io_error(e.into()))?;
+    let mut names = Vec::with_capacity(record.len());
+    for (i, field) in record.iter().enumerate() {
+        let Ok(text) = std::str::from_utf8(field.trim_ascii()) else {
+            let column = ColumnRef {
+                index: i + 1,
+                name: String::from_utf8_lossy(field).into_owned(),
             };
-            names.push(text.to_owned());
-        }
-        let header = Header::parse(&names).map_err(|(column, kind)| {
-            ReadError::new(
+            return Err(ReadError::new(
                 name,
                 Some(header_line),
-                column.map(|i| column_ref(&names, i)),
-                kind,
-            )
-        })?;
+                Some(column),
+                ReadErrorKind::InvalidUtf8,
+            ));
+        };
+        names.push(text.to_owned());
+    }
+    let header = Header::parse(&names).map_err(|(column, kind)| {
+        ReadError::new(
+            name,
+            Some(header_line),
+            column.map(|i| column_ref(&names, i)),
+            kind,
+        )
+    })?;
 
-        let mut rows = RowParser {
+    let rows = Rows {
+        parser: RowParser {
             roles: &header.roles,
             padding: header.padding,
             decimal_comma_possible: separator != b',',
-            out: Recording::empty(meta, &header.layout),
-        };
-        while csv.read_byte_record(&mut record).map_err(read_error)? {
-            if let Err((column, kind)) = rows.push(&record) {
-                // The row's first line: the csv reader has counted the row's own '\n' and any inside quotes.
-                let breaks_inside =
-                    record.as_slice().iter().filter(|b| **b == b'\n').count() as u64;
-                let line = header_line + csv.position().line().saturating_sub(2 + breaks_inside);
-                return Err(ReadError::new(
-                    name,
-                    Some(line),
-                    column.map(|i| column_ref(&names, i)),
-                    kind,
-                ));
-            }
+        },
+        separator,
+        layout: &header.layout,
+        time_column: header.roles.iter().position(|r| *r == Role::Time),
+    };
+    let mut out = Recording::empty(meta, &header.layout);
+    let read = match input.take() {
+        Some(rest) => rows.read(rest, header_line + 1, &mut out, split),
+        None => rows.quoted(&mut csv, (header_line, true), &mut out, Default::default()),
+    };
+    match read {
+        Ok(()) => {}
+        Err(Ok((line, column, kind))) => {
+            let column = column.map(|i| column_ref(&names, i));
+            return Err(ReadError::new(name, Some(line), column, kind));
         }
-        if rows.out.is_empty() {
-            return Err(ReadError::new(name, None, None, ReadErrorKind::NoData));
-        }
-        Ok(rows.out)
+        Err(Err(e)) => return Err(io_error(e)),
     }
+    if out.is_empty() {
+        return Err(ReadError::new(name, None, None, ReadErrorKind::NoData));
+    }
+    Ok(out)
 }
 
 /// Reads the metadata block line by line, up to and including the header line. Returns the metadata, the
@@ -252,161 +264,6 @@ fn column_count(line: &[u8], separator: u8) -> usize {
         }
     }
     n
-}
-
-/// Parses data rows into the columns of a recording.
-struct RowParser<'h> {
-    roles: &'h [Role],
-    /// Empty fields a row may have after the header's last column (see [`Header::padding`]).
-    padding: usize,
-    /// Columns are not separated by commas, so `1,5` may be a number written with a decimal comma.
-    decimal_comma_possible: bool,
-    out: Recording,
-}
-
-impl RowParser<'_> {
-    /// A numeric field: NaN when empty or `nan` (any case, any sign).
-    fn number(&self, text: &str) -> Result<f64, ReadErrorKind> {
-        if text.is_empty() {
-            return Ok(f64::NAN);
-        }
-        text.parse().map_err(|_| {
-            if self.decimal_comma_possible && text.replace(',', ".").parse::<f64>().is_ok() {
-                ReadErrorKind::DecimalComma(excerpt(text))
-            } else {
-                ReadErrorKind::NotANumber(excerpt(text))
-            }
-        })
-    }
-}
-
-/// `value` if it is within `limit`; an out-of-range error quoting `text` otherwise.
-fn within(text: &str, value: f64, limit: Limit) -> Result<f64, ReadErrorKind> {
-    if limit.exceeded_by(value) {
-        return Err(ReadErrorKind::OutOfRange {
-            value: excerpt(text),
-            limit: limit.max,
-            unit: limit.unit,
-        });
-    }
-    Ok(value)
-}
-
-impl RowParser<'_> {
-    /// Checks one record and appends it; blank lines (and rows of empty fields only) are skipped.
-    fn push(&mut self, record: &ByteRecord) -> Result<(), RowProblem> {
-        let expected = self.roles.len();
-        let found = record.len();
-        let first = record.get(0).unwrap_or_default().trim_ascii();
-        if first.is_empty() && record.iter().all(|f| f.trim_ascii().is_empty()) {
-            return Ok(());
-        }
-        if first.starts_with(b"#") {
-            return Err((None, ReadErrorKind::LineAfterHeader));
-        }
-        if found < expected {
-            return Err((None, ReadErrorKind::ShortRow { expected, found }));
-        }
-        let padded = found <= expected + self.padding
-            && record
-                .iter()
-                .skip(expected)
-                .all(|f| f.trim_ascii().is_empty());
-        if found > expected && !padded {
-            return Err((None, ReadErrorKind::LongRow { expected, found }));
-        }
-
-        let mut t_s = f64::NAN;
-        let mut mag_ut = [f64::NAN; 3];
-        let mut temp_c = f64::NAN;
-        let mut quat = [f64::NAN; 4];
-        let mut ref_ut = [f64::NAN; 3];
-        let mut gyro_rad_s = [f64::NAN; 3];
-        let mut time_column = 0;
-        for (k, (field, role)) in record.iter().zip(self.roles).enumerate() {
-            let at = |kind: ReadErrorKind| (Some(k), kind);
-            let numeric = || -> Result<(&str, f64), RowProblem> {
-                let text = std::str::from_utf8(field.trim_ascii())
-                    .map_err(|_| at(ReadErrorKind::InvalidUtf8))?;
-                Ok((text, self.number(text).map_err(at)?))
-            };
-            let optional = |limit: Limit| -> Result<f64, RowProblem> {
-                let (text, value) = numeric()?;
-                if value.is_infinite() {
-                    return Err(at(ReadErrorKind::Infinite(excerpt(text))));
-                }
-                within(text, value, limit).map_err(at)
-            };
-            match *role {
-                Role::Time => {
-                    let (text, value) = numeric()?;
-                    if !value.is_finite() {
-                        return Err(at(ReadErrorKind::NonFiniteTime(excerpt(text))));
-                    }
-                    t_s = within(text, value, limits::TIME).map_err(at)?;
-                    time_column = k;
-                }
-                Role::Mag(a) => {
-                    let (text, value) = numeric()?;
-                    if text.is_empty() {
-                        return Err(at(ReadErrorKind::EmptyMag));
-                    }
-                    if !value.is_finite() {
-                        return Err(at(ReadErrorKind::NonFiniteMag(excerpt(text))));
-                    }
-                    mag_ut[a] = within(text, value, limits::FIELD).map_err(at)?;
-                }
-                Role::Temp => temp_c = optional(limits::TEMP)?,
-                Role::Quat(a) => quat[a] = optional(limits::UNBOUNDED)?,
-                Role::Ref(a) => ref_ut[a] = optional(limits::FIELD)?,
-                Role::Gyro(a) => gyro_rad_s[a] = optional(limits::GYRO)?,
-                Role::Current(j) => {
-                    let value = optional(limits::CURRENT)?;
-                    self.out.currents[j].values.push(value);
-                }
-                Role::Extra(j) => {
-                    let text =
-                        std::str::from_utf8(field).map_err(|_| at(ReadErrorKind::InvalidUtf8))?;
-                    self.out.extra[j].values.push(text.to_owned());
-                }
-            }
-        }
-
-        let out = &mut self.out;
-        if let Some(t) = &mut out.t_s {
-            if let Some(&previous_s) = t.last()
-                && t_s < previous_s
-            {
-                return Err((
-                    Some(time_column),
-                    ReadErrorKind::TimeBackwards { previous_s, t_s },
-                ));
-            }
-            t.push(t_s);
-        }
-        out.mag_ut.push(mag_ut);
-        if let Some(temp) = &mut out.temp_c {
-            temp.push(temp_c);
-        }
-        if let Some(q) = &mut out.quat {
-            let quat = group_or_nan(quat);
-            if quat[0].is_nan() {
-                q.push(quat);
-            } else {
-                q.push(
-                    normalise_quat(quat)
-                        .map_err(|norm| (None, ReadErrorKind::QuatNotUnit { norm }))?,
-                );
-            }
-        }
-        if let Some(r) = &mut out.ref_ut {
-            r.push(group_or_nan(ref_ut));
-        }
-        if let Some(g) = &mut out.gyro_rad_s {
-            g.push(group_or_nan(gyro_rad_s));
-        }
-        Ok(())
-    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,323 @@
+//! Data rows on both cores: the file after the header is read in large blocks; each block is cut at line ends into
+//! pieces that are parsed in parallel (each into its own columns, reused from block to block), then appended in file
+//! order. Errors are those of a sequential reader, in its order: the first problem by line wins, and whether `t` goes
+//! backwards across two pieces is checked when they are joined. A block with a quote in it, and everything after,
+//! goes to the `csv` crate (quoted fields may hold separators and line ends), which starts there as a sequential
+//! reader would be at that line.
+
+use std::io::{self, Read};
+
+use csv::{ByteRecord, ReaderBuilder, Terminator};
+use rayon::prelude::*;
+
+use crate::error::ReadErrorKind;
+use crate::layout::Layout;
+use crate::metadata::Metadata;
+use crate::recording::Recording;
+use crate::rows::{RowParser, RowProblem, SplitLine, TimeLink};
+
+/// How the data are cut for the threads.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Split {
+    /// Bytes read at a time (a block ends at its last line end; the rest goes to the next one).
+    pub block_bytes: usize,
+    /// Bytes below which a block is parsed on the calling thread alone.
+    pub piece_bytes: usize,
+    /// Every row through the `csv` crate on one thread: the sequential reader the tests compare with.
+    pub sequential: bool,
+}
+
+impl Split {
+    /// 8 MiB blocks (memory stays at the columns plus a few blocks), pieces of at least 256 KiB.
+    pub(crate) const DEFAULT: Split = Split {
+        block_bytes: 8 << 20,
+        piece_bytes: 256 << 10,
+        sequential: false,
+    };
+}
+
+/// A problem at a 1-based line of the file, in a column if it is in one field.
+pub(crate) type LineProblem = (u64, Option<usize>, ReadErrorKind);
+
+/// Everything the rows need to know of the header.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Rows<'h> {
+    pub parser: RowParser<'h>,
+    pub separator: u8,
+    pub layout: &'h Layout,
+    /// The 0-based column of `t`, if any (where a `t` going backwards across pieces is reported).
+    pub time_column: Option<usize>,
+}
+
+/// What the join needs to know of a piece (its rows are in a buffer of their own).
+struct Piece {
+    /// Lines in the piece (line ends, and a last line without one), when it has no problem.
+    lines: u64,
+    time: TimeLink,
+    /// The 0-based line (in the piece) of the row that set `time.first_unchecked_s`.
+    first_line: u64,
+    problem: Option<(u64, RowProblem)>,
+}
+
+impl Rows<'_> {
+    /// Reads the data rows of `input`, whose first line is line `first_line` of the file, into `out`.
+    pub(crate) fn read(
+        &self,
+        mut input: impl Read,
+        first_line: u64,
+        out: &mut Recording,
+        split: Split,
+    ) -> Result<(), Result<LineProblem, io::Error>> {
+        let mut block = Vec::new();
+        let mut line = first_line;
+        let mut time = TimeLink::default();
+        let mut pieces: Vec<Recording> = Vec::new();
+        let mut want = split.block_bytes;
+        loop {
+            let end = fill(&mut input, &mut block, want).map_err(Err)?;
+            if memchr::memchr(b'"', &block).is_some() {
+                let rest = io::Cursor::new(block).chain(input).chain(&b"\n"[..]);
+                return self.quoted(
+                    &mut csv_reader(rest, self.separator),
+                    (line - 1, false),
+                    out,
+                    time,
+                );
+            }
+            // Up to the last line end, or all of it at the end of the file.
+            let cut = if end {
+                block.len()
+            } else {
+                memchr::memrchr(b'\n', &block).map_or(0, |i| i + 1)
+            };
+            line = self.parse_block(&block[..cut], line, out, &mut time, &mut pieces, split)?;
+            if end {
+                return Ok(());
+            }
+            // A line longer than a block: read on until it ends.
+            want = if cut == 0 {
+                2 * block.len()
+            } else {
+                split.block_bytes
+            };
+            block.drain(..cut);
+        }
+    }
+
+    /// Parses whole lines in pieces on the threads, joins them into `out`; returns the line after the block.
+    fn parse_block(
+        &self,
+        block: &[u8],
+        first_line: u64,
+        out: &mut Recording,
+        time: &mut TimeLink,
+        spare: &mut Vec<Recording>,
+        split: Split,
+    ) -> Result<u64, Result<LineProblem, io::Error>> {
+        let bounds = piece_bounds(block, split.piece_bytes, rayon::current_num_threads());
+        while spare.len() < bounds.len() - 1 {
+            spare.push(Recording::empty(Metadata::default(), self.layout));
+        }
+        let buffers = &mut spare[..bounds.len() - 1];
+        let pieces: Vec<Piece> = if buffers.len() == 1 {
+            vec![self.parse_piece(block, &mut buffers[0])]
+        } else {
+            buffers
+                .par_iter_mut()
+                .enumerate()
+                .map(|(k, rows)| self.parse_piece(&block[bounds[k]..bounds[k + 1]], rows))
+                .collect()
+        };
+        let mut line = first_line;
+        let mut problem = None;
+        for (mut piece, rows) in pieces.into_iter().zip(buffers.iter_mut()) {
+            if problem.is_none() {
+                problem = self.join(&mut piece, rows, line, out, time).err();
+                line += piece.lines;
+            }
+            clear(rows);
+        }
+        match problem {
+            Some(p) => Err(Ok(p)),
+            None => Ok(line),
+        }
+    }
+
+    /// Parses the lines of one piece into `rows` until the first problem.
+    fn parse_piece(&self, text: &[u8], rows: &mut Recording) -> Piece {
+        let mut fields = SplitLine::default();
+        let mut time = TimeLink::default();
+        let (mut first_line, mut problem) = (0, None);
+        let mut lines = 0u64;
+        let mut rest = text;
+        while !rest.is_empty() {
+            let (line, next) = match memchr::memchr(b'\n', rest) {
+                Some(i) => (&rest[..i], &rest[i + 1..]),
+                None => (rest, &rest[rest.len()..]),
+            };
+            rest = next;
+            if !line.is_empty() {
+                let unchecked = time.first_unchecked_s.is_none();
+                let result = if self
+                    .parser
+                    .push_plain(line, self.separator, rows, &mut time)
+                {
+                    Ok(())
+                } else {
+                    fields.split(line, self.separator);
+                    self.parser.push(&fields, rows, &mut time)
+                };
+                if unchecked && time.first_unchecked_s.is_some() {
+                    first_line = lines;
+                }
+                if let Err(p) = result {
+                    problem = Some((lines, p));
+                    break;
+                }
+            }
+            lines += 1;
+        }
+        Piece {
+            lines,
+            time,
+            first_line,
+            problem,
+        }
+    }
+
+    /// Appends a piece to `out` as a sequential reader would have: its first row checked against the last row
+    /// before it, then its own first problem, if any.
+    fn join(
+        &self,
+        piece: &mut Piece,
+        rows: &Recording,
+        line: u64,
+        out: &mut Recording,
+        time: &mut TimeLink,
+    ) -> Result<(), LineProblem> {
+        if let (Some(previous_s), Some(t_s)) = (time.previous_s, piece.time.first_unchecked_s)
+            && t_s < previous_s
+        {
+            let kind = ReadErrorKind::TimeBackwards { previous_s, t_s };
+            return Err((line + piece.first_line, self.time_column, kind));
+        }
+        if let Some((at, (column, kind))) = piece.problem.take() {
+            return Err((line + at, column, kind));
+        }
+        append(out, rows);
+        if piece.time.previous_s.is_some() {
+            time.previous_s = piece.time.previous_s;
+        }
+        Ok(())
+    }
+
+    /// The rows of a csv reader, between rows, into `out`. `header_line` is the line of the header if the reader
+    /// has read it; otherwise the reader starts at the line after `header_line`, and counts lines as if it had read
+    /// a one-line header (so that the lines it names are those of a reader that started at the header).
+    pub(crate) fn quoted<R: Read>(
+        &self,
+        csv: &mut csv::Reader<R>,
+        (header_line, header_read): (u64, bool),
+        out: &mut Recording,
+        mut time: TimeLink,
+    ) -> Result<(), Result<LineProblem, io::Error>> {
+        let mut record = ByteRecord::new();
+        while csv
+            .read_byte_record(&mut record)
+            .map_err(|e| Err(e.into()))?
+        {
+            if let Err((column, kind)) = self.parser.push(&record, out, &mut time) {
+                // The row's first line: the csv reader has counted the row's own '\n' and any inside quotes.
+                let breaks_inside =
+                    record.as_slice().iter().filter(|b| **b == b'\n').count() as u64;
+                let position = csv.position().line() + u64::from(!header_read);
+                let line = header_line + position.saturating_sub(2 + breaks_inside);
+                return Err(Ok((line, column, kind)));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A csv reader of rows separated by `separator` and ended by '\n' only (every line end is one by now). Give it input
+/// that ends with a '\n', so that every row does: its line count after a row is then one past the row's last line.
+pub(crate) fn csv_reader<R: Read>(input: R, separator: u8) -> csv::Reader<R> {
+    ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .delimiter(separator)
+        .terminator(Terminator::Any(b'\n'))
+        .buffer_capacity(256 << 10)
+        .from_reader(input)
+}
+
+/// Reads from `input` until `buf` holds at least `want` bytes or the input ends; returns whether it ended.
+fn fill(input: &mut impl Read, buf: &mut Vec<u8>, want: usize) -> io::Result<bool> {
+    if buf.len() >= want {
+        return Ok(false);
+    }
+    let need = want - buf.len();
+    let got = input.by_ref().take(need as u64).read_to_end(buf)?;
+    Ok(got < need)
+}
+
+/// Where to cut a block into pieces for `threads` threads: offsets just after line ends, first 0 and last the
+/// block's length; one piece for a small block.
+fn piece_bounds(block: &[u8], piece_bytes: usize, threads: usize) -> Vec<usize> {
+    let pieces = (block.len() / piece_bytes.max(1)).clamp(1, 4 * threads.max(1));
+    let mut bounds = vec![0];
+    for k in 1..pieces {
+        let target = (k * block.len() / pieces).max(*bounds.last().unwrap_or(&0));
+        match memchr::memchr(b'\n', &block[target..]) {
+            Some(i) if target + i + 1 < block.len() => bounds.push(target + i + 1),
+            _ => break,
+        }
+    }
+    bounds.push(block.len());
+    bounds.dedup();
+    if bounds.len() == 1 {
+        bounds.push(0);
+    }
+    bounds
+}
+
+/// Appends the rows of `piece` (same layout) to `out`.
+fn append(out: &mut Recording, piece: &Recording) {
+    fn extend<T: Clone>(out: &mut Option<Vec<T>>, piece: &Option<Vec<T>>) {
+        if let (Some(o), Some(p)) = (out, piece) {
+            o.extend_from_slice(p);
+        }
+    }
+    out.mag_ut.extend_from_slice(&piece.mag_ut);
+    extend(&mut out.t_s, &piece.t_s);
+    extend(&mut out.temp_c, &piece.temp_c);
+    extend(&mut out.quat, &piece.quat);
+    extend(&mut out.ref_ut, &piece.ref_ut);
+    extend(&mut out.gyro_rad_s, &piece.gyro_rad_s);
+    for (o, p) in out.currents.iter_mut().zip(&piece.currents) {
+        o.values.extend_from_slice(&p.values);
+    }
+    for (o, p) in out.extra.iter_mut().zip(&piece.extra) {
+        o.values.extend_from_slice(&p.values);
+    }
+}
+
+/// Empties every column, keeping its memory.
+fn clear(rows: &mut Recording) {
+    fn clear<T>(c: &mut Option<Vec<T>>) {
+        if let Some(c) = c {
+            c.clear();
+        }
+    }
+    rows.mag_ut.clear();
+    clear(&mut rows.t_s);
+    clear(&mut rows.temp_c);
+    clear(&mut rows.quat);
+    clear(&mut rows.ref_ut);
+    clear(&mut rows.gyro_rad_s);
+    rows.currents.iter_mut().for_each(|c| c.values.clear());
+    rows.extra.iter_mut().for_each(|c| c.values.clear());
+}
+
+#[cfg(test)]
+mod tests;
