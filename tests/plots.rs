@@ -171,8 +171,8 @@ fn check_folder(folder: &str) {
             assert!(t.has(text), "{name}: no {text}");
         }
         assert!(t.in_legend_strip("the sensor's noise"), "{name}");
-        // The located spans are shaded, and named in the legend, exactly when the summary names them.
-        let located = summary.contains("located:") && summary.contains("spans ");
+        // The located spans are shaded, and named in the legend, exactly when the summary lists disturbances.
+        let located = summary.contains("\n  disturbance ");
         assert_eq!(
             t.in_legend_strip("where the misfit was located"),
             located,

@@ -106,7 +106,11 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
         let Some((fit, scale)) = reweight(seeds, &w, SEED_ITERATIONS) else {
             continue;
         };
-        let plausible = plausible(&P::model(&fit).a);
+        let a = P::model(&fit).a;
+        let plausible = plausible(&a);
+        // Seeds compare in raw units: a fit that shrinks the readings (a scalar fit's huge sphere through a cap, at
+        // a tiny gain) shrinks its residuals with them.
+        let scale = scale / mean_gain(&a);
         let better = best
             .as_ref()
             .is_none_or(|(p, s, _)| (plausible, -scale) > (*p, -*s));
@@ -356,6 +360,12 @@ pub fn plausible(a: &Mat3) -> bool {
     let m = nalgebra::Matrix3::from_fn(|j, k| a[j][k]);
     let sv = m.singular_values();
     sv.min() > 0.0 && sv.max() / sv.min() <= PLAUSIBLE_GAIN_RATIO
+}
+
+/// The geometric mean of `A`'s singular values: the gain from raw to calibrated units.
+fn mean_gain(a: &Mat3) -> f64 {
+    let m = nalgebra::Matrix3::from_fn(|j, k| a[j][k]);
+    m.determinant().abs().cbrt()
 }
 
 #[cfg(test)]

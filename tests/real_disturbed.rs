@@ -1,0 +1,260 @@
+//! Acceptance (issue 10): on the physical recordings with real disturbances in `../shared/data/real/` the diagnosis
+//! locates every gross disturbance, models or excludes it, and the final calibration lands within tolerance of the
+//! truth the dataset gives; on the undisturbed ones it finds no disturbance and does not make the fit worse. The
+//! three BROAD recordings are also fitted with their quaternion columns removed (the scalar method, as a hand-held
+//! recording without a reference would be).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{fit_report, floats, magcal_fit, matrix, real};
+use magcal_app::params::ParamsFile;
+use magcal_calib::{Inputs, frames};
+use magcal_recording::Recording;
+use serde_json::Value;
+
+/// Tolerances of the issue: final A within this of I (largest element) …
+const A_TOL: f64 = 0.065;
+/// … and the offset within this of the truth, µT.
+const OFFSET_TOL_UT: f64 = 2.9;
+
+const BROAD_02: &str = "broad/broad_02_undisturbed_slow_rotation.csv";
+const BROAD_29: &str = "broad/broad_29_disturbed_stationary_magnet_B.csv";
+const BROAD_33: &str = "broad/broad_33_disturbed_attached_magnet_2cm.csv";
+const NEXUS_NODIST: &str = "inria-nexus5/nexus5_nodist_AR.csv";
+const NEXUS_DIST: &str = "inria-nexus5/nexus5_dist_AR.csv";
+
+/// Largest |A − I| element.
+fn a_error(a: &[[f64; 3]; 3]) -> f64 {
+    (0..9)
+        .map(|i| (a[i / 3][i % 3] - if i / 3 == i % 3 { 1.0 } else { 0.0 }).abs())
+        .fold(0.0, f64::max)
+}
+
+fn offset(r: &Value) -> [f64; 3] {
+    let o = floats(&r["calibration"]["offset_ut"]);
+    [o[0], o[1], o[2]]
+}
+
+/// Checks the final calibration of report `r` against A ≈ I and `offset_ut`.
+fn assert_within(r: &Value, offset_ut: [f64; 3], what: &str) {
+    let a = matrix(&r["calibration"]["A"]);
+    assert!(a_error(&a) <= A_TOL, "{what}: A = {a:?}");
+    let o = offset(r);
+    let e = frames::norm(frames::sub(o, offset_ut));
+    assert!(e <= OFFSET_TOL_UT, "{what}: offset {o:?}, {e:.2} µT off");
+}
+
+/// The located spans of a report, (t0, t1) in seconds.
+fn spans(r: &Value) -> Vec<(f64, f64)> {
+    r["diagnosis"]["spans"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s["t0_s"].as_f64().unwrap(), s["t1_s"].as_f64().unwrap()))
+        .collect()
+}
+
+fn effect_ids(r: &Value) -> Vec<String> {
+    r["diagnosis"]["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["id"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+/// Whether some span covers most of `[t0, t1]`.
+fn located(spans: &[(f64, f64)], t0: f64, t1: f64) -> bool {
+    spans
+        .iter()
+        .any(|(a, b)| (b.min(t1) - a.max(t0)).max(0.0) >= 0.5 * (t1 - t0))
+}
+
+/// Undisturbed: no gross finding, no located segment, and the final model no worse than the base on held-out data.
+fn assert_undisturbed(r: &Value, what: &str) {
+    let ids = effect_ids(r);
+    for id in [
+        "disturbance",
+        "bias_window",
+        "bias_step",
+        "nonlinearity",
+        "magnet_nearby",
+    ] {
+        assert!(!ids.iter().any(|i| i == id), "{what}: found {ids:?}");
+    }
+    assert!(spans(r).is_empty(), "{what}: spans {:?}", spans(r));
+    assert!(
+        r["diagnosis"]["located"]["segments"]
+            .as_array()
+            .unwrap()
+            .is_empty(),
+        "{what}: {}",
+        r["diagnosis"]["located"]
+    );
+    let (base, fin) = (
+        r["base"]["holdout_rms_ut"].as_f64().unwrap(),
+        r["residual"]["holdout_rms_ut"].as_f64().unwrap(),
+    );
+    assert!(fin <= base, "{what}: held-out {base} → {fin} µT");
+}
+
+#[test]
+fn broad_33_the_magnet_attached_to_the_board_is_a_bias_window() {
+    let r = fit_report(&real(BROAD_33), &[]);
+    assert_eq!(r["diagnosis"]["verdict"], "mismatch");
+    let w = r["diagnosis"]["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["id"] == "bias_window")
+        .unwrap_or_else(|| panic!("no bias_window in {}", r["diagnosis"]["effects"]));
+    // Attached by hand around 40–42 s, taken off around 98.6 s.
+    let (t0, t1) = (
+        w["params"]["t0_s"].as_f64().unwrap(),
+        w["params"]["t1_s"].as_f64().unwrap(),
+    );
+    assert!((39.0..=44.0).contains(&t0), "attached at {t0} s");
+    assert!((96.6..=100.6).contains(&t1), "taken off at {t1} s");
+    assert_within(&r, [0.0; 3], "broad 33");
+}
+
+#[test]
+fn broad_29_both_passes_by_the_magnet_are_located() {
+    let r = fit_report(&real(BROAD_29), &[]);
+    assert_eq!(r["diagnosis"]["verdict"], "mismatch");
+    let s = spans(&r);
+    assert!(located(&s, 30.5, 33.6), "30.5–33.6 s not in {s:?}");
+    assert!(located(&s, 99.0, 101.0), "99–101 s not in {s:?}");
+    assert_within(&r, [0.0; 3], "broad 29");
+}
+
+#[test]
+fn undisturbed_recordings_have_no_gross_findings() {
+    let r = fit_report(&real(BROAD_02), &[]);
+    assert_undisturbed(&r, "broad 02");
+    assert_within(&r, [0.0; 3], "broad 02");
+    let r = fit_report(&real(NEXUS_NODIST), &[]);
+    assert_undisturbed(&r, "nexus5 NoDist");
+    assert_within(&r, [62.4, -54.0, 408.0], "nexus5 NoDist");
+}
+
+/// The perturbations of the Nexus 5 walk, measured independently of the diagnosis: the undisturbed trial's base fit
+/// applied to this trial, samples whose field differs from the reference's by more than 15 µT (10 µT of
+/// perturbation above the few µT the hard iron moves between days, the lag and the reference's error add).
+fn nexus_perturbed_times(dir: &Path) -> Vec<f64> {
+    let params = dir.join("nodist.toml");
+    let out = magcal_fit(&[
+        real(NEXUS_NODIST).to_str().unwrap(),
+        "--no-diagnose",
+        "--out",
+        params.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let model = ParamsFile::read(&params).unwrap().model(&[]).unwrap();
+    let rec = Recording::read(&real(NEXUS_DIST)).unwrap();
+    let field = rec.meta.field_ned_ut.expect("the trial's field");
+    let (t, q) = (rec.t_s.as_ref().unwrap(), rec.quat.as_ref().unwrap());
+    rec.mag_ut
+        .iter()
+        .zip(q)
+        .zip(t)
+        .filter(|((m, q), _)| q.iter().all(|v| v.is_finite()) && m.iter().all(|v| v.is_finite()))
+        .filter(|((m, q), _)| {
+            let e = frames::sub(
+                model.apply(**m, &Inputs::NONE),
+                frames::expected_sensor_field(**q, field),
+            );
+            frames::norm(e) > 15.0
+        })
+        .map(|(_, t)| *t)
+        .collect()
+}
+
+#[test]
+fn nexus5_every_perturbation_above_10_ut_is_located() {
+    let dir = tempfile::tempdir().unwrap();
+    let perturbed = nexus_perturbed_times(dir.path());
+    assert!(
+        perturbed.len() > 100,
+        "{} perturbed samples",
+        perturbed.len()
+    );
+    let r = fit_report(&real(NEXUS_DIST), &[]);
+    let s = spans(&r);
+    let outside: Vec<f64> = perturbed
+        .iter()
+        .copied()
+        .filter(|t| !s.iter().any(|(a, b)| (a - 0.25..=b + 0.25).contains(t)))
+        .collect();
+    assert!(
+        outside.is_empty(),
+        "{} of {} perturbed samples outside the spans {s:?}, e.g. at {:?} s",
+        outside.len(),
+        perturbed.len(),
+        &outside[..outside.len().min(10)]
+    );
+    assert_within(&r, [60.0, -56.0, 408.0], "nexus5 Dist");
+}
+
+/// `rel` with its quaternion columns removed (and, if `no_field`, the field and the place that give it too).
+fn without_reference(rel: &str, dir: &Path, no_field: bool) -> PathBuf {
+    let text = std::fs::read_to_string(real(rel)).unwrap();
+    let mut out = String::new();
+    let mut keep: Vec<bool> = Vec::new();
+    for line in text.lines() {
+        if line.starts_with('#') {
+            let drop = no_field
+                && ["# field_ned_ut", "# location", "# date"]
+                    .iter()
+                    .any(|k| line.starts_with(k));
+            if !drop {
+                out.push_str(line);
+                out.push('\n');
+            }
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').collect();
+        if keep.is_empty() {
+            keep = cells
+                .iter()
+                .map(|c| !["qw", "qx", "qy", "qz"].contains(c))
+                .collect();
+        }
+        let kept: Vec<&str> = cells
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(c, _)| *c)
+            .collect();
+        out.push_str(&kept.join(","));
+        out.push('\n');
+    }
+    let path = dir.join(if no_field { "bare.csv" } else { "noquat.csv" });
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// The scalar A is symmetric: its error against I is what the tolerance bounds.
+#[test]
+fn broad_recordings_without_quaternions_calibrate_by_the_scalar_method() {
+    for rel in [BROAD_02, BROAD_29, BROAD_33] {
+        for no_field in [false, true] {
+            let dir = tempfile::tempdir().unwrap();
+            let path = without_reference(rel, dir.path(), no_field);
+            let r = fit_report(&path, &[]);
+            let what = format!("{rel} without quaternions (field removed too: {no_field})");
+            assert_eq!(r["method"], "scalar", "{what}");
+            assert_within(&r, [0.0; 3], &what);
+            if rel == BROAD_02 {
+                let ids = effect_ids(&r);
+                assert!(
+                    !ids.iter()
+                        .any(|i| i == "nonlinearity" || i == "bias_window"),
+                    "{what}: found {ids:?}"
+                );
+            }
+        }
+    }
+}
