@@ -258,3 +258,71 @@ fn broad_recordings_without_quaternions_calibrate_by_the_scalar_method() {
         }
     }
 }
+
+/// The table of docs/diagnosis.md: every physical recording, base and final errors against the truth the dataset
+/// gives (A against I, the offset against the values above; "—" where the dataset gives none), the effects, the
+/// spans and the verdict. Regenerate with
+/// `cargo test --release --test real_disturbed -- --ignored --nocapture table_of_every_real_recording`.
+#[test]
+#[ignore = "prints the table of docs/diagnosis.md"]
+fn table_of_every_real_recording() {
+    let truths: [(&str, Option<[f64; 3]>); 10] = [
+        (BROAD_02, Some([0.0; 3])),
+        (BROAD_29, Some([0.0; 3])),
+        (BROAD_33, Some([0.0; 3])),
+        (NEXUS_NODIST, Some([62.4, -54.0, 408.0])),
+        (NEXUS_DIST, Some([60.0, -56.0, 408.0])),
+        ("inria-nexus5/nexus5_calib_dance.csv", None),
+        ("hmc5883l/set2_full_sphere.csv", None),
+        ("hmc5883l/set2_unmoved_x_forward_10min.csv", None),
+        ("qmc5883l/qmc5883l_filtered_raw.csv", None),
+        ("qmc5883l/qmc5883l_noisy_raw.csv", None),
+    ];
+    println!(
+        "| recording | method | base A err / offset err (µT) | final A err / offset err (µT) | effects | spans (s) | verdict |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (rel, truth) in truths {
+        let path = real(rel);
+        let dir = tempfile::tempdir().unwrap();
+        let report = dir.path().join("r.json");
+        let out = magcal_fit(&[
+            path.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        if !out.status.success() {
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(err.contains(rel), "{rel}: an error that names no file: {err}");
+            println!("| `{rel}` | refused: {} | | | | | |", err.trim());
+            continue;
+        }
+        let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let errs = |a: &Value, b: &Value| {
+            let a = matrix(a);
+            let b = floats(b);
+            let o = magcal_calib::scalar::centre(&a, [b[0], b[1], b[2]]);
+            match truth {
+                Some(t) => format!(
+                    "{:.3} / {:.2}",
+                    a_error(&a),
+                    frames::norm(frames::sub(o, t))
+                ),
+                None => format!("{:.3} / —", a_error(&a)),
+            }
+        };
+        let base = errs(&r["base"]["A"], &r["base"]["b_ut"]);
+        let fin = errs(&r["calibration"]["A"], &r["calibration"]["b_ut"]);
+        let spans: Vec<String> = spans(&r)
+            .iter()
+            .map(|(a, b)| format!("{a:.1}–{b:.1}"))
+            .collect();
+        println!(
+            "| `{rel}` | {} | {base} | {fin} | {} | {} | {} |",
+            r["method"].as_str().unwrap(),
+            effect_ids(&r).join(", "),
+            spans.join(", "),
+            r["diagnosis"]["verdict"].as_str().unwrap()
+        );
+    }
+}

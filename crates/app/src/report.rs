@@ -161,7 +161,7 @@ pub struct SpanReport {
     /// The constant field that explains it: in sensor axes (`sensor_fixed`) or NED (`room_fixed`), µT.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub field_ut: Option<[f64; 3]>,
-    /// Modelled (its samples kept, with an effect) or left out of the calibration.
+    /// Modelled (the samples its constant explains kept, with an effect) or left out of the calibration.
     pub modelled: bool,
     /// In words.
     pub explanation: String,

@@ -24,6 +24,8 @@ use super::scan;
 const EXPLAINED_SCALES2: f64 = 4.0;
 /// …or at most this fraction of the span's residual energy.
 const EXPLAINED_SHARE: f64 = 0.1;
+/// A modelled span's sample stays in the fit when the span's constant leaves at most this many scales per axis.
+const KEPT_SCALES: f64 = 3.0;
 /// The other frame is told apart when it leaves at least this many times what the chosen one leaves.
 const FRAME_MARGIN: f64 = 2.0;
 /// The sensor turned during a span when the field direction in sensor axes moved by more than this, degrees.
@@ -62,15 +64,20 @@ pub(crate) struct Span {
     /// RMS of the residual per axis in it, µT.
     pub rms_ut: f64,
     pub kind: SpanKind,
+    /// Whether the sensor turned during it.
+    pub turned: bool,
 }
 
 impl Span {
-    /// Whether its samples are modelled (kept, with an effect) rather than excluded.
+    /// Whether its samples are modelled (kept, with an effect) rather than excluded: a constant explains it and the
+    /// sensor turned. A still sensor's span adds one direction to the fit, and its constant may be the still part
+    /// of something that moved (a magnet's field while the sensor rests near it): it is left out.
     pub fn modelled(&self) -> bool {
-        matches!(
-            self.kind,
-            SpanKind::SensorFixed { .. } | SpanKind::RoomFixed { .. }
-        )
+        self.turned
+            && matches!(
+                self.kind,
+                SpanKind::SensorFixed { .. } | SpanKind::RoomFixed { .. }
+            )
     }
 }
 
@@ -102,6 +109,24 @@ impl Residual<'_> {
             Residual::Magnitude { .. } => 1.0,
         }
     }
+}
+
+/// Whether sample `i` of a modelled span is explained by the span's constant: what it leaves is within
+/// [`KEPT_SCALES`] scales per axis. The rest (a ramp as a magnet is put on, a part that moved) stays out of the fit.
+pub(crate) fn explained_at(residual: &Residual<'_>, kind: &SpanKind, i: usize, scale_ut: f64) -> bool {
+    let left = match (residual, kind) {
+        (Residual::Vector { e, .. }, SpanKind::SensorFixed { offset_ut, .. }) => {
+            frames::norm(frames::sub(e[i], *offset_ut))
+        }
+        (Residual::Vector { e, rot: Some(r) }, SpanKind::RoomFixed { field_ned_ut }) => {
+            frames::norm(frames::sub(frames::mat_vec(&r[i], e[i]), *field_ned_ut))
+        }
+        (Residual::Magnitude { rho, unit }, SpanKind::SensorFixed { offset_ut, .. }) => {
+            (rho[i] - frames::dot(unit[i], *offset_ut)).abs()
+        }
+        _ => return false,
+    };
+    left <= KEPT_SCALES * scale_ut * residual.dims().sqrt()
 }
 
 /// The gross spans (the runs of samples not `kept`: the robust fit's spans, merged and widened there), classified.
@@ -171,6 +196,7 @@ fn classify(
         peak_ut,
         rms_ut,
         kind,
+        turned,
     }
 }
 

@@ -178,7 +178,7 @@ pub struct GrossSpan {
     pub rms_ut: f64,
     /// What explains it.
     pub kind: SpanKind,
-    /// Whether it is modelled (its samples kept, with an effect), or left out of the calibration.
+    /// Whether it is modelled (the samples its constant explains kept, with an effect), or left out of the calibration.
     pub modelled: bool,
     /// In words, with the reason it was left out when it was.
     pub explanation: String,
@@ -503,7 +503,9 @@ impl<'a> Setup<'a> {
             } else {
                 (span.start, span.end)
             };
-            included[a..b].fill(true);
+            for (i, inc) in included.iter_mut().enumerate().take(b).skip(a) {
+                *inc = gross::explained_at(&view, &span.kind, i, scale);
+            }
             let (t0_s, t1_s) = (candidates::between(s, a), candidates::between(s, b));
             let effect = match span.kind {
                 SpanKind::RoomFixed { .. } => Effect::Disturbance {
@@ -1187,20 +1189,29 @@ impl Setup<'_> {
             format!("samples {}–{}", sp.start, sp.end)
         };
         let explanation = match sp.kind {
+            SpanKind::SensorFixed { offset_ut, .. } | SpanKind::RoomFixed { field_ned_ut: offset_ut }
+                if !sp.turned =>
+            {
+                format!(
+                    "{when}: a constant field of {:.1} µT while the sensor hardly turned (fixed to the sensor or to \
+                     the room: they cannot be told apart, nor from something that moved) — left out of the calibration",
+                    frames::norm(offset_ut)
+                )
+            }
             SpanKind::SensorFixed {
                 offset_ut,
                 told_apart,
             } => format!(
-                "{when}: a field of {:.1} µT fixed to the sensor{} — modelled (bias_window), its samples kept",
+                "{when}: a field of {:.1} µT fixed to the sensor{} — modelled (bias_window), the samples it explains kept",
                 frames::norm(offset_ut),
                 if told_apart {
                     ""
                 } else {
-                    " (or to the room: the sensor hardly turned, so the two cannot be told apart)"
+                    " (or to the room: the two cannot be told apart here)"
                 }
             ),
             SpanKind::RoomFixed { field_ned_ut } => format!(
-                "{when}: a field of {:.1} µT fixed in the room — modelled (disturbance), its samples kept",
+                "{when}: a field of {:.1} µT fixed in the room — modelled (disturbance), the samples it explains kept",
                 frames::norm(field_ned_ut)
             ),
             SpanKind::Moving => format!(

@@ -1,0 +1,469 @@
+//! Acceptance (issue 10, item 2): gross disturbances on simulated benches, where the truth is known. Each seed is a
+//! random bench (`random_scenario`) with 0–3 disturbances of 3–300 µT (log-uniform), each of a random kind: a field
+//! fixed to the sensor for a while (`bias_window`, something attached to the board), a field fixed in the room for a
+//! while (`disturbance`), or a magnet fixed in the room near the moving sensor (`magnet_nearby`, sized by its peak
+//! on the recording, placed 3–8 cm beside the sensor's path: a pass by it). Windows last from 1 s to a fifth of the recording, in separate slots. Each seed is run by the
+//! vector method (attitude reference) and by the scalar method (the same readings without it, the magnitude known).
+//!
+//! Per run it checks, against the truth:
+//! - the final offset and A within 3 of their reported standard errors, every component (for the scalar method the
+//!   symmetric part of A, which is all it observes), with an error at most twice that of the same fit on the clean
+//!   samples alone, or 0.2 µT (offset) / 0.005 (A), whichever is larger — in at least 95 % of the runs;
+//! - every disturbance the method sees at more than 10 µT (the field's change for the vector method, its
+//!   magnitude's for the scalar one: a field fixed in the room across the Earth's changes the magnitude little)
+//!   located: a window's time and the spans that meet it overlap with an intersection over union of at least 0.5;
+//!   for a magnet, whose field falls off smoothly with distance, 90 % of the samples it perturbs by more than 10 µT
+//!   lie inside spans — at least 95 % of the disturbances;
+//! - the final model no worse than the base fit on a clean held-out recording of the same bench (another
+//!   trajectory): RMS residual at most 0.5 % above the base's — in every run;
+//! - runs without a disturbance: a false alarm (a verdict other than consistent) in at most 1 %.
+//!
+//! Heavy: `cargo test --release --test disturbed_study -- --ignored --nocapture` (CI runs it).
+
+use std::sync::Mutex;
+
+use magcal_app::calibrate::{Calibration, Method, calibrate};
+use magcal_app::field::ReferenceField;
+use magcal_calib::diagnosis::Verdict;
+use magcal_calib::effects::Effect;
+use magcal_calib::model::{Inputs, Model};
+use magcal_calib::{frames, scalar};
+use magcal_recording::Recording;
+use magcal_sim::study::{duration_s, random_scenario};
+use magcal_sim::{AttitudeOutput, Scenario, simulate, stream_rng};
+use nalgebra::Matrix3;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+const SEEDS: u64 = 200;
+/// Disturbances at least this large (µT) must be located.
+const MUST_LOCATE_UT: f64 = 10.0;
+/// A magnet is located when this share of the samples where it perturbs by more than 10 µT lies inside spans.
+const MAGNET_RECALL: f64 = 0.9;
+/// How much worse than the base the final model may fit the held-out recording (relative RMS).
+const HELD_OUT_SLACK: f64 = 0.005;
+
+/// 0–3 disturbances for a scenario, each with its size (µT).
+fn disturbances(s: &Scenario, seed: u64) -> Vec<(Effect, f64)> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xd157_0b0e);
+    let k = (seed % 4) as usize;
+    let t_end = duration_s(s);
+    let slot = 0.9 * t_end / k.max(1) as f64;
+    let mut dir = || {
+        let v: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
+        frames::scale(v, 1.0 / frames::norm(v).max(1e-9))
+    };
+    let dirs: Vec<([f64; 3], [f64; 3])> = (0..k).map(|_| (dir(), dir())).collect();
+    (0..k)
+        .map(|j| {
+            let size_ut = (rng.random_range(3.0f64.ln()..300.0f64.ln())).exp();
+            let len = rng.random_range(1.0..(0.2 * t_end).min(0.8 * slot));
+            let t0_s = 0.05 * t_end + j as f64 * slot + rng.random_range(0.0..slot - len);
+            let (d, d2) = dirs[j];
+            let e = match rng.random_range(0..3) {
+                0 => Effect::BiasWindow {
+                    t0_s,
+                    t1_s: t0_s + len,
+                    offset_ut: frames::scale(d, size_ut),
+                },
+                1 => Effect::Disturbance {
+                    t0_s,
+                    t1_s: t0_s + len,
+                    field_ned_ut: frames::scale(d, size_ut),
+                },
+                // Placed beside the sensor's path, 3–8 cm from where the sensor is at some moment: a pass by it.
+                _ => {
+                    let poses = s
+                        .trajectory
+                        .poses(s.sample_rate_hz, &mut stream_rng(s.seed, 1));
+                    let at = poses[rng.random_range(0..poses.len())].position_m;
+                    let m = Effect::MagnetNearby {
+                        position_m: frames::add(at, frames::scale(d, rng.random_range(0.03..0.08))),
+                        moment_am2: frames::scale(d2, 1e-4),
+                    };
+                    let peak = perturbation_ut(s, &m, true)
+                        .into_iter()
+                        .fold(0.0, f64::max);
+                    let (p, _) = m.params();
+                    m.with_params(p.map(|v| v * size_ut / peak))
+                }
+            };
+            (e, size_ut)
+        })
+        .collect()
+}
+
+/// The size of an effect's perturbation at each sample (µT), from noise-free simulations: of the calibrated field
+/// (`vector`), or of its magnitude, which is all the scalar method sees.
+fn perturbation_ut(s: &Scenario, e: &Effect, vector: bool) -> Vec<f64> {
+    let quiet = Scenario {
+        noise_ut: [0.0; 3],
+        lsb_ut: None,
+        attitude_noise_deg: 0.0,
+        effects: Vec::new(),
+        ..s.clone()
+    };
+    let with = Scenario {
+        effects: vec![*e],
+        ..quiet.clone()
+    };
+    let (a, b) = (simulate(&quiet).unwrap(), simulate(&with).unwrap());
+    a.truth
+        .clean_raw_ut
+        .iter()
+        .zip(&b.truth.clean_raw_ut)
+        .map(|(x, y)| {
+            let cal = |r: [f64; 3]| frames::add(frames::mat_vec(&s.sensor.a, r), s.sensor.b_ut);
+            if vector {
+                frames::norm(frames::sub(cal(*y), cal(*x)))
+            } else {
+                (frames::norm(cal(*y)) - frames::norm(cal(*x))).abs()
+            }
+        })
+        .collect()
+}
+
+/// The recording's rows where `keep` holds.
+fn rows(rec: &Recording, keep: &[bool]) -> Recording {
+    fn pick<T: Clone>(v: &[T], keep: &[bool]) -> Vec<T> {
+        v.iter()
+            .zip(keep)
+            .filter(|(_, k)| **k)
+            .map(|(x, _)| x.clone())
+            .collect()
+    }
+    let mut out = rec.clone();
+    out.t_s = rec.t_s.as_deref().map(|v| pick(v, keep));
+    out.mag_ut = pick(&rec.mag_ut, keep);
+    out.temp_c = rec.temp_c.as_deref().map(|v| pick(v, keep));
+    out.quat = rec.quat.as_deref().map(|v| pick(v, keep));
+    out.ref_ut = rec.ref_ut.as_deref().map(|v| pick(v, keep));
+    out.gyro_rad_s = rec.gyro_rad_s.as_deref().map(|v| pick(v, keep));
+    for c in &mut out.currents {
+        c.values = pick(&c.values, keep);
+    }
+    for c in &mut out.extra {
+        c.values = pick(&c.values, keep);
+    }
+    out
+}
+
+fn field(s: &Scenario, vector: bool) -> ReferenceField {
+    if vector {
+        ReferenceField::Vector {
+            field_ned_ut: s.field_ned_ut,
+            source: "simulated".into(),
+        }
+    } else {
+        ReferenceField::Magnitude {
+            field_ut: frames::norm(s.field_ned_ut),
+            source: "simulated".into(),
+        }
+    }
+}
+
+/// What the method can observe of the true A: all of it (vector), its symmetric part `√(AᵀA)` (scalar).
+fn observable_a(a: &[[f64; 3]; 3], vector: bool) -> Matrix3<f64> {
+    let m = Matrix3::from_fn(|j, k| a[j][k]);
+    if vector {
+        return m;
+    }
+    let e = (m.transpose() * m).symmetric_eigen();
+    e.eigenvectors * Matrix3::from_diagonal(&e.eigenvalues.map(f64::sqrt)) * e.eigenvectors.transpose()
+}
+
+/// Largest |A error| element and the offset error's norm (µT) of a model against the truth.
+fn errors(model: &Model, truth_a: &Matrix3<f64>, truth_offset: [f64; 3]) -> (f64, f64) {
+    let a = Matrix3::from_fn(|j, k| model.a[j][k]);
+    let o = scalar::centre(&model.a, model.b_ut);
+    (
+        (a - truth_a).abs().max(),
+        frames::norm(frames::sub(o, truth_offset)),
+    )
+}
+
+/// Largest error over standard error among A's components and the offset's.
+fn worst_z(cal: &Calibration, truth_a: &Matrix3<f64>, truth_offset: [f64; 3]) -> f64 {
+    let model = cal.model();
+    let (a_se, _) = cal.standard_errors();
+    let o_se = cal.offset_se_ut();
+    let o = scalar::centre(&model.a, model.b_ut);
+    let za = (0..9).map(|i| {
+        let (j, k) = (i / 3, i % 3);
+        (model.a[j][k] - truth_a[(j, k)]).abs() / a_se[j][k]
+    });
+    let zo = (0..3).map(|k| (o[k] - truth_offset[k]).abs() / o_se[k]);
+    za.chain(zo).fold(0.0, f64::max)
+}
+
+/// RMS residual of a model on a recording against the truth: per axis (vector) or of the magnitude (scalar).
+fn held_out_rms(model: &Model, rec: &Recording, s: &Scenario, vector: bool) -> f64 {
+    let t = rec.t_s.as_ref().unwrap();
+    let q = rec.quat.as_ref().unwrap();
+    let f = frames::norm(s.field_ned_ut);
+    let mut ss = 0.0;
+    for i in 0..rec.mag_ut.len() {
+        let currents: Vec<f64> = rec.currents.iter().map(|c| c.values[i]).collect();
+        let inputs = Inputs {
+            t_s: t[i],
+            temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |v| v[i]),
+            currents_a: &currents,
+        };
+        let b = model.apply(rec.mag_ut[i], &inputs);
+        ss += if vector {
+            let e = frames::sub(b, frames::expected_sensor_field(q[i], s.field_ned_ut));
+            frames::dot(e, e) / 3.0
+        } else {
+            (frames::norm(b) - f).powi(2)
+        };
+    }
+    (ss / rec.mag_ut.len() as f64).sqrt()
+}
+
+/// Intersection over union of `truth` with the spans that meet it.
+fn iou(truth: &[bool], t: &[f64], spans: &[(f64, f64)]) -> f64 {
+    let meets: Vec<&(f64, f64)> = spans
+        .iter()
+        .filter(|(a, b)| t.iter().zip(truth).any(|(t, x)| *x && (a..=b).contains(&t)))
+        .collect();
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (t, x) in t.iter().zip(truth) {
+        let d = meets.iter().any(|(a, b)| (a..=b).contains(&t));
+        inter += usize::from(*x && d);
+        union += usize::from(*x || d);
+    }
+    inter as f64 / union.max(1) as f64
+}
+
+#[derive(Default)]
+struct Tally {
+    runs: usize,
+    nulls: usize,
+    false_alarms: Vec<String>,
+    /// Runs within 3 SE and within the error bound.
+    good: usize,
+    bad: Vec<String>,
+    must_locate: usize,
+    located: usize,
+    missed: Vec<String>,
+    worse: Vec<String>,
+    refused: Vec<String>,
+}
+
+fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
+    let mut s = random_scenario(seed);
+    if !vector {
+        s.attitude = AttitudeOutput::None;
+    }
+    let dist = disturbances(&s, seed);
+    s.effects = dist.iter().map(|(e, _)| *e).collect();
+    let sim = simulate(&s).unwrap();
+    let rec = &sim.recording;
+    let what = format!(
+        "seed {seed} {}: {:?}",
+        if vector { "vector" } else { "scalar" },
+        dist.iter()
+            .map(|(e, size)| format!("{} {size:.1} µT", e.id()))
+            .collect::<Vec<_>>()
+    );
+    let cal = match calibrate(rec, Method::Auto, field(&s, vector), true) {
+        Ok(c) => c,
+        Err(e) => {
+            tally.lock().unwrap().refused.push(format!("{what}: {e}"));
+            return;
+        }
+    };
+    let d = cal.diagnosis.as_ref().expect("diagnosed");
+    let t = rec.t_s.as_ref().unwrap();
+    // Where each disturbance is, and the clean rows.
+    let perturbed: Vec<Vec<f64>> = dist
+        .iter()
+        .map(|(e, _)| perturbation_ut(&s, e, vector))
+        .collect();
+    let noise = s.noise_ut[0];
+    let clean: Vec<bool> = (0..t.len())
+        .map(|i| perturbed.iter().all(|p| p[i] < 0.5 * noise))
+        .collect();
+    let truth_a = observable_a(&s.sensor.a, vector);
+    let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
+    let (a_err, o_err) = errors(&cal.model(), &truth_a, truth_offset);
+    let clean_fit = calibrate(&rows(rec, &clean), Method::Auto, field(&s, vector), false);
+    let (a_bound, o_bound) = match &clean_fit {
+        Ok(c) => {
+            let (a, o) = errors(&c.model(), &truth_a, truth_offset);
+            ((2.0 * a).max(0.005), (2.0 * o).max(0.2))
+        }
+        Err(_) => (f64::INFINITY, f64::INFINITY),
+    };
+    let z = worst_z(&cal, &truth_a, truth_offset);
+    let spans: Vec<(f64, f64)> = d.spans.iter().map(|sp| (sp.t0_s, sp.t1_s)).collect();
+    // A clean held-out recording of the same bench: another trajectory and noise (the held-out always has the
+    // attitude, to compute the truth).
+    let held = Scenario {
+        seed: seed + 1_000_000,
+        effects: Vec::new(),
+        attitude: AttitudeOutput::Quaternion,
+        ..s.clone()
+    };
+    let held_rec = simulate(&held).unwrap().recording;
+    let (base_ho, final_ho) = (
+        held_out_rms(&cal.base_model(), &held_rec, &s, vector),
+        held_out_rms(&cal.model(), &held_rec, &s, vector),
+    );
+    let found: Vec<String> = d
+        .effects
+        .iter()
+        .map(|e| format!("{} {:.1} µT", e.effect.id(), e.size_ut))
+        .chain(d.spans.iter().map(|sp| sp.explanation.clone()))
+        .collect();
+    let what = format!("{what} → found {found:?}");
+    let mut tl = tally.lock().unwrap();
+    tl.runs += 1;
+    if dist.is_empty() {
+        tl.nulls += 1;
+        if d.verdict != Verdict::Consistent {
+            let ids: Vec<&str> = d.effects.iter().map(|e| e.effect.id().as_str()).collect();
+            tl.false_alarms
+                .push(format!("{what}: {ids:?}, {} spans", d.spans.len()));
+        }
+    }
+    if z <= 3.0 && a_err <= a_bound && o_err <= o_bound {
+        tl.good += 1;
+    } else {
+        tl.bad.push(format!(
+            "{what}: worst z {z:.2}, A err {a_err:.4} (bound {a_bound:.4}), offset err {o_err:.3} µT \
+             (bound {o_bound:.3})"
+        ));
+    }
+    for ((e, _), p) in dist.iter().zip(&perturbed) {
+        // What the method sees of it.
+        let visible_ut = p.iter().copied().fold(0.0, f64::max);
+        if visible_ut < MUST_LOCATE_UT {
+            continue;
+        }
+        tl.must_locate += 1;
+        let (ok, how) = match e {
+            Effect::BiasWindow { t0_s, t1_s, .. } | Effect::Disturbance { t0_s, t1_s, .. } => {
+                let truth: Vec<bool> = t.iter().map(|t| (t0_s..=t1_s).contains(&t)).collect();
+                let u = iou(&truth, t, &spans);
+                (u >= 0.5, format!("IoU {u:.2}"))
+            }
+            _ => {
+                let above: Vec<f64> = t
+                    .iter()
+                    .zip(p)
+                    .filter(|(_, v)| **v > MUST_LOCATE_UT)
+                    .map(|(t, _)| *t)
+                    .collect();
+                let inside = above
+                    .iter()
+                    .filter(|t| spans.iter().any(|(a, b)| (a..=b).contains(t)))
+                    .count();
+                let share = inside as f64 / above.len() as f64;
+                (share >= MAGNET_RECALL, format!("{:.0} % of it inside", 100.0 * share))
+            }
+        };
+        if ok {
+            tl.located += 1;
+        } else {
+            tl.missed.push(format!(
+                "{what}: {} seen at up to {visible_ut:.1} µT, {how}, spans {spans:?}",
+                e.id()
+            ));
+        }
+    }
+    if final_ho > base_ho * (1.0 + HELD_OUT_SLACK) {
+        tl.worse.push(format!(
+            "{what}: held-out {base_ho:.4} → {final_ho:.4} µT"
+        ));
+    }
+}
+
+fn report(name: &str, t: &Tally) {
+    let pct = |a: usize, n: usize| 100.0 * a as f64 / n.max(1) as f64;
+    println!("## {name}");
+    println!(
+        "| runs | within 3 SE and the error bound | disturbances > 10 µT located (IoU ≥ 0.5) | final worse than base on held-out | false alarms on nulls | refused |"
+    );
+    println!("|---|---|---|---|---|---|");
+    println!(
+        "| {} | {:.1} % | {} of {} ({:.1} %) | {} | {} of {} | {} |",
+        t.runs,
+        pct(t.good, t.runs),
+        t.located,
+        t.must_locate,
+        pct(t.located, t.must_locate),
+        t.worse.len(),
+        t.false_alarms.len(),
+        t.nulls,
+        t.refused.len()
+    );
+    for (label, list) in [
+        ("outside", &t.bad),
+        ("missed", &t.missed),
+        ("worse", &t.worse),
+        ("false alarm", &t.false_alarms),
+        ("refused", &t.refused),
+    ] {
+        for l in list {
+            println!("{label}: {l}");
+        }
+    }
+}
+
+fn study(vector: bool) -> Tally {
+    let tally = Mutex::new(Tally::default());
+    let next = Mutex::new(0u64);
+    std::thread::scope(|scope| {
+        for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
+            scope.spawn(|| {
+                loop {
+                    let seed = {
+                        let mut n = next.lock().unwrap();
+                        *n += 1;
+                        *n
+                    };
+                    if seed > SEEDS {
+                        break;
+                    }
+                    run(seed, vector, &tally);
+                }
+            });
+        }
+    });
+    tally.into_inner().unwrap()
+}
+
+fn check(t: &Tally) {
+    let pct = |a: usize, n: usize| 100.0 * a as f64 / n.max(1) as f64;
+    assert!(t.refused.is_empty(), "refused: {:?}", t.refused);
+    assert!(pct(t.good, t.runs) >= 95.0, "{} of {} runs good", t.good, t.runs);
+    assert!(
+        pct(t.located, t.must_locate) >= 95.0,
+        "{} of {} located",
+        t.located,
+        t.must_locate
+    );
+    assert!(t.worse.is_empty(), "{:?}", t.worse);
+    assert!(
+        pct(t.false_alarms.len(), t.nulls) <= 1.0,
+        "{:?}",
+        t.false_alarms
+    );
+}
+
+#[test]
+#[ignore = "statistics over 200 seeds: run in release (CI does)"]
+fn vector_method_calibrates_around_gross_disturbances() {
+    let t = study(true);
+    report("vector method", &t);
+    check(&t);
+}
+
+#[test]
+#[ignore = "statistics over 200 seeds: run in release (CI does)"]
+fn scalar_method_calibrates_around_gross_disturbances() {
+    let t = study(false);
+    report("scalar method", &t);
+    check(&t);
+}
