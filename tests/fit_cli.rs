@@ -264,3 +264,148 @@ fn no_output_ever_overwrites_the_input_and_nothing_is_written_when_one_would() {
     );
     assert!(report.exists());
 }
+
+/// The named lines of an effect left out, as the export and the terminal print them.
+fn named(kind: &str, effect: &serde_json::Value) -> String {
+    format!(
+        "{kind} {}, {:.3} µT RMS per axis on this recording: {}",
+        effect["id"].as_str().unwrap(),
+        effect["size_ut"].as_f64().unwrap(),
+        effect["what"].as_str().unwrap()
+    )
+}
+
+/// Issue 7, defect 7: an export names each effect the diagnosis found, with its size on the recording and its
+/// parameters, says what the target holds, and claims to hold none of them; the terminal shows the same lines.
+#[test]
+fn exports_name_each_correction_left_out_with_its_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixture = |name: &str| {
+        format!(
+            "{}/fixtures/diagnosis/{name}.csv",
+            env!("CARGO_MANIFEST_DIR")
+        )
+    };
+    let run = |name: &str, extra: &[&str]| {
+        let rec = fixture(name);
+        let mut args = vec![rec.as_str()];
+        args.extend_from_slice(extra);
+        let out = magcal_fit(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (
+            String::from_utf8(out.stdout).unwrap(),
+            String::from_utf8(out.stderr).unwrap(),
+        )
+    };
+
+    // The JSON lists them in full, with the report's size and parameters.
+    let (report, json) = (dir.path().join("r.json"), dir.path().join("e.json"));
+    let (rs, js) = (report.to_str().unwrap(), json.to_str().unwrap());
+    run(
+        "temperature_bias",
+        &["--report", rs, "--export", "json", "--export-out", js],
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let export: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let found = &report["diagnosis"]["effects"];
+    let left = export["left_out"].as_array().unwrap();
+    assert_eq!(left.len(), 1, "{export}");
+    let temp = &left[0];
+    assert_eq!(temp["id"], "temperature_bias");
+    assert_eq!(temp["correction"], true);
+    assert_eq!(temp["size_ut"], found[0]["size_ut"]);
+    assert_eq!(
+        temp["params"]["coef_ut_per_c"],
+        found[0]["params"]["coef_ut_per_c"]
+    );
+    let size = temp["size_ut"].as_f64().unwrap();
+    assert!(size > 0.03 && size < 0.2, "{size}");
+    // The fixture's coefficient is 0.073 µT/°C (its .truth.toml): said in human units.
+    assert!(
+        temp["what"]
+            .as_str()
+            .unwrap()
+            .starts_with("offset follows temperature: 0.07"),
+        "{temp}"
+    );
+    let line = named("left out:", temp);
+
+    // Every text format names it in the file, and the terminal says the same.
+    for (format, holds, parameter) in [
+        (
+            "ardupilot",
+            "# what the target holds: ArduPilot's COMPASS_*",
+            "COMPASS_",
+        ),
+        (
+            "px4",
+            "# what the target holds: PX4's CAL_MAG0_*",
+            "1\t1\tCAL_MAG0_",
+        ),
+        (
+            "c-header",
+            "/* what the target holds: the header holds A and b only */",
+            "static const",
+        ),
+    ] {
+        let (stdout, stderr) = run("temperature_bias", &["--export", format]);
+        assert!(stdout.contains(holds), "{format}:\n{stdout}");
+        assert!(stdout.contains(&line), "{format}: no {line}\n{stdout}");
+        assert!(stderr.contains(&format!("  {line}")), "{format}:\n{stderr}");
+        // Only the linear model is written: no compensation the target could hold is claimed.
+        let written: Vec<&str> = stdout
+            .lines()
+            .filter(|l| l.starts_with(parameter))
+            .collect();
+        assert!(
+            written.len() == if format == "c-header" { 2 } else { 9 }
+                && written
+                    .iter()
+                    .all(|l| !l.contains("COMPASS_MOT") && !l.contains("COMP\t")),
+            "{format}: {written:?}"
+        );
+    }
+
+    // A current's field: ArduPilot and PX4 have a place for one, not written with A and b fitted without it.
+    let (ap, _) = run("current_bias", &["--export", "ardupilot"]);
+    let (px, _) = run("current_bias", &["--export", "px4"]);
+    for (text, place) in [
+        (&ap, "not written: COMPASS_MOT_X/Y/Z"),
+        (&px, "not written: CAL_MAG0_XCOMP/YCOMP/ZCOMP"),
+    ] {
+        let line = text
+            .lines()
+            .find(|l| l.contains("left out: current_bias, "))
+            .unwrap_or_else(|| panic!("{text}"));
+        assert!(
+            line.contains("the current in i_motor adds a field of 0.") && line.contains(place),
+            "{line}"
+        );
+    }
+
+    // A timing effect is no correction: named as such, nothing said left out or fitted without.
+    let (stdout, _) = run("time_lag", &["--export", "px4"]);
+    assert!(
+        stdout.contains("# not a correction: time_lag, ")
+            && stdout.contains("the magnetometer sample is late by"),
+        "{stdout}"
+    );
+    assert!(
+        !stdout.contains("left out:") && !stdout.contains("fitted without"),
+        "{stdout}"
+    );
+
+    // A chip's offset registers (--write-to): the same named list.
+    let (stdout, _) = run("temperature_bias", &["--write-to", "sim:lis2mdl"]);
+    assert!(
+        stdout.contains("the chip's offset registers hold an offset only")
+            && stdout.contains(&format!("  {line}")),
+        "{stdout}"
+    );
+}

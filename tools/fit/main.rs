@@ -176,9 +176,9 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
     // Exports and devices hold A and b only: the base fit when the final model has corrections.
     let target = target_model(&cal);
-    let corrections = cal.model().corrections().count();
+    let found = cal.diagnosis.as_ref().map_or(&[][..], |d| &d.effects[..]);
     if let Some(format) = args.export {
-        let text = export(&target, format, corrections);
+        let text = export(&target, format, found);
         match &args.export_out {
             Some(path) => write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?,
@@ -200,7 +200,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     };
     say(&format!(
         "\n{}",
-        how_to_apply(where_to, args.out.as_deref(), corrections)
+        how_to_apply(where_to, args.out.as_deref(), found)
     ));
     Ok(())
 }

@@ -10,8 +10,12 @@
 //! Both matrices are symmetric, and `A` from a vector fit is not (it includes the sensor's misalignment): `A` is split
 //! as `A = R·S` (polar decomposition), `S` is exported and the rotation `R` is reported in a comment — set it as the
 //! board orientation if it matters. The offsets are exact either way, since `A⁻¹·b = S⁻¹·R⁻¹·b` is what both apply.
+//!
+//! Every effect the diagnosis found is named in the output with its size and parameters, and why the target does not
+//! carry it ([`left_out_lines`]): the same lines go to the terminal ([`crate::howto`]).
 
-use magcal_calib::Model;
+use magcal_calib::diagnosis::FoundEffect;
+use magcal_calib::{EffectId, Frame, Model};
 use nalgebra::{Matrix3, Vector3};
 
 /// An export format.
@@ -25,6 +29,102 @@ pub enum ExportFormat {
     CHeader,
     /// JSON with `A`, `b_ut` and the offset.
     Json,
+}
+
+/// Where the calibration goes, for saying what it cannot hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Holder {
+    /// An export format.
+    Format(ExportFormat),
+    /// A MotionCal-style board written with `--write-to serial:…`.
+    Board,
+    /// A chip's offset registers written with `--write-to`.
+    Chip,
+}
+
+impl Holder {
+    /// What the target holds.
+    fn holds(self) -> &'static str {
+        match self {
+            Holder::Format(ExportFormat::Ardupilot) => {
+                "ArduPilot's COMPASS_* parameters hold an offset (OFS), a symmetric matrix (DIA, ODI) and a field \
+                 per amp of the battery current or per throttle (MOT, MOTCT)"
+            }
+            Holder::Format(ExportFormat::Px4) => {
+                "PX4's CAL_MAG0_* parameters hold an offset (OFF), a symmetric matrix (SCALE, ODIAG) and a field \
+                 per kA of a battery's current or per throttle (COMP, with CAL_MAG_COMP_TYP)"
+            }
+            Holder::Format(ExportFormat::CHeader) => "the header holds A and b only",
+            Holder::Format(ExportFormat::Json) => "the JSON's A and b_ut are the linear model only",
+            Holder::Board => {
+                "MotionCal's calibration packet holds an offset, a symmetric matrix and the field magnitude"
+            }
+            Holder::Chip => "the chip's offset registers hold an offset only",
+        }
+    }
+}
+
+/// Whether a found effect is a correction of the sensor, which the final model and the parameters file hold (the
+/// others are the bench's, the world's or one recording's events).
+pub fn is_correction(id: EffectId) -> bool {
+    id.frame() == Frame::Body && !id.is_transient()
+}
+
+/// Why `holder` does not carry the found effect `e`.
+fn why_not(e: &FoundEffect, holder: Holder) -> String {
+    let id = e.effect.id();
+    let channel = e.channel.as_deref().unwrap_or("the current channel");
+    let fitted_without = "these A and b were fitted without it, and the compensation is only right with A and b \
+                          fitted with it";
+    match (id, holder) {
+        _ if id.is_transient() => {
+            "an event of this recording, not of the sensor: nothing to carry over".to_owned()
+        }
+        _ if id.frame() == Frame::Timing => {
+            "timing between the magnetometer and the attitude reference, not the sensor's readings: nothing to \
+             carry over"
+                .to_owned()
+        }
+        _ if id.frame() == Frame::World => {
+            "the world field, not the sensor: nothing to carry over".to_owned()
+        }
+        (EffectId::CurrentBias, Holder::Format(ExportFormat::Ardupilot)) => format!(
+            "not written: COMPASS_MOT_X/Y/Z with COMPASS_MOTCT 2 hold a field per amp of the battery monitor's \
+             current (if {channel} is that current), but {fitted_without} (ArduPilot's compassmot measures it on the \
+             vehicle); the parameters file (--out) keeps it"
+        ),
+        (EffectId::CurrentBias, Holder::Format(ExportFormat::Px4)) => format!(
+            "not written: CAL_MAG0_XCOMP/YCOMP/ZCOMP with CAL_MAG_COMP_TYP current-based hold a field per kA of a \
+             battery's current (if {channel} is that current), but {fitted_without}; the parameters file (--out) \
+             keeps it"
+        ),
+        _ => "no place for it there; the parameters file (--out) keeps it".to_owned(),
+    }
+}
+
+/// One line per effect the diagnosis `found` (in the order found), naming it with its size on the recording, what it
+/// is, and why `holder` does not carry it: `left out:` for the sensor's corrections, `not a correction:` for the
+/// rest. Empty when nothing was found.
+pub fn left_out_lines(found: &[FoundEffect], holder: Holder) -> Vec<String> {
+    if found.is_empty() {
+        return Vec::new();
+    }
+    let mut lines = vec![format!("what the target holds: {}", holder.holds())];
+    for e in found {
+        lines.push(format!(
+            "{} {}, {:.3} µT RMS per axis on this recording: {}; {}",
+            if is_correction(e.effect.id()) {
+                "left out:"
+            } else {
+                "not a correction:"
+            },
+            e.effect.id(),
+            e.size_ut,
+            e.what,
+            why_not(e, holder)
+        ));
+    }
+    lines
 }
 
 /// `A = R·S`, `R` a rotation and `S` symmetric positive definite.
@@ -58,10 +158,20 @@ impl Polar {
     }
 }
 
-/// The model in another tool's format. Only the linear part can be exported; body-fixed corrections are listed in a
-/// comment where the format has comments. `fitted_without` is the number of corrections of the final model this
-/// `A` and `b` were fitted without (see [`crate::verdict::target_model`]), said in the same comment.
-pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> String {
+/// The model in another tool's format. Only the linear part can be exported; body-fixed corrections are counted in a
+/// comment (the JSON's `notes`). `found` are the effects the diagnosis found: each is named in comments (the JSON's
+/// `left_out`, in full) with why the format does not carry it ([`left_out_lines`]); when `model` has no corrections,
+/// its `A` and `b` are taken to be fitted without those of `found` (see [`crate::verdict::target_model`]).
+pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> String {
+    let fitted_without = if model.corrections().count() > 0 {
+        0
+    } else {
+        found
+            .iter()
+            .filter(|e| is_correction(e.effect.id()))
+            .count()
+    };
+    let named = left_out_lines(found, Holder::Format(format));
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let centre = -(a.try_inverse().unwrap_or_else(Matrix3::zeros) * Vector3::from(model.b_ut));
     let polar = Polar::of(&model.a);
@@ -87,7 +197,7 @@ pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> Str
             let mut out = String::from(
                 "# magcal calibration for ArduPilot: corrected = M·(raw + OFS), OFS in mGauss\n",
             );
-            for n in &notes {
+            for n in notes.iter().chain(&named) {
                 out += &format!("# {n}\n");
             }
             let ofs = -centre * 10.0;
@@ -106,7 +216,7 @@ pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> Str
             let mut out = String::from(
                 "# magcal calibration for PX4 (QGroundControl .params): corrected = S·(raw − OFF), OFF in gauss\n",
             );
-            for n in &notes {
+            for n in notes.iter().chain(&named) {
                 out += &format!("# {n}\n");
             }
             out += "# Vehicle-Id\tComponent-Id\tName\tValue\tType\n";
@@ -130,6 +240,9 @@ pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> Str
             if dropped > 0 {
                 out += &format!("/* {} */\n", notes[1]);
             }
+            for n in &named {
+                out += &format!("/* {} */\n", n.replace("*/", "* /"));
+            }
             out += "static const float MAGCAL_A[3][3] = {\n";
             for row in &model.a {
                 out += &format!(
@@ -152,6 +265,15 @@ pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> Str
                 "b_ut": model.b_ut,
                 "offset_ut": [centre.x, centre.y, centre.z],
                 "notes": if dropped > 0 { vec![notes[1].clone()] } else { vec![] },
+                "target_holds": Holder::Format(format).holds(),
+                "left_out": found.iter().map(|e| serde_json::json!({
+                    "id": e.effect.id().as_str(),
+                    "correction": is_correction(e.effect.id()),
+                    "size_ut": e.size_ut,
+                    "params": crate::report::params_json(e),
+                    "what": e.what,
+                    "why": why_not(e, Holder::Format(format)),
+                })).collect::<Vec<_>>(),
             });
             serde_json::to_string_pretty(&value).expect("plain data") + "\n"
         }
@@ -159,7 +281,7 @@ pub fn export(model: &Model, format: ExportFormat, fitted_without: usize) -> Str
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn value(text: &str, name: &str) -> f64 {
@@ -195,7 +317,7 @@ mod tests {
             let b = model.apply([raw.x, raw.y, raw.z], &magcal_calib::Inputs::NONE);
             Polar::of(&model.a).rotation.transpose() * Vector3::from(b)
         };
-        let ap = export(&model, ExportFormat::Ardupilot, 0);
+        let ap = export(&model, ExportFormat::Ardupilot, &[]);
         let ofs = Vector3::new(
             value(&ap, "COMPASS_OFS_X"),
             value(&ap, "COMPASS_OFS_Y"),
@@ -216,7 +338,7 @@ mod tests {
         assert!((ap_mg / 10.0 - ours).norm() < 1e-3, "{ap_mg} vs {ours}");
         assert!((m - s).norm() < 1e-5);
 
-        let px = export(&model, ExportFormat::Px4, 0);
+        let px = export(&model, ExportFormat::Px4, &[]);
         let off = Vector3::new(
             value(&px, "CAL_MAG0_XOFF"),
             value(&px, "CAL_MAG0_YOFF"),
@@ -251,17 +373,112 @@ mod tests {
         );
     }
 
+    /// A found effect with only what the export reads.
+    fn found(effect: magcal_calib::Effect, channel: Option<&str>, size_ut: f64) -> FoundEffect {
+        FoundEffect {
+            effect,
+            channel: channel.map(str::to_owned),
+            params: Vec::new(),
+            rms_before_ut: 0.0,
+            rms_after_ut: 0.0,
+            holdout_rms_before_ut: 0.0,
+            holdout_rms_after_ut: 0.0,
+            evidence: 0.0,
+            size_ut,
+            what: format!("what {}", effect.id()),
+            explanation: String::new(),
+        }
+    }
+
+    /// A temperature bias and a current bias (corrections) and a time lag (not one).
+    pub(crate) fn three_found() -> Vec<FoundEffect> {
+        use magcal_calib::Effect;
+        vec![
+            found(
+                Effect::TemperatureBias {
+                    coef_ut_per_c: [0.01, 0.0, 0.0],
+                    t_ref_c: 20.0,
+                },
+                None,
+                0.163,
+            ),
+            found(
+                Effect::CurrentBias {
+                    channel: 0,
+                    coef_ut_per_a: [0.2, 0.0, 0.0],
+                },
+                Some("i_motor"),
+                0.171,
+            ),
+            found(Effect::TimeLag { lag_s: 0.012 }, None, 0.118),
+        ]
+    }
+
     #[test]
     fn the_c_header_and_json_carry_a_and_b() {
         let (model, _) = skewed_model();
-        let h = export(&model, ExportFormat::CHeader, 2);
+        let h = export(&model, ExportFormat::CHeader, &three_found());
         assert!(h.contains("MAGCAL_A[3][3]") && h.contains("12.000000f"));
         assert!(
             h.contains("fitted without the 2 body-fixed correction(s)"),
             "{h}"
         );
+        assert!(
+            h.contains(
+                "/* left out: temperature_bias, 0.163 µT RMS per axis on this recording: what temperature_bias; no place"
+            ),
+            "{h}"
+        );
         let j: serde_json::Value =
-            serde_json::from_str(&export(&model, ExportFormat::Json, 0)).unwrap();
+            serde_json::from_str(&export(&model, ExportFormat::Json, &[])).unwrap();
         assert_eq!(j["b_ut"][2].as_f64(), Some(30.0));
+        assert_eq!(j["left_out"].as_array().map(Vec::len), Some(0));
+    }
+
+    /// Each format names every effect found with its size, says what it holds, and claims to hold none of them.
+    #[test]
+    fn every_format_names_what_it_leaves_out() {
+        let (model, _) = skewed_model();
+        let found = three_found();
+        for format in [
+            ExportFormat::Ardupilot,
+            ExportFormat::Px4,
+            ExportFormat::CHeader,
+            ExportFormat::Json,
+        ] {
+            let text = export(&model, format, &found);
+            for line in [
+                "left out: temperature_bias, 0.163 µT RMS per axis on this recording: what temperature_bias",
+                "left out: current_bias, 0.171 µT RMS per axis on this recording: what current_bias",
+                "not a correction: time_lag, 0.118 µT RMS per axis on this recording: what time_lag; timing",
+            ] {
+                assert_eq!(
+                    text.contains(line),
+                    format != ExportFormat::Json,
+                    "{format:?}: {line}\n{text}"
+                );
+            }
+            assert!(!text.contains("COMPASS_MOT_X,") && !text.contains("\tCAL_MAG0_XCOMP\t"));
+        }
+        let ap = export(&model, ExportFormat::Ardupilot, &found);
+        assert!(
+            ap.contains("# what the target holds: ArduPilot's COMPASS_*"),
+            "{ap}"
+        );
+        assert!(ap.contains("not written: COMPASS_MOT_X/Y/Z"), "{ap}");
+        let j: serde_json::Value =
+            serde_json::from_str(&export(&model, ExportFormat::Json, &found)).unwrap();
+        let left = j["left_out"].as_array().unwrap();
+        assert_eq!(left.len(), 3);
+        assert_eq!(left[1]["id"], "current_bias");
+        assert_eq!(left[1]["size_ut"].as_f64(), Some(0.171));
+        assert_eq!(left[1]["correction"], true);
+        assert_eq!(left[2]["correction"], false);
+        assert!(
+            j["target_holds"]
+                .as_str()
+                .unwrap()
+                .contains("linear model only")
+        );
     }
 }

@@ -4,8 +4,10 @@
 use std::fmt::Write;
 use std::path::Path;
 
+use magcal_calib::diagnosis::FoundEffect;
+
 use crate::device::DeviceSpec;
-use crate::export::ExportFormat;
+use crate::export::{ExportFormat, Holder, is_correction, left_out_lines};
 
 /// Where the calibration goes.
 #[derive(Clone, Copy, Debug)]
@@ -31,9 +33,9 @@ fn check_line(params: Option<&Path>) -> String {
     )
 }
 
-/// The lines for a target; `params` is the parameters file written (`--out`), `corrections` the number of body-fixed
-/// corrections the target cannot hold.
-pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, corrections: usize) -> String {
+/// The lines for a target; `params` is the parameters file written (`--out`), `found` the effects the diagnosis found,
+/// each named with why the target does not carry it ([`left_out_lines`]).
+pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, found: &[FoundEffect]) -> String {
     let mut out = String::new();
     let axes = "the values are in the sensor's axes as recorded: they fit where the magnetometer reports those same \
                 axes (record through the autopilot, or with the sensor aligned with the vehicle)";
@@ -109,12 +111,27 @@ pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, corrections: usiz
                     a recording to check with is raw again)\n";
         }
     }
-    if corrections > 0 && !matches!(target, Target::None) {
-        let _ = writeln!(
-            out,
-            "  the model's {corrections} body-fixed correction(s) have no place there: it gets A and b fitted without \
-             them; the parameters file keeps them"
-        );
+    let holder = match target {
+        Target::None => None,
+        Target::Export { format, .. } => Some(Holder::Format(format)),
+        Target::Device(DeviceSpec::Serial(_)) => Some(Holder::Board),
+        Target::Device(_) => Some(Holder::Chip),
+    };
+    let corrections = found
+        .iter()
+        .filter(|e| is_correction(e.effect.id()))
+        .count();
+    if let Some(holder) = holder {
+        if corrections > 0 {
+            let _ = writeln!(
+                out,
+                "  the model's {corrections} body-fixed correction(s) have no place there: it gets A and b fitted \
+                 without them; the parameters file keeps them"
+            );
+        }
+        for line in left_out_lines(found, holder) {
+            let _ = writeln!(out, "  {line}");
+        }
     }
     out + &check_line(params)
 }
@@ -132,7 +149,7 @@ mod tests {
                 path: Some(Path::new("cal.h")),
             },
             Some(params),
-            0,
+            &[],
         );
         assert!(
             c.contains("cal.h") && c.contains("MAGCAL_A[j][0] * raw[0]"),
@@ -145,25 +162,29 @@ mod tests {
                 path: None,
             },
             None,
-            2,
+            &crate::export::tests::three_found(),
         );
         assert!(
             ap.contains("param load") && ap.contains("COMPASS_ORIENT"),
             "{ap}"
         );
         assert!(ap.contains("2 body-fixed correction(s)"), "{ap}");
+        assert!(
+            ap.contains("\n  left out: current_bias, 0.171 µT RMS per axis on this recording: what current_bias; not written"),
+            "{ap}"
+        );
         let px = how_to_apply(
             Target::Export {
                 format: ExportFormat::Px4,
                 path: None,
             },
             None,
-            0,
+            &[],
         );
         assert!(
             px.contains("QGroundControl") && px.contains("CAL_MAG0_ID"),
             "{px}"
         );
-        assert!(how_to_apply(Target::None, None, 0).contains("--export"));
+        assert!(how_to_apply(Target::None, None, &[]).contains("--export"));
     }
 }

@@ -3,7 +3,7 @@
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
 //! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
-use magcal_calib::diagnosis::{Diagnosis, ParamValue, SpanKind, Verdict};
+use magcal_calib::diagnosis::{Diagnosis, FoundEffect, ParamValue, SpanKind, Verdict};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
@@ -235,6 +235,18 @@ pub struct OrientationReport {
     pub elsewhere_rms_ut: f64,
 }
 
+/// A found effect's parameters by name, each with `<name>_se` beside it where estimated.
+pub(crate) fn params_json(e: &FoundEffect) -> Map<String, Value> {
+    let mut params = Map::new();
+    for p in &e.params {
+        params.insert(p.name.to_owned(), json_value(&p.value));
+        if let Some(se) = &p.se {
+            params.insert(format!("{}_se", p.name), json_value(se));
+        }
+    }
+    params
+}
+
 fn json_value(v: &ParamValue) -> Value {
     match v {
         ParamValue::Number(x) => serde_json::json!(x),
@@ -255,25 +267,16 @@ impl DiagnosisReport {
             effects: d
                 .effects
                 .iter()
-                .map(|e| {
-                    let mut params = Map::new();
-                    for p in &e.params {
-                        params.insert(p.name.to_owned(), json_value(&p.value));
-                        if let Some(se) = &p.se {
-                            params.insert(format!("{}_se", p.name), json_value(se));
-                        }
-                    }
-                    EffectReport {
-                        id: e.effect.id().as_str().to_owned(),
-                        params,
-                        rms_before_ut: e.rms_before_ut,
-                        rms_after_ut: e.rms_after_ut,
-                        holdout_rms_before_ut: e.holdout_rms_before_ut,
-                        holdout_rms_after_ut: e.holdout_rms_after_ut,
-                        evidence: e.evidence,
-                        size_ut: e.size_ut,
-                        explanation: e.explanation.clone(),
-                    }
+                .map(|e| EffectReport {
+                    id: e.effect.id().as_str().to_owned(),
+                    params: params_json(e),
+                    rms_before_ut: e.rms_before_ut,
+                    rms_after_ut: e.rms_after_ut,
+                    holdout_rms_before_ut: e.holdout_rms_before_ut,
+                    holdout_rms_after_ut: e.holdout_rms_after_ut,
+                    evidence: e.evidence,
+                    size_ut: e.size_ut,
+                    explanation: e.explanation.clone(),
                 })
                 .collect(),
             ambiguous: d

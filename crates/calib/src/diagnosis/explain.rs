@@ -17,15 +17,10 @@ fn along(v: [f64; 3], unit: &str) -> String {
     format!("{m:.3} {unit} along {d}")
 }
 
-/// The sentence for a found effect, ending with the held-out residual before and after against the noise floor.
-pub(crate) fn explain(
-    e: &Effect,
-    channel: Option<&str>,
-    holdout: (f64, f64),
-    floor_ut: f64,
-    field_ut: f64,
-) -> String {
-    let what = match *e {
+/// What a found effect is, with its main parameters in physical units (`field_ut`: the field's magnitude, for the
+/// non-linearity's size).
+pub(crate) fn what(e: &Effect, channel: Option<&str>, field_ut: f64) -> String {
+    match *e {
         Effect::TemperatureBias { coef_ut_per_c, .. } => {
             format!(
                 "offset follows temperature: {}",
@@ -114,7 +109,12 @@ pub(crate) fn explain(
             "a magnet of {:.2} A·m² fixed in the room",
             frames::norm(moment_am2)
         ),
-    };
+    }
+}
+
+/// The sentence for a found effect (`what`, from [`what`]), ending with the held-out residual before and after
+/// against the noise floor.
+pub(crate) fn explain(what: &str, holdout: (f64, f64), floor_ut: f64) -> String {
     format!(
         "{what}; after modelling, held-out residual {:.3} → {:.3} µT, noise floor {floor_ut:.3} µT",
         holdout.0, holdout.1

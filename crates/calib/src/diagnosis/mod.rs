@@ -159,6 +159,8 @@ pub struct FoundEffect {
     pub evidence: f64,
     /// Its size: the RMS per axis of its perturbation over the samples where it acts, µT.
     pub size_ut: f64,
+    /// What it is, with its main parameters in physical units (the start of `explanation`).
+    pub what: String,
     /// The finding in words.
     pub explanation: String,
 }
@@ -920,14 +922,10 @@ impl Setup<'_> {
                 }
             };
             let holdout = (rms(cv.0), rms(cv.1));
+            let what = explain::what(effect, cand.channel.as_deref(), self.field_ut);
             effects.push(FoundEffect {
-                explanation: explain::explain(
-                    effect,
-                    cand.channel.as_deref(),
-                    holdout,
-                    self.noise_floor_ut,
-                    self.field_ut,
-                ),
+                explanation: explain::explain(&what, holdout, self.noise_floor_ut),
+                what,
                 params: params_of(effect, *se, cand, last.rss / rows * tau_last),
                 effect: *effect,
                 channel: cand.channel.clone(),
