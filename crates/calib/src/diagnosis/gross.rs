@@ -113,7 +113,12 @@ impl Residual<'_> {
 
 /// Whether sample `i` of a modelled span is explained by the span's constant: what it leaves is within
 /// [`KEPT_SCALES`] scales per axis. The rest (a ramp as a magnet is put on, a part that moved) stays out of the fit.
-pub(crate) fn explained_at(residual: &Residual<'_>, kind: &SpanKind, i: usize, scale_ut: f64) -> bool {
+pub(crate) fn explained_at(
+    residual: &Residual<'_>,
+    kind: &SpanKind,
+    i: usize,
+    scale_ut: f64,
+) -> bool {
     let left = match (residual, kind) {
         (Residual::Vector { e, .. }, SpanKind::SensorFixed { offset_ut, .. }) => {
             frames::norm(frames::sub(e[i], *offset_ut))

@@ -1187,9 +1187,10 @@ impl Setup<'_> {
             format!("samples {}–{}", sp.start, sp.end)
         };
         let explanation = match sp.kind {
-            SpanKind::SensorFixed { offset_ut, .. } | SpanKind::RoomFixed { field_ned_ut: offset_ut }
-                if !sp.turned =>
-            {
+            SpanKind::SensorFixed { offset_ut, .. }
+            | SpanKind::RoomFixed {
+                field_ned_ut: offset_ut,
+            } if !sp.turned => {
                 format!(
                     "{when}: a constant field of {:.1} µT while the sensor hardly turned (fixed to the sensor or to \
                      the room: they cannot be told apart, nor from something that moved) — left out of the calibration",
