@@ -43,6 +43,7 @@ pub use gross::SpanKind;
 pub use locate::{Located, Orientation, Segment};
 
 use crate::FitError;
+use crate::chunks;
 use crate::effects::{Effect, EffectId, Frame};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
@@ -61,6 +62,10 @@ pub const MIN_SAMPLES: usize = 50;
 const CV_BLOCKS: usize = 5;
 /// Contiguous batches for the residual's autocorrelation (method of batch means).
 const AUTOCORRELATION_BATCHES: usize = 100;
+const _: () = assert!(
+    AUTOCORRELATION_BATCHES.is_multiple_of(CV_BLOCKS),
+    "each batch lies within one block"
+);
 /// Passes of looking for gross spans (again after the catalogue's effects are out of the residual).
 pub const ROUNDS: usize = 3;
 
@@ -358,6 +363,15 @@ struct Setup<'a> {
     base: Model,
 }
 
+/// One batch's normal equations: its clean rows and its other included ones apart (the batch lies within one
+/// cross-validation block), its batch sums, and per candidate the rows where it acts.
+struct BatchPart {
+    clean: BlockStats,
+    other: BlockStats,
+    batch: Batches,
+    active: Vec<usize>,
+}
+
 /// One pass of stages 2–5.
 struct Round {
     spans: Vec<Span>,
@@ -603,77 +617,27 @@ impl<'a> Setup<'a> {
     }
 
     /// The normal equations of the included samples per block (and of the clean ones apart), counting where each
-    /// candidate acts.
+    /// candidate acts. Each batch of the autocorrelation lies within one block and is summed on its own, on all
+    /// threads; the batches are merged in order.
     fn accumulate(&self, cands: &mut [Candidate], included: &[bool], clean: &[bool]) -> Problem {
-        let s = self.samples;
-        let n = s.len();
         let columns = cands.last().map_or(self.n_base, |c| c.first + c.n);
         let dims = if self.vector { 3 } else { 1 };
+        let parts = chunks::parts(AUTOCORRELATION_BATCHES, |batch| {
+            self.accumulate_batch(batch, cands, included, clean, columns)
+        });
         let mut blocks: Vec<BlockStats> =
             (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
         let mut clean_blocks = blocks.clone();
         let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
-        let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
-        let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
         let mut active = vec![0usize; cands.len()];
-        let base = (0..n).map(|i| self.base_rho(i));
-        for (i, rho) in base.enumerate() {
-            if !included[i] {
-                continue;
-            }
-            let b = i * CV_BLOCKS / n;
-            let batch = i * AUTOCORRELATION_BATCHES / n;
-            blocks[b].samples += 1;
-            if clean[i] {
-                clean_blocks[b].samples += 1;
-            }
-            let ctx = s.context(i);
-            for (c, cand) in cands.iter().enumerate() {
-                regs[c] = cand.regressors(&ctx);
-            }
-            let mc = frames::sub(s.raw[i], self.raw_mean);
-            let mut add = |entries: &[(usize, f64)], dim: usize, y: f64| {
-                blocks[b].add_row(entries, y);
-                if clean[i] {
-                    clean_blocks[b].add_row(entries, y);
-                }
-                batches.add_row(batch, dim, entries, y);
-            };
-            if self.vector {
-                for j in 0..3 {
-                    entries.clear();
-                    entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
-                    entries.push((4 * j + 3, 1.0));
-                    for (c, cand) in cands.iter().enumerate() {
-                        let row: Vec<f64> = (0..cand.n).map(|k| -regs[c][k][j]).collect();
-                        if row.iter().any(|v| *v != 0.0) {
-                            active[c] += 1;
-                        }
-                        entries.extend(row.iter().enumerate().map(|(k, v)| (cand.first + k, *v)));
-                    }
-                    add(&entries, j, s.field[i][j]);
-                }
-            } else {
-                // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
-                let u = self.unit[i];
-                entries.clear();
-                for (k, (r, q)) in SYM.iter().enumerate() {
-                    let d = if r == q {
-                        u[*r] * mc[*q]
-                    } else {
-                        u[*r] * mc[*q] + u[*q] * mc[*r]
-                    };
-                    entries.push((k, d));
-                }
-                entries.extend((0..3).map(|k| (6 + k, u[k])));
-                for (c, cand) in cands.iter().enumerate() {
-                    let row: Vec<f64> = (0..cand.n).map(|k| -frames::dot(u, regs[c][k])).collect();
-                    if row.iter().any(|v| *v != 0.0) {
-                        active[c] += 1;
-                    }
-                    entries.extend(row.iter().enumerate().map(|(k, v)| (cand.first + k, *v)));
-                }
-                add(&entries, 0, -rho);
+        for (batch, part) in parts.iter().enumerate() {
+            let b = batch / (AUTOCORRELATION_BATCHES / CV_BLOCKS);
+            blocks[b].add(&part.clean);
+            blocks[b].add(&part.other);
+            clean_blocks[b].add(&part.clean);
+            batches.put(batch, &part.batch);
+            for (a, p) in active.iter_mut().zip(&part.active) {
+                *a += p;
             }
         }
         for (c, cand) in cands.iter_mut().enumerate() {
@@ -688,6 +652,87 @@ impl<'a> Setup<'a> {
             }
         }
         Problem::new(blocks, clean_blocks, batches, noise_var)
+    }
+
+    /// [`Setup::accumulate`] over the samples of one batch (`i·BATCHES/n` = `batch`); a candidate's zero regressors
+    /// are left out of the rows.
+    fn accumulate_batch(
+        &self,
+        batch: usize,
+        cands: &[Candidate],
+        included: &[bool],
+        clean: &[bool],
+        columns: usize,
+    ) -> BatchPart {
+        let s = self.samples;
+        let n = s.len();
+        let dims = if self.vector { 3 } else { 1 };
+        let mut part = BatchPart {
+            clean: BlockStats::new(columns),
+            other: BlockStats::new(columns),
+            batch: Batches::new(1, dims, columns),
+            active: vec![0; cands.len()],
+        };
+        let first = (batch * n).div_ceil(AUTOCORRELATION_BATCHES);
+        let end = ((batch + 1) * n).div_ceil(AUTOCORRELATION_BATCHES);
+        let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
+        let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
+        for i in (first..end).filter(|&i| included[i]) {
+            let ctx = s.context(i);
+            for (c, cand) in cands.iter().enumerate() {
+                regs[c] = cand.regressors(&ctx);
+            }
+            let mc = frames::sub(s.raw[i], self.raw_mean);
+            let stats = if clean[i] {
+                &mut part.clean
+            } else {
+                &mut part.other
+            };
+            stats.samples += 1;
+            // A candidate's values in a row from its regressors, the zeros left out.
+            let mut push = |entries: &mut Vec<(usize, f64)>,
+                            value: &dyn Fn(usize, usize) -> f64| {
+                for (c, cand) in cands.iter().enumerate() {
+                    let before = entries.len();
+                    entries.extend(
+                        (0..cand.n)
+                            .map(|k| (cand.first + k, value(c, k)))
+                            .filter(|(_, v)| *v != 0.0),
+                    );
+                    if entries.len() > before {
+                        part.active[c] += 1;
+                    }
+                }
+            };
+            if self.vector {
+                for j in 0..3 {
+                    entries.clear();
+                    entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
+                    entries.push((4 * j + 3, 1.0));
+                    push(&mut entries, &|c, k| -regs[c][k][j]);
+                    stats.add_row(&entries, s.field[i][j]);
+                    part.batch.add_row(0, j, &entries, s.field[i][j]);
+                }
+            } else {
+                // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
+                let u = self.unit[i];
+                entries.clear();
+                for (k, (r, q)) in SYM.iter().enumerate() {
+                    let d = if r == q {
+                        u[*r] * mc[*q]
+                    } else {
+                        u[*r] * mc[*q] + u[*q] * mc[*r]
+                    };
+                    entries.push((k, d));
+                }
+                entries.extend((0..3).map(|k| (6 + k, u[k])));
+                push(&mut entries, &|c, k| -frames::dot(u, regs[c][k]));
+                let rho = self.base_rho(i);
+                stats.add_row(&entries, -rho);
+                part.batch.add_row(0, 0, &entries, -rho);
+            }
+        }
+        part
     }
 
     /// The scalar method's base residual of sample `i` (zero for the vector method, whose rows need none).
