@@ -242,15 +242,13 @@ pub(crate) fn refine_edges(
     let len = span.end - span.start;
     let lo = span.start.saturating_sub(len / 2);
     let hi = (span.end + len / 2).min(n);
-    let body_rot;
-    let rot = match (span.kind, rot) {
-        (SpanKind::RoomFixed { .. }, Some(r)) => &r[lo..hi],
-        _ => {
-            body_rot = vec![frames::IDENTITY; hi - lo];
-            &body_rot[..]
+    let world: Vec<[f64; 3]> = match (span.kind, rot) {
+        (SpanKind::RoomFixed { .. }, Some(r)) => {
+            (lo..hi).map(|i| frames::mat_vec(&r[i], e[i])).collect()
         }
+        _ => e[lo..hi].to_vec(),
     };
-    match scan::window(&e[lo..hi], rot, scale_ut * scale_ut) {
+    match scan::window(&world, scale_ut * scale_ut) {
         Some(w) => (lo + w.start, lo + w.end),
         None => (span.start, span.end),
     }

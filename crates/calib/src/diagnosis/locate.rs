@@ -40,12 +40,46 @@ pub struct Located {
     pub channel_share: f64,
 }
 
+/// Per-sample components (one per calibrated axis, or one: |B|), `dims` values a sample, in one vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Components {
+    /// Components per sample.
+    pub dims: usize,
+    /// The values, sample after sample.
+    pub values: Vec<f64>,
+}
+
+impl Components {
+    /// The first `dims` components of each residual.
+    pub(crate) fn of<'r>(residuals: impl Iterator<Item = &'r [f64; 3]>, dims: usize) -> Components {
+        Components {
+            dims,
+            values: residuals.flat_map(|e| e[..dims].iter().copied()).collect(),
+        }
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.values.len() / self.dims.max(1)
+    }
+
+    /// Whether no sample is held.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// Each sample's components, in order.
+    pub fn iter(&self) -> std::slice::ChunksExact<'_, f64> {
+        self.values.chunks_exact(self.dims.max(1))
+    }
+}
+
 /// A residual above the noise by this factor (in RMS) is a mismatch worth locating.
 const EXCESS: f64 = 1.2;
 
 /// Locates the mismatch in per-sample residuals (`res[i]`: one or three components) against the per-axis noise floor.
 pub(crate) fn locate(
-    res: &[Vec<f64>],
+    res: &Components,
     floor_ut: &[f64],
     t: Option<&[f64]>,
     directions: &[[f64; 3]],
@@ -195,9 +229,9 @@ fn orientation(energy: &[f64], directions: &[[f64; 3]], floor_rms: f64) -> Optio
 
 /// The channel explaining the largest share of the residual's variance (linear in the centred channel, per
 /// component), if significant (N·R² > 25, p < 10⁻⁵ for three components).
-fn follows(res: &[Vec<f64>], channels: &[(&str, Vec<f64>)]) -> (Option<String>, f64) {
+fn follows(res: &Components, channels: &[(&str, Vec<f64>)]) -> (Option<String>, f64) {
     let n = res.len() as f64;
-    let dims = res[0].len();
+    let dims = res.dims;
     let means: Vec<f64> = (0..dims)
         .map(|j| res.iter().map(|r| r[j]).sum::<f64>() / n)
         .collect();
@@ -236,12 +270,10 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
 
-    fn noisy(n: usize, seed: u64) -> Vec<Vec<f64>> {
+    fn noisy(n: usize, seed: u64) -> Vec<[f64; 3]> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut g = move || -> f64 { StandardNormal.sample(&mut rng) };
-        (0..n)
-            .map(|_| vec![0.1 * g(), 0.1 * g(), 0.1 * g()])
-            .collect()
+        (0..n).map(|_| [0.1 * g(), 0.1 * g(), 0.1 * g()]).collect()
     }
 
     #[test]
@@ -253,7 +285,7 @@ mod tests {
             r[0] += 0.5;
         }
         let loc = locate(
-            &res,
+            &Components::of(res.iter(), 3),
             &[0.1; 3],
             Some(&t),
             &vec![[1.0, 0.0, 0.0]; n],
@@ -286,10 +318,22 @@ mod tests {
         for i in 0..n / 3 {
             res[i][1] += 0.3 * (temp[i] - 20.0);
         }
-        let loc = locate(&res, &[0.1; 3], None, &dirs, &[("temp", temp.clone())]);
+        let loc = locate(
+            &Components::of(res.iter(), 3),
+            &[0.1; 3],
+            None,
+            &dirs,
+            &[("temp", temp.clone())],
+        );
         assert_eq!(loc.channel.as_deref(), Some("temp"));
         assert_eq!(loc.orientation.map(|o| o.direction), Some("+Y"));
-        let clean = locate(&noisy(n, 6), &[0.1; 3], None, &dirs, &[("temp", temp)]);
+        let clean = locate(
+            &Components::of(noisy(n, 6).iter(), 3),
+            &[0.1; 3],
+            None,
+            &dirs,
+            &[("temp", temp)],
+        );
         assert!(
             clean.axes.is_empty() && clean.channel.is_none() && clean.orientation.is_none(),
             "{clean:?}"

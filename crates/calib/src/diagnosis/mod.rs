@@ -40,7 +40,7 @@ use nalgebra::DVector;
 
 pub use candidates::Untestable;
 pub use gross::SpanKind;
-pub use locate::{Located, Orientation, Segment};
+pub use locate::{Components, Located, Orientation, Segment};
 
 use crate::FitError;
 use crate::chunks;
@@ -234,9 +234,9 @@ pub struct Residuals {
     /// The field direction in sensor axes.
     pub direction: Vec<[f64; 3]>,
     /// Residual of the base fit, µT.
-    pub base: Vec<Vec<f64>>,
+    pub base: Components,
     /// Residual of the extended fit, µT.
-    pub extended: Vec<Vec<f64>>,
+    pub extended: Components,
     /// The channels the residual was compared with (`temp`, `i_<name>`, `t`, `rotation_rate`), per sample.
     pub channels: Vec<(String, Vec<f64>)>,
     /// Per sample, whether it was left out of the calibration (a gross span not modelled).
@@ -565,8 +565,11 @@ impl<'a> Setup<'a> {
         };
         let window = match (&s.rot, self.vector && s.has_time) {
             (Some(rot), true) => {
-                let rot_clean: Vec<Mat3> = clean_idx.iter().map(|&i| rot[i]).collect();
-                scan::window(&e_clean, &rot_clean, sigma2)
+                let world: Vec<[f64; 3]> = clean_idx
+                    .iter()
+                    .map(|&i| frames::mat_vec(&rot[i], residual[i]))
+                    .collect();
+                scan::window(&world, sigma2)
             }
             _ => None,
         };
@@ -1028,9 +1031,7 @@ impl Setup<'_> {
             vec![self.noise_floor_ut]
         };
         let dims = if vector { 3 } else { 1 };
-        let as_rows =
-            |r: &[[f64; 3]]| -> Vec<Vec<f64>> { r.iter().map(|e| e[..dims].to_vec()).collect() };
-        let base_rows = as_rows(base_residual);
+        let base_rows = Components::of(base_residual.iter(), dims);
         // Where the mismatch is, on the samples the calibration used; its segments are the gross spans.
         let used: Vec<usize> = (0..n).filter(|&i| round.included[i]).collect();
         let pick = |v: &[f64]| used.iter().map(|&i| v[i]).collect::<Vec<f64>>();
@@ -1038,7 +1039,7 @@ impl Setup<'_> {
             .iter()
             .map(|(name, v)| (name.as_str(), pick(v)))
             .collect();
-        let used_rows: Vec<Vec<f64>> = used.iter().map(|&i| base_rows[i].clone()).collect();
+        let used_rows = Components::of(used.iter().map(|&i| &base_residual[i]), dims);
         let used_dirs: Vec<[f64; 3]> = used.iter().map(|&i| self.unit[i]).collect();
         let mut located = locate::locate(
             &used_rows,
@@ -1056,7 +1057,7 @@ impl Setup<'_> {
                 rms_ut: sp.rms_ut,
             })
             .collect();
-        let extended = as_rows(&final_residual);
+        let extended = Components::of(final_residual.iter(), dims);
         let reference_floor_ut = (rms(problem.clean_rss(&last)).powi(2)
             - self.noise_floor_ut.powi(2))
         .max(0.0)
@@ -1143,8 +1144,11 @@ impl Setup<'_> {
                     scan::step_scalar(&rho, &u, sigma2)
                 }
                 _ => s.rot.as_ref().and_then(|rot| {
-                    let r: Vec<Mat3> = clean_idx.iter().map(|&i| rot[i]).collect();
-                    scan::window(&e, &r, sigma2)
+                    let world: Vec<[f64; 3]> = clean_idx
+                        .iter()
+                        .map(|&i| frames::mat_vec(&rot[i], partial[i]))
+                        .collect();
+                    scan::window(&world, sigma2)
                 }),
             };
             let Some(w) = rescan else { continue };
