@@ -131,7 +131,7 @@ pub struct Untestable {
 
 /// What the recording offers.
 pub(crate) struct Offer<'a> {
-    pub samples: &'a Samples,
+    pub samples: &'a Samples<'a>,
     pub vector: bool,
     pub current_names: &'a [&'a str],
     pub step: Option<Scan>,
@@ -240,7 +240,7 @@ pub(crate) fn candidates(
         );
     }
 
-    let attitude = s.rot.is_some();
+    let attitude = s.quat.is_some();
     const NO_REFERENCE: &str = "the scalar method has no attitude reference: a timing error between sensor and reference needs one";
     const NO_TIME: &str = "the recording has no t column";
     match (offer.vector, s.has_time) {

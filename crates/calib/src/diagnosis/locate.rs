@@ -52,10 +52,11 @@ pub struct Components {
 impl Components {
     /// The first `dims` components of each residual.
     pub(crate) fn of<'r>(residuals: impl Iterator<Item = &'r [f64; 3]>, dims: usize) -> Components {
-        Components {
-            dims,
-            values: residuals.flat_map(|e| e[..dims].iter().copied()).collect(),
+        let mut values = Vec::with_capacity(residuals.size_hint().0 * dims);
+        for e in residuals {
+            values.extend_from_slice(&e[..dims]);
         }
+        Components { dims, values }
     }
 
     /// Samples held.
@@ -83,7 +84,7 @@ pub(crate) fn locate(
     floor_ut: &[f64],
     t: Option<&[f64]>,
     directions: &[[f64; 3]],
-    channels: &[(&str, Vec<f64>)],
+    channels: &[(&str, &[f64])],
 ) -> Located {
     let n = res.len();
     let dims = floor_ut.len();
@@ -229,7 +230,7 @@ fn orientation(energy: &[f64], directions: &[[f64; 3]], floor_rms: f64) -> Optio
 
 /// The channel explaining the largest share of the residual's variance (linear in the centred channel, per
 /// component), if significant (N·R² > 25, p < 10⁻⁵ for three components).
-fn follows(res: &Components, channels: &[(&str, Vec<f64>)]) -> (Option<String>, f64) {
+fn follows(res: &Components, channels: &[(&str, &[f64])]) -> (Option<String>, f64) {
     let n = res.len() as f64;
     let dims = res.dims;
     let means: Vec<f64> = (0..dims)
@@ -239,7 +240,7 @@ fn follows(res: &Components, channels: &[(&str, Vec<f64>)]) -> (Option<String>, 
         .map(|j| res.iter().map(|r| (r[j] - means[j]).powi(2)).sum::<f64>())
         .sum();
     let mut best = (None, 0.0);
-    for (name, c) in channels {
+    for &(name, c) in channels {
         let cm = c.iter().sum::<f64>() / n;
         let var_c: f64 = c.iter().map(|v| (v - cm).powi(2)).sum();
         if var_c <= 0.0 || var_res <= 0.0 {
@@ -257,7 +258,7 @@ fn follows(res: &Components, channels: &[(&str, Vec<f64>)]) -> (Option<String>, 
             .sum();
         let share = explained / var_res;
         if share > best.1 && n * share > 25.0 {
-            best = (Some((*name).to_owned()), share);
+            best = (Some(name.to_owned()), share);
         }
     }
     best
@@ -289,7 +290,7 @@ mod tests {
             &[0.1; 3],
             Some(&t),
             &vec![[1.0, 0.0, 0.0]; n],
-            &[("t", t.clone())],
+            &[("t", &t[..])],
         );
         assert_eq!(loc.axes, vec!["x"]);
         assert_eq!(loc.segments.len(), 1, "{:?}", loc.segments);
@@ -323,7 +324,7 @@ mod tests {
             &[0.1; 3],
             None,
             &dirs,
-            &[("temp", temp.clone())],
+            &[("temp", &temp[..])],
         );
         assert_eq!(loc.channel.as_deref(), Some("temp"));
         assert_eq!(loc.orientation.map(|o| o.direction), Some("+Y"));
@@ -332,7 +333,7 @@ mod tests {
             &[0.1; 3],
             None,
             &dirs,
-            &[("temp", temp)],
+            &[("temp", &temp[..])],
         );
         assert!(
             clean.axes.is_empty() && clean.channel.is_none() && clean.orientation.is_none(),

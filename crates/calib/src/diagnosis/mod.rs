@@ -36,6 +36,8 @@ mod scan;
 mod select;
 mod stats;
 
+use std::borrow::Cow;
+
 use nalgebra::DVector;
 
 pub use candidates::Untestable;
@@ -298,7 +300,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     } else {
         setup.scale(&base_residual)
     };
-    let mut span_residual = base_residual.clone();
+    let mut span_residual = Cow::Borrowed(base_residual.as_slice());
     let mut left_out: Vec<(usize, usize)> = Vec::new();
     let mut rejected = Vec::new();
     let mut round = setup.round(&span_residual, &kept, scale, &left_out)?;
@@ -323,12 +325,12 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         let residual = setup.residual(&a, b, &effects);
         let scale2 = setup.scale(&residual);
         let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
-        let times = samples.has_time.then_some(samples.t.as_slice());
+        let times = samples.has_time.then_some(&samples.t[..]);
         let kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
         if kept2 == kept {
             break;
         }
-        (kept, scale, span_residual) = (kept2, scale2, residual);
+        (kept, scale, span_residual) = (kept2, scale2, Cow::Owned(residual));
         round = setup.round(&span_residual, &kept, scale, &left_out)?;
     }
     if setup.guard(&mut round, &mut rejected) {
@@ -342,13 +344,18 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         round = setup.round(&span_residual, &kept, scale, &left_out)?;
         setup.guard(&mut round, &mut rejected);
     }
-    Ok(setup.report(round, &base_residual, rejected, base))
+    let mut diagnosis = setup.report(round, base_residual, rejected, base);
+    // The per-sample vectors the report shares with the samples, moved rather than copied.
+    diagnosis.residuals.direction = setup.unit;
+    diagnosis.residuals.rows = samples.rows;
+    diagnosis.residuals.t_s = samples.t.into_owned();
+    Ok(diagnosis)
 }
 
 /// What every stage shares: the samples and what the reference offers.
 struct Setup<'a> {
     input: &'a DiagnosisInput<'a>,
-    samples: &'a Samples,
+    samples: &'a Samples<'a>,
     vector: bool,
     /// The field magnitude (scalar: the fitted one; vector: the reference's mean), µT.
     field_ut: f64,
@@ -484,11 +491,15 @@ impl<'a> Setup<'a> {
     ) -> Result<Round, FitError> {
         let s = self.samples;
         let n = s.len();
-        let rho: Vec<f64> = residual.iter().map(|e| e[0]).collect();
+        let rho: Vec<f64> = if self.vector {
+            Vec::new()
+        } else {
+            residual.iter().map(|e| e[0]).collect()
+        };
         let view = if self.vector {
             Residual::Vector {
                 e: residual,
-                rot: s.rot.as_deref(),
+                rot: s.rot(),
             }
         } else {
             Residual::Magnitude {
@@ -513,7 +524,7 @@ impl<'a> Setup<'a> {
                 continue;
             }
             let (a, b) = if self.vector {
-                gross::refine_edges(span, residual, s.rot.as_deref(), scale)
+                gross::refine_edges(span, residual, s.rot(), scale)
             } else {
                 (span.start, span.end)
             };
@@ -553,21 +564,21 @@ impl<'a> Setup<'a> {
             .map(|&i| frames::dot(residual[i], residual[i]))
             .sum::<f64>()
             / (clean_idx.len().max(1) * if self.vector { 3 } else { 1 }) as f64;
-        let e_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| residual[i]).collect();
         let step = if !s.has_time {
             None
         } else if self.vector {
+            let e_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| residual[i]).collect();
             scan::step_vector(&e_clean, sigma2)
         } else {
-            let rho_clean: Vec<f64> = e_clean.iter().map(|e| e[0]).collect();
+            let rho_clean: Vec<f64> = clean_idx.iter().map(|&i| residual[i][0]).collect();
             let u_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| self.unit[i]).collect();
             scan::step_scalar(&rho_clean, &u_clean, sigma2)
         };
-        let window = match (&s.rot, self.vector && s.has_time) {
+        let window = match (s.rot(), self.vector && s.has_time) {
             (Some(rot), true) => {
                 let world: Vec<[f64; 3]> = clean_idx
                     .iter()
-                    .map(|&i| frames::mat_vec(&rot[i], residual[i]))
+                    .map(|&i| frames::mat_vec(&rot.at(i), residual[i]))
                     .collect();
                 scan::window(&world, sigma2)
             }
@@ -857,7 +868,7 @@ impl Setup<'_> {
     fn report(
         &self,
         mut round: Round,
-        base_residual: &[[f64; 3]],
+        base_residual: Vec<[f64; 3]>,
         rejected: Vec<Rejected>,
         base: &Model,
     ) -> Diagnosis {
@@ -935,6 +946,9 @@ impl Setup<'_> {
         let all: Vec<Effect> = chosen.iter().map(|c| c.1).collect();
         let final_residual = self.residual(&ext_a, ext_b, &all);
         let sizes = self.sizes(&chosen, &final_residual);
+        let dims = if vector { 3 } else { 1 };
+        let extended = Components::of(final_residual.iter(), dims);
+        drop(final_residual);
         for (k, (c, effect, se)) in chosen.iter().enumerate() {
             let cand = &round.cands[*c];
             if effect.id().frame() == Frame::Body && !effect.id().is_transient() {
@@ -1030,23 +1044,54 @@ impl Setup<'_> {
         } else {
             vec![self.noise_floor_ut]
         };
-        let dims = if vector { 3 } else { 1 };
-        let base_rows = Components::of(base_residual.iter(), dims);
-        // Where the mismatch is, on the samples the calibration used; its segments are the gross spans.
+        // Where the mismatch is, on the samples the calibration used (the samples themselves when all are); its
+        // segments are the gross spans.
         let used: Vec<usize> = (0..n).filter(|&i| round.included[i]).collect();
-        let pick = |v: &[f64]| used.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-        let used_channels: Vec<(&str, Vec<f64>)> = channels
+        let all_used = used.len() == n;
+        let base_rows = Components::of(base_residual.iter(), dims);
+        let used_rows = if all_used {
+            Cow::Borrowed(&base_rows)
+        } else {
+            Cow::Owned(Components::of(
+                used.iter().map(|&i| &base_residual[i]),
+                dims,
+            ))
+        };
+        drop(base_residual);
+        let pick = |v: &'_ [f64]| -> Vec<f64> { used.iter().map(|&i| v[i]).collect() };
+        let used_channels: Vec<(&str, Cow<[f64]>)> = channels
             .iter()
-            .map(|(name, v)| (name.as_str(), pick(v)))
+            .map(|(name, v)| {
+                let v = if all_used {
+                    Cow::Borrowed(v.as_slice())
+                } else {
+                    Cow::Owned(pick(v))
+                };
+                (name.as_str(), v)
+            })
             .collect();
-        let used_rows = Components::of(used.iter().map(|&i| &base_residual[i]), dims);
-        let used_dirs: Vec<[f64; 3]> = used.iter().map(|&i| self.unit[i]).collect();
+        let used_dirs: Cow<[[f64; 3]]> = if all_used {
+            Cow::Borrowed(&self.unit)
+        } else {
+            Cow::Owned(used.iter().map(|&i| self.unit[i]).collect())
+        };
+        let used_t: Option<Cow<[f64]>> = s.has_time.then(|| {
+            if all_used {
+                Cow::Borrowed(&s.t[..])
+            } else {
+                Cow::Owned(pick(&s.t))
+            }
+        });
+        let channel_values: Vec<(&str, &[f64])> = used_channels
+            .iter()
+            .map(|(name, v)| (*name, &v[..]))
+            .collect();
         let mut located = locate::locate(
             &used_rows,
             &floor_axes,
-            s.has_time.then(|| pick(&s.t)).as_deref(),
+            used_t.as_deref(),
             &used_dirs,
-            &used_channels,
+            &channel_values,
         );
         let spans: Vec<GrossSpan> = round.spans.iter().map(|sp| self.gross_span(sp)).collect();
         located.segments = spans
@@ -1057,7 +1102,6 @@ impl Setup<'_> {
                 rms_ut: sp.rms_ut,
             })
             .collect();
-        let extended = Components::of(final_residual.iter(), dims);
         let reference_floor_ut = (rms(problem.clean_rss(&last)).powi(2)
             - self.noise_floor_ut.powi(2))
         .max(0.0)
@@ -1096,10 +1140,11 @@ impl Setup<'_> {
             samples_used: used.len(),
             samples_excluded: n - used.len(),
             samples_left_out: s.left_out,
+            // Filled by `diagnose`.
             residuals: Residuals {
-                rows: s.rows.clone(),
-                t_s: s.t.clone(),
-                direction: self.unit.clone(),
+                rows: Vec::new(),
+                t_s: Vec::new(),
+                direction: Vec::new(),
                 base: base_rows,
                 extended,
                 channels,
@@ -1143,10 +1188,10 @@ impl Setup<'_> {
                     let u: Vec<[f64; 3]> = clean_idx.iter().map(|&i| self.unit[i]).collect();
                     scan::step_scalar(&rho, &u, sigma2)
                 }
-                _ => s.rot.as_ref().and_then(|rot| {
+                _ => s.rot().and_then(|rot| {
                     let world: Vec<[f64; 3]> = clean_idx
                         .iter()
-                        .map(|&i| frames::mat_vec(&rot[i], partial[i]))
+                        .map(|&i| frames::mat_vec(&rot.at(i), partial[i]))
                         .collect();
                     scan::window(&world, sigma2)
                 }),
@@ -1207,7 +1252,7 @@ impl Setup<'_> {
         let n = s.len();
         let mut channels: Vec<(String, Vec<f64>)> = Vec::new();
         if s.has_temp {
-            channels.push(("temp".to_owned(), s.temp.clone()));
+            channels.push(("temp".to_owned(), s.temp.to_vec()));
         }
         for (k, name) in self.current_names.iter().enumerate() {
             channels.push((
@@ -1216,7 +1261,7 @@ impl Setup<'_> {
             ));
         }
         if s.has_time {
-            channels.push(("t".to_owned(), s.t.clone()));
+            channels.push(("t".to_owned(), s.t.to_vec()));
         }
         if self.vector && s.has_time {
             channels.push((

@@ -88,7 +88,7 @@ fn best_split(stats: &[f64], n: usize) -> Option<Scan> {
     if !stat.is_finite() {
         return None;
     }
-    let interval = profile(stats, k, stat);
+    let interval = profile(|i| stats[i], stats.len(), k, stat);
     Some(Scan {
         start: k,
         end: n,
@@ -98,15 +98,15 @@ fn best_split(stats: &[f64], n: usize) -> Option<Scan> {
     })
 }
 
-/// The contiguous run of indices around `best` whose statistic is within 1 of the maximum.
-fn profile(stats: &[f64], best: usize, max: f64) -> (usize, usize) {
-    let within = |i: usize| stats[i] >= max - 1.0;
+/// The contiguous run of indices (of `0..len`) around `best` whose statistic is within 1 of the maximum.
+fn profile(stats: impl Fn(usize) -> f64, len: usize, best: usize, max: f64) -> (usize, usize) {
+    let within = |i: usize| stats(i) >= max - 1.0;
     let mut lo = best;
     while lo > 0 && within(lo - 1) {
         lo -= 1;
     }
     let mut hi = best;
-    while hi + 1 < stats.len() && within(hi + 1) {
+    while hi + 1 < len && within(hi + 1) {
         hi += 1;
     }
     (lo, hi)
@@ -174,15 +174,14 @@ pub(crate) fn window(world: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
         })
         .collect();
     b = argmax(&ends);
+    drop((starts, ends));
     let best_stat = stat(a, b);
-    let starts: Vec<f64> = (0..n).map(|x| stat(x, b)).collect();
-    let ends: Vec<f64> = (0..=n).map(|x| stat(a, x)).collect();
     Some(Scan {
         start: a,
         end: b,
         stat: best_stat,
-        start_interval: profile(&starts, a, best_stat),
-        end_interval: profile(&ends, b, best_stat),
+        start_interval: profile(|x| stat(x, b), n, a, best_stat),
+        end_interval: profile(|x| stat(a, x), n + 1, b, best_stat),
     })
 }
 
