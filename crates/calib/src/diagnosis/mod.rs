@@ -691,10 +691,11 @@ impl<'a> Setup<'a> {
         let end = ((batch + 1) * n).div_ceil(AUTOCORRELATION_BATCHES);
         let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
         let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
+        let probes: Vec<candidates::Probes> = cands.iter().map(Candidate::probes).collect();
         for i in (first..end).filter(|&i| included[i]) {
             let ctx = s.context(i);
-            for (c, cand) in cands.iter().enumerate() {
-                regs[c] = cand.regressors(&ctx);
+            for (reg, probe) in regs.iter_mut().zip(&probes) {
+                *reg = probe.regressors(&ctx);
             }
             let mc = frames::sub(s.raw[i], self.raw_mean);
             let stats = if clean[i] {
@@ -703,27 +704,12 @@ impl<'a> Setup<'a> {
                 &mut part.other
             };
             stats.samples += 1;
-            // A candidate's values in a row from its regressors, the zeros left out.
-            let mut push = |entries: &mut Vec<(usize, f64)>,
-                            value: &dyn Fn(usize, usize) -> f64| {
-                for (c, cand) in cands.iter().enumerate() {
-                    let before = entries.len();
-                    entries.extend(
-                        (0..cand.n)
-                            .map(|k| (cand.first + k, value(c, k)))
-                            .filter(|(_, v)| *v != 0.0),
-                    );
-                    if entries.len() > before {
-                        part.active[c] += 1;
-                    }
-                }
-            };
             if self.vector {
                 for j in 0..3 {
                     entries.clear();
                     entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
                     entries.push((4 * j + 3, 1.0));
-                    push(&mut entries, &|c, k| -regs[c][k][j]);
+                    push_candidates(&mut entries, cands, &mut part.active, |c, k| -regs[c][k][j]);
                     stats.add_row(&entries, s.field[i][j]);
                     part.batch.add_row(0, j, &entries, s.field[i][j]);
                 }
@@ -740,7 +726,9 @@ impl<'a> Setup<'a> {
                     entries.push((k, d));
                 }
                 entries.extend((0..3).map(|k| (6 + k, u[k])));
-                push(&mut entries, &|c, k| -frames::dot(u, regs[c][k]));
+                push_candidates(&mut entries, cands, &mut part.active, |c, k| {
+                    -frames::dot(u, regs[c][k])
+                });
                 let rho = self.base_rho(i);
                 stats.add_row(&entries, -rho);
                 part.batch.add_row(0, 0, &entries, -rho);
@@ -1322,6 +1310,27 @@ impl Setup<'_> {
             kind: sp.kind,
             modelled: sp.modelled(),
             explanation,
+        }
+    }
+}
+
+/// Appends the candidates' values in a row (`value(c, k)`: candidate `c`'s parameter `k`), the zeros left out, and
+/// counts the candidates that act in it.
+fn push_candidates(
+    entries: &mut Vec<(usize, f64)>,
+    cands: &[Candidate],
+    active: &mut [usize],
+    value: impl Fn(usize, usize) -> f64,
+) {
+    for (c, cand) in cands.iter().enumerate() {
+        let before = entries.len();
+        entries.extend(
+            (0..cand.n)
+                .map(|k| (cand.first + k, value(c, k)))
+                .filter(|(_, v)| *v != 0.0),
+        );
+        if entries.len() > before {
+            active[c] += 1;
         }
     }
 }
