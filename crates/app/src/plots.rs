@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use magcal_calib::diagnosis::{Diagnosis, Verdict as Finding};
+use magcal_calib::diagnosis::{Components, Diagnosis, Verdict as Finding};
 use magcal_calib::effects::{Effect, EffectId};
 use magcal_calib::frames;
 use magcal_recording::Recording;
@@ -536,7 +536,7 @@ struct Series {
 }
 
 /// Per-sample residual magnitude (RMS over the components).
-fn magnitude(res: &[Vec<f64>]) -> Vec<f64> {
+fn magnitude(res: &Components) -> Vec<f64> {
     res.iter()
         .map(|r| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt())
         .collect()
@@ -892,7 +892,7 @@ fn channel_unit(name: &str) -> &'static str {
 /// `residual_channel.svg`: the residual component most correlated with the channel, against the channel.
 fn residual_channel(path: &Path, d: &Diagnosis, name: &str, values: &[f64]) -> PlotResult<()> {
     let r = &d.residuals;
-    let dims = r.base.first().map_or(1, Vec::len);
+    let dims = r.base.dims;
     let n = values.len() as f64;
     let cm = values.iter().sum::<f64>() / n;
     let corr = |j: usize| {
@@ -908,10 +908,10 @@ fn residual_channel(path: &Path, d: &Diagnosis, name: &str, values: &[f64]) -> P
         .max_by(|&a, &b| corr(a).total_cmp(&corr(b)))
         .unwrap_or(0);
     let stride = (values.len() / SCATTER_POINTS).max(1);
-    let pick = |res: &[Vec<f64>]| -> Vec<(f64, f64)> {
+    let pick = |res: &Components| -> Vec<(f64, f64)> {
         values
             .iter()
-            .zip(res)
+            .zip(res.iter())
             .step_by(stride)
             .map(|(c, v)| (*c, v[j]))
             .collect()
@@ -924,10 +924,10 @@ fn residual_channel(path: &Path, d: &Diagnosis, name: &str, values: &[f64]) -> P
         });
     let hi = hi.max(lo + 1e-9);
     // Binned means show the trend the scatter hides.
-    let means = |res: &[Vec<f64>]| -> Vec<(f64, f64)> {
+    let means = |res: &Components| -> Vec<(f64, f64)> {
         let mut sum = [0.0; CHANNEL_BINS];
         let mut count = [0usize; CHANNEL_BINS];
-        for (c, v) in values.iter().zip(res) {
+        for (c, v) in values.iter().zip(res.iter()) {
             let k = (((c - lo) / (hi - lo)) * CHANNEL_BINS as f64) as usize;
             sum[k.min(CHANNEL_BINS - 1)] += v[j];
             count[k.min(CHANNEL_BINS - 1)] += 1;

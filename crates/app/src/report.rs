@@ -3,7 +3,7 @@
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
 //! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
-use magcal_calib::diagnosis::{Diagnosis, FoundEffect, ParamValue, SpanKind, Verdict};
+use magcal_calib::diagnosis::{Components, Diagnosis, FoundEffect, ParamValue, SpanKind, Verdict};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
@@ -466,7 +466,7 @@ pub struct FieldReport {
 }
 
 /// RMS per component of per-sample residuals.
-fn per_axis_rms(res: &[Vec<f64>]) -> [f64; 3] {
+fn per_axis_rms(res: &Components) -> [f64; 3] {
     let n = res.len().max(1) as f64;
     std::array::from_fn(|j| {
         (res.iter()

@@ -40,3 +40,9 @@ pub(crate) fn map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     }
     out
 }
+
+/// `f(k)` for every part `k` in `0..parts`, computed on all threads, in order: for passes whose parts are fixed by
+/// the data rather than by [`CHUNK`].
+pub(crate) fn parts<T: Send>(parts: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    (0..parts).into_par_iter().map(&f).collect()
+}

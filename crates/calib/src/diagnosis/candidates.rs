@@ -94,27 +94,51 @@ impl Candidate {
         )
     }
 
-    /// The regressors at one sample: column `k` is the perturbation per unit of parameter `k`, in calibrated axes.
+    /// The effects whose perturbations are its regressors, made once for a pass over the samples.
+    pub fn probes(&self) -> Probes {
+        let linear = self.template.is_linear();
+        let with = |k: usize, v: f64| {
+            let mut p = [0.0; 3];
+            p[k] = v;
+            self.template.with_params(p)
+        };
+        Probes {
+            n: self.n,
+            linear,
+            effects: std::array::from_fn(|k| {
+                if linear {
+                    [with(k, 1.0); 2]
+                } else {
+                    [with(k, STEP), with(k, -STEP)]
+                }
+            }),
+        }
+    }
+}
+
+/// Step of the central differences of a non-linear effect (the only one is the field direction error, in degrees:
+/// second-order terms are ~1e-4 of the first for errors of a degree).
+const STEP: f64 = 1e-2;
+
+/// A candidate's effects with one parameter set: per parameter, at 1 (a linear effect) or at ±[`STEP`].
+pub(crate) struct Probes {
+    n: usize,
+    linear: bool,
+    effects: [[Effect; 2]; 3],
+}
+
+impl Probes {
+    /// The regressors at one sample: column `k` is the perturbation per unit of parameter `k`, in calibrated axes
+    /// (linearised at zero by central differences for a non-linear effect).
     pub fn regressors(&self, ctx: &Context<'_>) -> [[f64; 3]; 3] {
         let mut out = [[0.0; 3]; 3];
-        if self.template.is_linear() {
-            for (k, col) in out.iter_mut().enumerate().take(self.n) {
-                let mut p = [0.0; 3];
-                p[k] = 1.0;
-                *col = self.template.with_params(p).perturbation_ut(ctx);
-            }
-        } else {
-            // Linearised at zero by central differences (the only non-linear effect is the field direction error,
-            // in degrees: second-order terms are ~1e-4 of the first for errors of a degree).
-            const STEP: f64 = 1e-2;
-            for (k, col) in out.iter_mut().enumerate().take(self.n) {
-                let mut p = [0.0; 3];
-                p[k] = STEP;
-                let plus = self.template.with_params(p).perturbation_ut(ctx);
-                p[k] = -STEP;
-                let minus = self.template.with_params(p).perturbation_ut(ctx);
-                *col = std::array::from_fn(|j| (plus[j] - minus[j]) / (2.0 * STEP));
-            }
+        for (col, [plus, minus]) in out.iter_mut().zip(&self.effects).take(self.n) {
+            *col = if self.linear {
+                plus.perturbation_ut(ctx)
+            } else {
+                let (plus, minus) = (plus.perturbation_ut(ctx), minus.perturbation_ut(ctx));
+                std::array::from_fn(|j| (plus[j] - minus[j]) / (2.0 * STEP))
+            };
         }
         out
     }
@@ -131,7 +155,7 @@ pub struct Untestable {
 
 /// What the recording offers.
 pub(crate) struct Offer<'a> {
-    pub samples: &'a Samples,
+    pub samples: &'a Samples<'a>,
     pub vector: bool,
     pub current_names: &'a [&'a str],
     pub step: Option<Scan>,
@@ -240,7 +264,7 @@ pub(crate) fn candidates(
         );
     }
 
-    let attitude = s.rot.is_some();
+    let attitude = s.quat.is_some();
     const NO_REFERENCE: &str = "the scalar method has no attitude reference: a timing error between sensor and reference needs one";
     const NO_TIME: &str = "the recording has no t column";
     match (offer.vector, s.has_time) {

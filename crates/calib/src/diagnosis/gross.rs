@@ -16,8 +16,9 @@
 //! part of the span's energy). The frame is told by the attitude: when the sensor hardly turned during the span the
 //! two constants are the same, and the span is modelled as fixed to the sensor with that said.
 
-use crate::frames::{self, Mat3};
+use crate::frames;
 
+use super::samples::Attitudes;
 use super::scan;
 
 /// A constant explains a span when it leaves at most this many times the scale's variance per axis…
@@ -86,7 +87,7 @@ pub(crate) enum Residual<'a> {
     /// Three components in sensor axes, and the attitude when known.
     Vector {
         e: &'a [[f64; 3]],
-        rot: Option<&'a [Mat3]>,
+        rot: Option<Attitudes<'a>>,
     },
     /// The magnitude's residual and the field direction (sensor axes).
     Magnitude {
@@ -124,7 +125,7 @@ pub(crate) fn explained_at(
             frames::norm(frames::sub(e[i], *offset_ut))
         }
         (Residual::Vector { e, rot: Some(r) }, SpanKind::RoomFixed { field_ned_ut }) => {
-            frames::norm(frames::sub(frames::mat_vec(&r[i], e[i]), *field_ned_ut))
+            frames::norm(frames::sub(frames::mat_vec(&r.at(i), e[i]), *field_ned_ut))
         }
         (Residual::Magnitude { rho, unit }, SpanKind::SensorFixed { offset_ut, .. }) => {
             (rho[i] - frames::dot(unit[i], *offset_ut)).abs()
@@ -173,7 +174,7 @@ fn classify(
     let kind = match residual {
         Residual::Vector { e, rot } => {
             let (body, rss_body) = constant(&e[a..b], None);
-            let world = rot.map(|r| constant(&e[a..b], Some(&r[a..b])));
+            let world = rot.map(|r| constant(&e[a..b], Some(r.range(a, b))));
             match world {
                 Some((field, rss_world)) if rss_world < rss_body && explained(rss_world) => {
                     SpanKind::RoomFixed {
@@ -206,9 +207,9 @@ fn classify(
 }
 
 /// The constant that best explains residuals `e` — in sensor axes, or in NED through `rot` — and what it leaves.
-fn constant(e: &[[f64; 3]], rot: Option<&[Mat3]>) -> ([f64; 3], f64) {
+fn constant(e: &[[f64; 3]], rot: Option<Attitudes<'_>>) -> ([f64; 3], f64) {
     let frame = |i: usize| match rot {
-        Some(r) => frames::mat_vec(&r[i], e[i]),
+        Some(r) => frames::mat_vec(&r.at(i), e[i]),
         None => e[i],
     };
     let n = e.len() as f64;
@@ -266,22 +267,20 @@ fn turned_deg(directions: &[[f64; 3]]) -> f64 {
 pub(crate) fn refine_edges(
     span: &Span,
     e: &[[f64; 3]],
-    rot: Option<&[Mat3]>,
+    rot: Option<Attitudes<'_>>,
     scale_ut: f64,
 ) -> (usize, usize) {
     let n = e.len();
     let len = span.end - span.start;
     let lo = span.start.saturating_sub(len / 2);
     let hi = (span.end + len / 2).min(n);
-    let body_rot;
-    let rot = match (span.kind, rot) {
-        (SpanKind::RoomFixed { .. }, Some(r)) => &r[lo..hi],
-        _ => {
-            body_rot = vec![frames::IDENTITY; hi - lo];
-            &body_rot[..]
+    let world: Vec<[f64; 3]> = match (span.kind, rot) {
+        (SpanKind::RoomFixed { .. }, Some(r)) => {
+            (lo..hi).map(|i| frames::mat_vec(&r.at(i), e[i])).collect()
         }
+        _ => e[lo..hi].to_vec(),
     };
-    match scan::window(&e[lo..hi], rot, scale_ut * scale_ut) {
+    match scan::window(&world, scale_ut * scale_ut) {
         Some(w) => (lo + w.start, lo + w.end),
         None => (span.start, span.end),
     }

@@ -40,16 +40,51 @@ pub struct Located {
     pub channel_share: f64,
 }
 
+/// Per-sample components (one per calibrated axis, or one: |B|), `dims` values a sample, in one vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Components {
+    /// Components per sample.
+    pub dims: usize,
+    /// The values, sample after sample.
+    pub values: Vec<f64>,
+}
+
+impl Components {
+    /// The first `dims` components of each residual.
+    pub(crate) fn of<'r>(residuals: impl Iterator<Item = &'r [f64; 3]>, dims: usize) -> Components {
+        let mut values = Vec::with_capacity(residuals.size_hint().0 * dims);
+        for e in residuals {
+            values.extend_from_slice(&e[..dims]);
+        }
+        Components { dims, values }
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.values.len() / self.dims.max(1)
+    }
+
+    /// Whether no sample is held.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// Each sample's components, in order.
+    pub fn iter(&self) -> std::slice::ChunksExact<'_, f64> {
+        self.values.chunks_exact(self.dims.max(1))
+    }
+}
+
 /// A residual above the noise by this factor (in RMS) is a mismatch worth locating.
 const EXCESS: f64 = 1.2;
 
 /// Locates the mismatch in per-sample residuals (`res[i]`: one or three components) against the per-axis noise floor.
 pub(crate) fn locate(
-    res: &[Vec<f64>],
+    res: &Components,
     floor_ut: &[f64],
     t: Option<&[f64]>,
     directions: &[[f64; 3]],
-    channels: &[(&str, Vec<f64>)],
+    channels: &[(&str, &[f64])],
 ) -> Located {
     let n = res.len();
     let dims = floor_ut.len();
@@ -195,9 +230,9 @@ fn orientation(energy: &[f64], directions: &[[f64; 3]], floor_rms: f64) -> Optio
 
 /// The channel explaining the largest share of the residual's variance (linear in the centred channel, per
 /// component), if significant (N·R² > 25, p < 10⁻⁵ for three components).
-fn follows(res: &[Vec<f64>], channels: &[(&str, Vec<f64>)]) -> (Option<String>, f64) {
+fn follows(res: &Components, channels: &[(&str, &[f64])]) -> (Option<String>, f64) {
     let n = res.len() as f64;
-    let dims = res[0].len();
+    let dims = res.dims;
     let means: Vec<f64> = (0..dims)
         .map(|j| res.iter().map(|r| r[j]).sum::<f64>() / n)
         .collect();
@@ -205,7 +240,7 @@ fn follows(res: &[Vec<f64>], channels: &[(&str, Vec<f64>)]) -> (Option<String>, 
         .map(|j| res.iter().map(|r| (r[j] - means[j]).powi(2)).sum::<f64>())
         .sum();
     let mut best = (None, 0.0);
-    for (name, c) in channels {
+    for &(name, c) in channels {
         let cm = c.iter().sum::<f64>() / n;
         let var_c: f64 = c.iter().map(|v| (v - cm).powi(2)).sum();
         if var_c <= 0.0 || var_res <= 0.0 {
@@ -223,7 +258,7 @@ fn follows(res: &[Vec<f64>], channels: &[(&str, Vec<f64>)]) -> (Option<String>, 
             .sum();
         let share = explained / var_res;
         if share > best.1 && n * share > 25.0 {
-            best = (Some((*name).to_owned()), share);
+            best = (Some(name.to_owned()), share);
         }
     }
     best
@@ -236,12 +271,10 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
 
-    fn noisy(n: usize, seed: u64) -> Vec<Vec<f64>> {
+    fn noisy(n: usize, seed: u64) -> Vec<[f64; 3]> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut g = move || -> f64 { StandardNormal.sample(&mut rng) };
-        (0..n)
-            .map(|_| vec![0.1 * g(), 0.1 * g(), 0.1 * g()])
-            .collect()
+        (0..n).map(|_| [0.1 * g(), 0.1 * g(), 0.1 * g()]).collect()
     }
 
     #[test]
@@ -253,11 +286,11 @@ mod tests {
             r[0] += 0.5;
         }
         let loc = locate(
-            &res,
+            &Components::of(res.iter(), 3),
             &[0.1; 3],
             Some(&t),
             &vec![[1.0, 0.0, 0.0]; n],
-            &[("t", t.clone())],
+            &[("t", &t[..])],
         );
         assert_eq!(loc.axes, vec!["x"]);
         assert_eq!(loc.segments.len(), 1, "{:?}", loc.segments);
@@ -286,10 +319,22 @@ mod tests {
         for i in 0..n / 3 {
             res[i][1] += 0.3 * (temp[i] - 20.0);
         }
-        let loc = locate(&res, &[0.1; 3], None, &dirs, &[("temp", temp.clone())]);
+        let loc = locate(
+            &Components::of(res.iter(), 3),
+            &[0.1; 3],
+            None,
+            &dirs,
+            &[("temp", &temp[..])],
+        );
         assert_eq!(loc.channel.as_deref(), Some("temp"));
         assert_eq!(loc.orientation.map(|o| o.direction), Some("+Y"));
-        let clean = locate(&noisy(n, 6), &[0.1; 3], None, &dirs, &[("temp", temp)]);
+        let clean = locate(
+            &Components::of(noisy(n, 6).iter(), 3),
+            &[0.1; 3],
+            None,
+            &dirs,
+            &[("temp", &temp[..])],
+        );
         assert!(
             clean.axes.is_empty() && clean.channel.is_none() && clean.orientation.is_none(),
             "{clean:?}"

@@ -36,13 +36,16 @@ mod scan;
 mod select;
 mod stats;
 
+use std::borrow::Cow;
+
 use nalgebra::DVector;
 
 pub use candidates::Untestable;
 pub use gross::SpanKind;
-pub use locate::{Located, Orientation, Segment};
+pub use locate::{Components, Located, Orientation, Segment};
 
 use crate::FitError;
+use crate::chunks;
 use crate::effects::{Effect, EffectId, Frame};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
@@ -61,6 +64,10 @@ pub const MIN_SAMPLES: usize = 50;
 const CV_BLOCKS: usize = 5;
 /// Contiguous batches for the residual's autocorrelation (method of batch means).
 const AUTOCORRELATION_BATCHES: usize = 100;
+const _: () = assert!(
+    AUTOCORRELATION_BATCHES.is_multiple_of(CV_BLOCKS),
+    "each batch lies within one block"
+);
 /// Passes of looking for gross spans (again after the catalogue's effects are out of the residual).
 pub const ROUNDS: usize = 3;
 
@@ -231,9 +238,9 @@ pub struct Residuals {
     /// The field direction in sensor axes.
     pub direction: Vec<[f64; 3]>,
     /// Residual of the base fit, µT.
-    pub base: Vec<Vec<f64>>,
+    pub base: Components,
     /// Residual of the extended fit, µT.
-    pub extended: Vec<Vec<f64>>,
+    pub extended: Components,
     /// The channels the residual was compared with (`temp`, `i_<name>`, `t`, `rotation_rate`), per sample.
     pub channels: Vec<(String, Vec<f64>)>,
     /// Per sample, whether it was left out of the calibration (a gross span not modelled).
@@ -295,7 +302,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     } else {
         setup.scale(&base_residual)
     };
-    let mut span_residual = base_residual.clone();
+    let mut span_residual = Cow::Borrowed(base_residual.as_slice());
     let mut left_out: Vec<(usize, usize)> = Vec::new();
     let mut rejected = Vec::new();
     let mut round = setup.round(&span_residual, &kept, scale, &left_out)?;
@@ -320,12 +327,12 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         let residual = setup.residual(&a, b, &effects);
         let scale2 = setup.scale(&residual);
         let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
-        let times = samples.has_time.then_some(samples.t.as_slice());
+        let times = samples.has_time.then_some(&samples.t[..]);
         let kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
         if kept2 == kept {
             break;
         }
-        (kept, scale, span_residual) = (kept2, scale2, residual);
+        (kept, scale, span_residual) = (kept2, scale2, Cow::Owned(residual));
         round = setup.round(&span_residual, &kept, scale, &left_out)?;
     }
     if setup.guard(&mut round, &mut rejected) {
@@ -339,13 +346,18 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         round = setup.round(&span_residual, &kept, scale, &left_out)?;
         setup.guard(&mut round, &mut rejected);
     }
-    Ok(setup.report(round, &base_residual, rejected, base))
+    let mut diagnosis = setup.report(round, base_residual, rejected, base);
+    // The per-sample vectors the report shares with the samples, moved rather than copied.
+    diagnosis.residuals.direction = setup.unit;
+    diagnosis.residuals.rows = samples.rows;
+    diagnosis.residuals.t_s = samples.t.into_owned();
+    Ok(diagnosis)
 }
 
 /// What every stage shares: the samples and what the reference offers.
 struct Setup<'a> {
     input: &'a DiagnosisInput<'a>,
-    samples: &'a Samples,
+    samples: &'a Samples<'a>,
     vector: bool,
     /// The field magnitude (scalar: the fitted one; vector: the reference's mean), µT.
     field_ut: f64,
@@ -358,6 +370,15 @@ struct Setup<'a> {
     n_base: usize,
     /// The base fit the samples' fields were computed with (the scalar method's linearisation point).
     base: Model,
+}
+
+/// One batch's normal equations: its clean rows and its other included ones apart (the batch lies within one
+/// cross-validation block), its batch sums, and per candidate the rows where it acts.
+struct BatchPart {
+    clean: BlockStats,
+    other: BlockStats,
+    batch: Batches,
+    active: Vec<usize>,
 }
 
 /// One pass of stages 2–5.
@@ -472,11 +493,15 @@ impl<'a> Setup<'a> {
     ) -> Result<Round, FitError> {
         let s = self.samples;
         let n = s.len();
-        let rho: Vec<f64> = residual.iter().map(|e| e[0]).collect();
+        let rho: Vec<f64> = if self.vector {
+            Vec::new()
+        } else {
+            residual.iter().map(|e| e[0]).collect()
+        };
         let view = if self.vector {
             Residual::Vector {
                 e: residual,
-                rot: s.rot.as_deref(),
+                rot: s.rot(),
             }
         } else {
             Residual::Magnitude {
@@ -501,7 +526,7 @@ impl<'a> Setup<'a> {
                 continue;
             }
             let (a, b) = if self.vector {
-                gross::refine_edges(span, residual, s.rot.as_deref(), scale)
+                gross::refine_edges(span, residual, s.rot(), scale)
             } else {
                 (span.start, span.end)
             };
@@ -543,20 +568,23 @@ impl<'a> Setup<'a> {
             .map(|&i| frames::dot(residual[i], residual[i]))
             .sum::<f64>()
             / (clean_idx.len().max(1) * if self.vector { 3 } else { 1 }) as f64;
-        let e_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| residual[i]).collect();
         let step = if !s.has_time {
             None
         } else if self.vector {
+            let e_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| residual[i]).collect();
             scan::step_vector(&e_clean, sigma2)
         } else {
-            let rho_clean: Vec<f64> = e_clean.iter().map(|e| e[0]).collect();
+            let rho_clean: Vec<f64> = clean_idx.iter().map(|&i| residual[i][0]).collect();
             let u_clean: Vec<[f64; 3]> = clean_idx.iter().map(|&i| self.unit[i]).collect();
             scan::step_scalar(&rho_clean, &u_clean, sigma2)
         };
-        let window = match (&s.rot, self.vector && s.has_time) {
+        let window = match (s.rot(), self.vector && s.has_time) {
             (Some(rot), true) => {
-                let rot_clean: Vec<Mat3> = clean_idx.iter().map(|&i| rot[i]).collect();
-                scan::window(&e_clean, &rot_clean, sigma2)
+                let world: Vec<[f64; 3]> = clean_idx
+                    .iter()
+                    .map(|&i| frames::mat_vec(&rot.at(i), residual[i]))
+                    .collect();
+                scan::window(&world, sigma2)
             }
             _ => None,
         };
@@ -607,77 +635,27 @@ impl<'a> Setup<'a> {
     }
 
     /// The normal equations of the included samples per block (and of the clean ones apart), counting where each
-    /// candidate acts.
+    /// candidate acts. Each batch of the autocorrelation lies within one block and is summed on its own, on all
+    /// threads; the batches are merged in order.
     fn accumulate(&self, cands: &mut [Candidate], included: &[bool], clean: &[bool]) -> Problem {
-        let s = self.samples;
-        let n = s.len();
         let columns = cands.last().map_or(self.n_base, |c| c.first + c.n);
         let dims = if self.vector { 3 } else { 1 };
+        let parts = chunks::parts(AUTOCORRELATION_BATCHES, |batch| {
+            self.accumulate_batch(batch, cands, included, clean, columns)
+        });
         let mut blocks: Vec<BlockStats> =
             (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
         let mut clean_blocks = blocks.clone();
         let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
-        let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
-        let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
         let mut active = vec![0usize; cands.len()];
-        let base = (0..n).map(|i| self.base_rho(i));
-        for (i, rho) in base.enumerate() {
-            if !included[i] {
-                continue;
-            }
-            let b = i * CV_BLOCKS / n;
-            let batch = i * AUTOCORRELATION_BATCHES / n;
-            blocks[b].samples += 1;
-            if clean[i] {
-                clean_blocks[b].samples += 1;
-            }
-            let ctx = s.context(i);
-            for (c, cand) in cands.iter().enumerate() {
-                regs[c] = cand.regressors(&ctx);
-            }
-            let mc = frames::sub(s.raw[i], self.raw_mean);
-            let mut add = |entries: &[(usize, f64)], dim: usize, y: f64| {
-                blocks[b].add_row(entries, y);
-                if clean[i] {
-                    clean_blocks[b].add_row(entries, y);
-                }
-                batches.add_row(batch, dim, entries, y);
-            };
-            if self.vector {
-                for j in 0..3 {
-                    entries.clear();
-                    entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
-                    entries.push((4 * j + 3, 1.0));
-                    for (c, cand) in cands.iter().enumerate() {
-                        let row: Vec<f64> = (0..cand.n).map(|k| -regs[c][k][j]).collect();
-                        if row.iter().any(|v| *v != 0.0) {
-                            active[c] += 1;
-                        }
-                        entries.extend(row.iter().enumerate().map(|(k, v)| (cand.first + k, *v)));
-                    }
-                    add(&entries, j, s.field[i][j]);
-                }
-            } else {
-                // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
-                let u = self.unit[i];
-                entries.clear();
-                for (k, (r, q)) in SYM.iter().enumerate() {
-                    let d = if r == q {
-                        u[*r] * mc[*q]
-                    } else {
-                        u[*r] * mc[*q] + u[*q] * mc[*r]
-                    };
-                    entries.push((k, d));
-                }
-                entries.extend((0..3).map(|k| (6 + k, u[k])));
-                for (c, cand) in cands.iter().enumerate() {
-                    let row: Vec<f64> = (0..cand.n).map(|k| -frames::dot(u, regs[c][k])).collect();
-                    if row.iter().any(|v| *v != 0.0) {
-                        active[c] += 1;
-                    }
-                    entries.extend(row.iter().enumerate().map(|(k, v)| (cand.first + k, *v)));
-                }
-                add(&entries, 0, -rho);
+        for (batch, part) in parts.iter().enumerate() {
+            let b = batch / (AUTOCORRELATION_BATCHES / CV_BLOCKS);
+            blocks[b].add(&part.clean);
+            blocks[b].add(&part.other);
+            clean_blocks[b].add(&part.clean);
+            batches.put(batch, &part.batch);
+            for (a, p) in active.iter_mut().zip(&part.active) {
+                *a += p;
             }
         }
         for (c, cand) in cands.iter_mut().enumerate() {
@@ -692,6 +670,75 @@ impl<'a> Setup<'a> {
             }
         }
         Problem::new(blocks, clean_blocks, batches, noise_var)
+    }
+
+    /// [`Setup::accumulate`] over the samples of one batch (`i·BATCHES/n` = `batch`); a candidate's zero regressors
+    /// are left out of the rows.
+    fn accumulate_batch(
+        &self,
+        batch: usize,
+        cands: &[Candidate],
+        included: &[bool],
+        clean: &[bool],
+        columns: usize,
+    ) -> BatchPart {
+        let s = self.samples;
+        let n = s.len();
+        let dims = if self.vector { 3 } else { 1 };
+        let mut part = BatchPart {
+            clean: BlockStats::new(columns),
+            other: BlockStats::new(columns),
+            batch: Batches::new(1, dims, columns),
+            active: vec![0; cands.len()],
+        };
+        let first = (batch * n).div_ceil(AUTOCORRELATION_BATCHES);
+        let end = ((batch + 1) * n).div_ceil(AUTOCORRELATION_BATCHES);
+        let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
+        let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
+        let probes: Vec<candidates::Probes> = cands.iter().map(Candidate::probes).collect();
+        for i in (first..end).filter(|&i| included[i]) {
+            let ctx = s.context(i);
+            for (reg, probe) in regs.iter_mut().zip(&probes) {
+                *reg = probe.regressors(&ctx);
+            }
+            let mc = frames::sub(s.raw[i], self.raw_mean);
+            let stats = if clean[i] {
+                &mut part.clean
+            } else {
+                &mut part.other
+            };
+            stats.samples += 1;
+            if self.vector {
+                for j in 0..3 {
+                    entries.clear();
+                    entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
+                    entries.push((4 * j + 3, 1.0));
+                    push_candidates(&mut entries, cands, &mut part.active, |c, k| -regs[c][k][j]);
+                    stats.add_row(&entries, s.field[i][j]);
+                    part.batch.add_row(0, j, &entries, s.field[i][j]);
+                }
+            } else {
+                // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
+                let u = self.unit[i];
+                entries.clear();
+                for (k, (r, q)) in SYM.iter().enumerate() {
+                    let d = if r == q {
+                        u[*r] * mc[*q]
+                    } else {
+                        u[*r] * mc[*q] + u[*q] * mc[*r]
+                    };
+                    entries.push((k, d));
+                }
+                entries.extend((0..3).map(|k| (6 + k, u[k])));
+                push_candidates(&mut entries, cands, &mut part.active, |c, k| {
+                    -frames::dot(u, regs[c][k])
+                });
+                let rho = self.base_rho(i);
+                stats.add_row(&entries, -rho);
+                part.batch.add_row(0, 0, &entries, -rho);
+            }
+        }
+        part
     }
 
     /// The scalar method's base residual of sample `i` (zero for the vector method, whose rows need none).
@@ -813,7 +860,7 @@ impl Setup<'_> {
     fn report(
         &self,
         mut round: Round,
-        base_residual: &[[f64; 3]],
+        base_residual: Vec<[f64; 3]>,
         rejected: Vec<Rejected>,
         base: &Model,
     ) -> Diagnosis {
@@ -891,6 +938,9 @@ impl Setup<'_> {
         let all: Vec<Effect> = chosen.iter().map(|c| c.1).collect();
         let final_residual = self.residual(&ext_a, ext_b, &all);
         let sizes = self.sizes(&chosen, &final_residual);
+        let dims = if vector { 3 } else { 1 };
+        let extended = Components::of(final_residual.iter(), dims);
+        drop(final_residual);
         for (k, (c, effect, se)) in chosen.iter().enumerate() {
             let cand = &round.cands[*c];
             if effect.id().frame() == Frame::Body && !effect.id().is_transient() {
@@ -982,25 +1032,54 @@ impl Setup<'_> {
         } else {
             vec![self.noise_floor_ut]
         };
-        let dims = if vector { 3 } else { 1 };
-        let as_rows =
-            |r: &[[f64; 3]]| -> Vec<Vec<f64>> { r.iter().map(|e| e[..dims].to_vec()).collect() };
-        let base_rows = as_rows(base_residual);
-        // Where the mismatch is, on the samples the calibration used; its segments are the gross spans.
+        // Where the mismatch is, on the samples the calibration used (the samples themselves when all are); its
+        // segments are the gross spans.
         let used: Vec<usize> = (0..n).filter(|&i| round.included[i]).collect();
-        let pick = |v: &[f64]| used.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-        let used_channels: Vec<(&str, Vec<f64>)> = channels
+        let all_used = used.len() == n;
+        let base_rows = Components::of(base_residual.iter(), dims);
+        let used_rows = if all_used {
+            Cow::Borrowed(&base_rows)
+        } else {
+            Cow::Owned(Components::of(
+                used.iter().map(|&i| &base_residual[i]),
+                dims,
+            ))
+        };
+        drop(base_residual);
+        let pick = |v: &'_ [f64]| -> Vec<f64> { used.iter().map(|&i| v[i]).collect() };
+        let used_channels: Vec<(&str, Cow<[f64]>)> = channels
             .iter()
-            .map(|(name, v)| (name.as_str(), pick(v)))
+            .map(|(name, v)| {
+                let v = if all_used {
+                    Cow::Borrowed(v.as_slice())
+                } else {
+                    Cow::Owned(pick(v))
+                };
+                (name.as_str(), v)
+            })
             .collect();
-        let used_rows: Vec<Vec<f64>> = used.iter().map(|&i| base_rows[i].clone()).collect();
-        let used_dirs: Vec<[f64; 3]> = used.iter().map(|&i| self.unit[i]).collect();
+        let used_dirs: Cow<[[f64; 3]]> = if all_used {
+            Cow::Borrowed(&self.unit)
+        } else {
+            Cow::Owned(used.iter().map(|&i| self.unit[i]).collect())
+        };
+        let used_t: Option<Cow<[f64]>> = s.has_time.then(|| {
+            if all_used {
+                Cow::Borrowed(&s.t[..])
+            } else {
+                Cow::Owned(pick(&s.t))
+            }
+        });
+        let channel_values: Vec<(&str, &[f64])> = used_channels
+            .iter()
+            .map(|(name, v)| (*name, &v[..]))
+            .collect();
         let mut located = locate::locate(
             &used_rows,
             &floor_axes,
-            s.has_time.then(|| pick(&s.t)).as_deref(),
+            used_t.as_deref(),
             &used_dirs,
-            &used_channels,
+            &channel_values,
         );
         let spans: Vec<GrossSpan> = round.spans.iter().map(|sp| self.gross_span(sp)).collect();
         located.segments = spans
@@ -1011,7 +1090,6 @@ impl Setup<'_> {
                 rms_ut: sp.rms_ut,
             })
             .collect();
-        let extended = as_rows(&final_residual);
         let reference_floor_ut = (rms(problem.clean_rss(&last)).powi(2)
             - self.noise_floor_ut.powi(2))
         .max(0.0)
@@ -1050,10 +1128,11 @@ impl Setup<'_> {
             samples_used: used.len(),
             samples_excluded: n - used.len(),
             samples_left_out: s.left_out,
+            // Filled by `diagnose`.
             residuals: Residuals {
-                rows: s.rows.clone(),
-                t_s: s.t.clone(),
-                direction: self.unit.clone(),
+                rows: Vec::new(),
+                t_s: Vec::new(),
+                direction: Vec::new(),
                 base: base_rows,
                 extended,
                 channels,
@@ -1097,9 +1176,12 @@ impl Setup<'_> {
                     let u: Vec<[f64; 3]> = clean_idx.iter().map(|&i| self.unit[i]).collect();
                     scan::step_scalar(&rho, &u, sigma2)
                 }
-                _ => s.rot.as_ref().and_then(|rot| {
-                    let r: Vec<Mat3> = clean_idx.iter().map(|&i| rot[i]).collect();
-                    scan::window(&e, &r, sigma2)
+                _ => s.rot().and_then(|rot| {
+                    let world: Vec<[f64; 3]> = clean_idx
+                        .iter()
+                        .map(|&i| frames::mat_vec(&rot.at(i), partial[i]))
+                        .collect();
+                    scan::window(&world, sigma2)
                 }),
             };
             let Some(w) = rescan else { continue };
@@ -1158,7 +1240,7 @@ impl Setup<'_> {
         let n = s.len();
         let mut channels: Vec<(String, Vec<f64>)> = Vec::new();
         if s.has_temp {
-            channels.push(("temp".to_owned(), s.temp.clone()));
+            channels.push(("temp".to_owned(), s.temp.to_vec()));
         }
         for (k, name) in self.current_names.iter().enumerate() {
             channels.push((
@@ -1167,7 +1249,7 @@ impl Setup<'_> {
             ));
         }
         if s.has_time {
-            channels.push(("t".to_owned(), s.t.clone()));
+            channels.push(("t".to_owned(), s.t.to_vec()));
         }
         if self.vector && s.has_time {
             channels.push((
@@ -1238,6 +1320,27 @@ impl Setup<'_> {
             kind: sp.kind,
             modelled: sp.modelled(),
             explanation,
+        }
+    }
+}
+
+/// Appends the candidates' values in a row (`value(c, k)`: candidate `c`'s parameter `k`), the zeros left out, and
+/// counts the candidates that act in it.
+fn push_candidates(
+    entries: &mut Vec<(usize, f64)>,
+    cands: &[Candidate],
+    active: &mut [usize],
+    value: impl Fn(usize, usize) -> f64,
+) {
+    for (c, cand) in cands.iter().enumerate() {
+        let before = entries.len();
+        entries.extend(
+            (0..cand.n)
+                .map(|k| (cand.first + k, value(c, k)))
+                .filter(|(_, v)| *v != 0.0),
+        );
+        if entries.len() > before {
+            active[c] += 1;
         }
     }
 }

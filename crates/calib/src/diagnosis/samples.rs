@@ -1,6 +1,8 @@
 //! The samples the diagnosis works on: the rows where every channel it uses is present, with the field, its rate
 //! and the attitude worked out once.
 
+use std::borrow::Cow;
+
 use crate::effects::{Context, WorldContext};
 use crate::frames::{self, Mat3};
 use crate::model::{Inputs, Model};
@@ -8,24 +10,24 @@ use crate::model::{Inputs, Model};
 use super::{DiagnosisInput, Reference};
 
 /// Per-sample data, for the rows the diagnosis uses.
-pub(crate) struct Samples {
+pub(crate) struct Samples<'a> {
     /// Row index in the recording.
     pub rows: Vec<usize>,
     /// Raw reading, µT.
-    pub raw: Vec<[f64; 3]>,
+    pub raw: Cow<'a, [[f64; 3]]>,
     /// The field in calibrated sensor axes: the reference (vector) or the base-calibrated reading (scalar).
     pub field: Vec<[f64; 3]>,
     /// Its rate of change, µT/s (zero without time or reference).
     pub rate: Vec<[f64; 3]>,
-    /// Sensor → NED, when the attitude is known.
-    pub rot: Option<Vec<Mat3>>,
+    /// The recording's attitude quaternions (sensor → NED, by recording row), when the attitude is known.
+    pub quat: Option<&'a [[f64; 4]]>,
     /// The assumed world field, when the attitude is known.
     pub field_ned_ut: Option<[f64; 3]>,
     /// Time, s (zero without a time column).
-    pub t: Vec<f64>,
+    pub t: Cow<'a, [f64]>,
     pub has_time: bool,
     /// Temperature, °C (NaN without one).
-    pub temp: Vec<f64>,
+    pub temp: Cow<'a, [f64]>,
     pub has_temp: bool,
     /// Currents, row-major with `n_currents` per sample.
     pub currents: Vec<f64>,
@@ -36,9 +38,40 @@ pub(crate) struct Samples {
     pub kept: Vec<bool>,
 }
 
-impl Samples {
+/// The attitudes (sensor → NED) of consecutive samples, worked out from the quaternions when asked for.
+#[derive(Clone, Copy)]
+pub(crate) struct Attitudes<'a> {
+    quat: &'a [[f64; 4]],
+    /// The samples' recording rows.
+    rows: &'a [usize],
+}
+
+impl Attitudes<'_> {
+    /// Sample `i`'s.
+    pub fn at(&self, i: usize) -> Mat3 {
+        frames::quat_to_matrix(self.quat[self.rows[i]])
+    }
+
+    /// Those of samples `a..b`.
+    pub fn range(&self, a: usize, b: usize) -> Self {
+        Attitudes {
+            quat: self.quat,
+            rows: &self.rows[a..b],
+        }
+    }
+}
+
+impl<'a> Samples<'a> {
     pub fn len(&self) -> usize {
         self.raw.len()
+    }
+
+    /// Every sample's attitude, when known.
+    pub fn rot(&self) -> Option<Attitudes<'_>> {
+        self.quat.map(|quat| Attitudes {
+            quat,
+            rows: &self.rows,
+        })
     }
 
     /// The effect context of sample `i`.
@@ -49,9 +82,9 @@ impl Samples {
             currents_a: &self.currents[i * self.n_currents..(i + 1) * self.n_currents],
             field_ut: self.field[i],
             field_rate_ut_per_s: self.rate[i],
-            world: match (&self.rot, self.field_ned_ut) {
-                (Some(r), Some(f)) => Some(WorldContext {
-                    sensor_to_ned: r[i],
+            world: match (self.quat, self.field_ned_ut) {
+                (Some(q), Some(f)) => Some(WorldContext {
+                    sensor_to_ned: frames::quat_to_matrix(q[self.rows[i]]),
                     field_ned_ut: f,
                     position_m: [0.0; 3],
                 }),
@@ -61,7 +94,7 @@ impl Samples {
     }
 
     /// Gathers the usable rows. `base` calibrates readings for the scalar method's field estimate.
-    pub fn gather(input: &DiagnosisInput<'_>, base: &Model) -> Samples {
+    pub fn gather(input: &DiagnosisInput<'a>, base: &Model) -> Samples<'a> {
         let n = input.raw_ut.len();
         let expected: Option<Vec<[f64; 3]>> = match &input.reference {
             Reference::Attitude { quat, field_ned_ut } => Some(
@@ -81,29 +114,29 @@ impl Samples {
                 && input.currents.iter().all(|(_, c)| c[i].is_finite())
         };
         let index: Vec<usize> = (0..n).filter(|&i| usable(i)).collect();
-        let raw: Vec<[f64; 3]> = index.iter().map(|&i| input.raw_ut[i]).collect();
+        // The recording's own columns when every row is usable.
+        fn pick<'c, T: Copy>(column: &'c [T], index: &[usize]) -> Cow<'c, [T]> {
+            if index.len() == column.len() {
+                Cow::Borrowed(column)
+            } else {
+                Cow::Owned(index.iter().map(|&i| column[i]).collect())
+            }
+        }
+        let raw = pick(input.raw_ut, &index);
         let field: Vec<[f64; 3]> = match &expected {
             Some(e) => index.iter().map(|&i| e[i]).collect(),
             None => raw.iter().map(|m| base.apply(*m, &Inputs::NONE)).collect(),
         };
-        let t: Vec<f64> = match input.t_s {
-            Some(t) => index.iter().map(|&i| t[i]).collect(),
-            None => vec![0.0; index.len()],
+        let t = match input.t_s {
+            Some(t) => pick(t, &index),
+            None => Cow::Owned(vec![0.0; index.len()]),
         };
         let rate = match (&expected, input.t_s) {
             (Some(_), Some(_)) => field_rate(&field, &t, &index),
             _ => vec![[0.0; 3]; index.len()],
         };
-        let (rot, field_ned_ut) = match &input.reference {
-            Reference::Attitude { quat, field_ned_ut } => (
-                Some(
-                    index
-                        .iter()
-                        .map(|&i| frames::quat_to_matrix(quat[i]))
-                        .collect(),
-                ),
-                Some(*field_ned_ut),
-            ),
+        let (quat, field_ned_ut) = match input.reference {
+            Reference::Attitude { quat, field_ned_ut } => (Some(quat), Some(field_ned_ut)),
             _ => (None, None),
         };
         let n_currents = input.currents.len();
@@ -118,8 +151,8 @@ impl Samples {
                 .collect(),
             left_out: n - index.len(),
             temp: match input.temp_c {
-                Some(tc) => index.iter().map(|&i| tc[i]).collect(),
-                None => vec![f64::NAN; index.len()],
+                Some(tc) => pick(tc, &index),
+                None => Cow::Owned(vec![f64::NAN; index.len()]),
             },
             has_temp: input.temp_c.is_some(),
             has_time: input.t_s.is_some(),
@@ -127,7 +160,7 @@ impl Samples {
             raw,
             field,
             rate,
-            rot,
+            quat,
             field_ned_ut,
             t,
             currents,

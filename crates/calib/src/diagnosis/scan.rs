@@ -5,7 +5,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::frames::{self, Mat3};
+use crate::frames;
 
 /// A scanned hyperparameter.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,7 +88,7 @@ fn best_split(stats: &[f64], n: usize) -> Option<Scan> {
     if !stat.is_finite() {
         return None;
     }
-    let interval = profile(stats, k, stat);
+    let interval = profile(|i| stats[i], stats.len(), k, stat);
     Some(Scan {
         start: k,
         end: n,
@@ -98,15 +98,15 @@ fn best_split(stats: &[f64], n: usize) -> Option<Scan> {
     })
 }
 
-/// The contiguous run of indices around `best` whose statistic is within 1 of the maximum.
-fn profile(stats: &[f64], best: usize, max: f64) -> (usize, usize) {
-    let within = |i: usize| stats[i] >= max - 1.0;
+/// The contiguous run of indices (of `0..len`) around `best` whose statistic is within 1 of the maximum.
+fn profile(stats: impl Fn(usize) -> f64, len: usize, best: usize, max: f64) -> (usize, usize) {
+    let within = |i: usize| stats(i) >= max - 1.0;
     let mut lo = best;
     while lo > 0 && within(lo - 1) {
         lo -= 1;
     }
     let mut hi = best;
-    while hi + 1 < stats.len() && within(hi + 1) {
+    while hi + 1 < len && within(hi + 1) {
         hi += 1;
     }
     (lo, hi)
@@ -117,17 +117,17 @@ const WINDOW_GRID: usize = 400;
 /// A disturbance covers at most this fraction of the recording (a longer one is a field error, not a transient).
 const WINDOW_MAX_FRACTION: f64 = 0.8;
 
-/// The most likely window of a world-fixed disturbance in a vector residual `e`, seen through the attitude `rot`:
-/// in NED the disturbance is a constant `d` inside the window, so the statistic is `|Σ_window R·e|² / (L·σ²)`.
-/// Coarse grid first, then each boundary refined at sample resolution.
-pub(crate) fn window(e: &[[f64; 3]], rot: &[Mat3], sigma2: f64) -> Option<Scan> {
-    let n = e.len();
+/// The most likely window of a world-fixed disturbance in a vector residual seen through the attitude, `world`
+/// (`R·e` per sample, NED): the disturbance is a constant `d` there inside the window, so the statistic is
+/// `|Σ_window R·e|² / (L·σ²)`. Coarse grid first, then each boundary refined at sample resolution.
+pub(crate) fn window(world: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
+    let n = world.len();
     if n < 4 * MIN_SIDE {
         return None;
     }
     let mut prefix = vec![[0.0; 3]; n + 1];
     for i in 0..n {
-        prefix[i + 1] = frames::add(prefix[i], frames::mat_vec(&rot[i], e[i]));
+        prefix[i + 1] = frames::add(prefix[i], world[i]);
     }
     let max_len = (WINDOW_MAX_FRACTION * n as f64) as usize;
     let stat = |a: usize, b: usize| {
@@ -174,15 +174,14 @@ pub(crate) fn window(e: &[[f64; 3]], rot: &[Mat3], sigma2: f64) -> Option<Scan> 
         })
         .collect();
     b = argmax(&ends);
+    drop((starts, ends));
     let best_stat = stat(a, b);
-    let starts: Vec<f64> = (0..n).map(|x| stat(x, b)).collect();
-    let ends: Vec<f64> = (0..=n).map(|x| stat(a, x)).collect();
     Some(Scan {
         start: a,
         end: b,
         stat: best_stat,
-        start_interval: profile(&starts, a, best_stat),
-        end_interval: profile(&ends, b, best_stat),
+        start_interval: profile(|x| stat(x, b), n, a, best_stat),
+        end_interval: profile(|x| stat(a, x), n + 1, b, best_stat),
     })
 }
 
@@ -199,6 +198,8 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
+
+    use crate::frames::Mat3;
 
     /// `n` triples of Gaussian noise of standard deviation 0.1.
     fn noise(n: usize, seed: u64) -> Vec<[f64; 3]> {
@@ -235,7 +236,8 @@ mod tests {
         for i in 1000..1600 {
             e[i] = frames::add(e[i], frames::mat_t_vec(&rot[i], [0.08, 0.0, 0.0]));
         }
-        let s = window(&e, &rot, 0.01).unwrap();
+        let world: Vec<[f64; 3]> = (0..n).map(|i| frames::mat_vec(&rot[i], e[i])).collect();
+        let s = window(&world, 0.01).unwrap();
         assert!(
             (s.start as i64 - 1000).abs() < 40 && (s.end as i64 - 1600).abs() < 40,
             "{s:?}"

@@ -27,24 +27,28 @@ impl BlockStats {
         }
     }
 
-    /// Adds one row given as (column, value) pairs.
+    /// Adds one row given as (column, value) pairs, columns in increasing order (zero values may be left out). The
+    /// products go to the lower triangle, a column at a time; [`BlockStats::symmetrise`] mirrors them.
     pub fn add_row(&mut self, entries: &[(usize, f64)], y: f64) {
+        let n = self.xtx.nrows();
+        let xtx = self.xtx.as_mut_slice();
         for (a, &(i, xi)) in entries.iter().enumerate() {
             self.xty[i] += xi * y;
+            let column = &mut xtx[i * n..(i + 1) * n];
             for &(j, xj) in &entries[a..] {
-                self.xtx[(i, j)] += xi * xj;
+                column[j] += xi * xj;
             }
         }
         self.yty += y * y;
         self.rows += 1;
     }
 
-    /// Mirrors the accumulated upper triangle into the lower one.
+    /// Mirrors the accumulated lower triangle into the upper one.
     pub fn symmetrise(&mut self) {
         let n = self.xtx.nrows();
         for i in 0..n {
             for j in 0..i {
-                self.xtx[(i, j)] = self.xtx[(j, i)];
+                self.xtx[(j, i)] = self.xtx[(i, j)];
             }
         }
     }
@@ -78,6 +82,14 @@ impl Batches {
             sy: vec![0.0; batches * dims],
             count: vec![0; batches * dims],
         }
+    }
+
+    /// Sets batch `batch` to the only batch of `part`.
+    pub fn put(&mut self, batch: usize, part: &Batches) {
+        let slots = batch * self.dims..(batch + 1) * self.dims;
+        self.sx[slots.start * self.columns..slots.end * self.columns].copy_from_slice(&part.sx);
+        self.sy[slots.clone()].copy_from_slice(&part.sy);
+        self.count[slots].copy_from_slice(&part.count);
     }
 
     /// Adds one row of kind `dim` to batch `batch`.
