@@ -8,6 +8,8 @@
 //! Heavy; regenerate the tables in docs/diagnosis.md with
 //! `cargo test --release --test diagnosis_power -- --ignored --nocapture`.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 
@@ -48,6 +50,19 @@ struct Tally {
     ambiguous: usize,
     /// Another effect found besides (or instead of) the right one.
     extra: usize,
+}
+
+impl Tally {
+    /// Counts one run with effect `id` injected and diagnosis `d`.
+    fn record(&mut self, id: EffectId, d: &Diagnosis) {
+        let found: Vec<EffectId> = d.effects.iter().map(|e| e.effect.id()).collect();
+        let ambiguous = d.ambiguous.iter().any(|a| a.ids.contains(&id));
+        self.runs += 1;
+        self.detected += usize::from(found.contains(&id));
+        self.exact += usize::from(found == [id] && !ambiguous);
+        self.ambiguous += usize::from(ambiguous);
+        self.extra += usize::from(found.iter().any(|f| *f != id));
+    }
 }
 
 /// Error over standard error of each fitted parameter of `found`, by parameter name, against the injected `truth`.
@@ -92,61 +107,38 @@ fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
     let tallies = Mutex::new(vec![Tally::default(); ids.len()]);
     let nulls = Mutex::new((0usize, 0usize, Vec::new()));
     let zs: Mutex<BTreeMap<&str, Vec<f64>>> = Mutex::new(BTreeMap::new());
-    let next = Mutex::new(0u64);
-    std::thread::scope(|scope| {
-        for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
-            scope.spawn(|| {
-                loop {
-                    let seed = {
-                        let mut n = next.lock().unwrap();
-                        *n += 1;
-                        *n
-                    };
-                    if seed > SEEDS {
-                        break;
-                    }
-                    let base = random_scenario(seed);
-                    let null = diagnose(&base);
-                    {
-                        let mut n = nulls.lock().unwrap();
-                        n.0 += 1;
-                        if null.verdict != Verdict::Consistent {
-                            n.1 += 1;
-                            let found: Vec<&str> = null
-                                .effects
-                                .iter()
-                                .map(|e| e.effect.id().as_str())
-                                .collect();
-                            n.2.push(format!("seed {seed}: {found:?}"));
-                        }
-                    }
-                    for (k, id) in ids.iter().enumerate() {
-                        let mut s = base.clone();
-                        let e = scale_to_rms(
-                            &s,
-                            &random_effect(*id, &s, seed),
-                            SIZE_IN_SIGMA * s.noise_ut[0],
-                        );
-                        s.effects = vec![e];
-                        let d = diagnose(&s);
-                        let found: Vec<EffectId> =
-                            d.effects.iter().map(|e| e.effect.id()).collect();
-                        let ambiguous = d.ambiguous.iter().any(|a| a.ids.contains(id));
-                        if let Some(f) = d.effects.iter().find(|f| f.effect.id() == *id) {
-                            let mut z = zs.lock().unwrap();
-                            for (name, v) in z_scores(f, &e) {
-                                z.entry(name).or_default().push(v);
-                            }
-                        }
-                        let mut t = tallies.lock().unwrap();
-                        t[k].runs += 1;
-                        t[k].detected += usize::from(found.contains(id));
-                        t[k].exact += usize::from(found == [*id] && !ambiguous);
-                        t[k].ambiguous += usize::from(ambiguous);
-                        t[k].extra += usize::from(found.iter().any(|f| f != id));
-                    }
+    common::for_each_seed(SEEDS, |seed| {
+        let base = random_scenario(seed);
+        let null = diagnose(&base);
+        {
+            let mut n = nulls.lock().unwrap();
+            n.0 += 1;
+            if null.verdict != Verdict::Consistent {
+                n.1 += 1;
+                let found: Vec<&str> = null
+                    .effects
+                    .iter()
+                    .map(|e| e.effect.id().as_str())
+                    .collect();
+                n.2.push(format!("seed {seed}: {found:?}"));
+            }
+        }
+        for (k, id) in ids.iter().enumerate() {
+            let mut s = base.clone();
+            let e = scale_to_rms(
+                &s,
+                &random_effect(*id, &s, seed),
+                SIZE_IN_SIGMA * s.noise_ut[0],
+            );
+            s.effects = vec![e];
+            let d = diagnose(&s);
+            if let Some(f) = d.effects.iter().find(|f| f.effect.id() == *id) {
+                let mut z = zs.lock().unwrap();
+                for (name, v) in z_scores(f, &e) {
+                    z.entry(name).or_default().push(v);
                 }
-            });
+            }
+            tallies.lock().unwrap()[k].record(*id, &d);
         }
     });
     let tallies = tallies.into_inner().unwrap();
@@ -244,61 +236,38 @@ fn diagnose_scalar(s: &Scenario) -> Diagnosis {
 fn scalar_false_alarms_over_200_seeds_and_detection_table() {
     let tallies = Mutex::new(vec![Tally::default(); SCALAR_IDS.len()]);
     let nulls = Mutex::new((0usize, Vec::new()));
-    let next = Mutex::new(0u64);
-    std::thread::scope(|scope| {
-        for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
-            scope.spawn(|| {
-                loop {
-                    let seed = {
-                        let mut n = next.lock().unwrap();
-                        *n += 1;
-                        *n
-                    };
-                    if seed > SEEDS {
-                        break;
-                    }
-                    let base = random_scenario(seed);
-                    let null = diagnose_scalar(&base);
-                    {
-                        let mut n = nulls.lock().unwrap();
-                        n.0 += 1;
-                        if null.verdict != Verdict::Consistent {
-                            let found: Vec<&str> = null
-                                .effects
-                                .iter()
-                                .map(|e| e.effect.id().as_str())
-                                .collect();
-                            n.1.push(format!(
-                                "seed {seed}: {found:?}, {} spans",
-                                null.spans.len()
-                            ));
-                        }
-                    }
-                    // The detection table on every other seed (it is measured, not asserted).
-                    if seed % 2 == 1 {
-                        continue;
-                    }
-                    for (k, id) in SCALAR_IDS.iter().enumerate() {
-                        let mut s = base.clone();
-                        let e = scale_to_rms(
-                            &s,
-                            &random_effect(*id, &s, seed),
-                            SCALAR_SIZE_IN_SIGMA * s.noise_ut[0],
-                        );
-                        s.effects = vec![e];
-                        let d = diagnose_scalar(&s);
-                        let found: Vec<EffectId> =
-                            d.effects.iter().map(|e| e.effect.id()).collect();
-                        let ambiguous = d.ambiguous.iter().any(|a| a.ids.contains(id));
-                        let mut t = tallies.lock().unwrap();
-                        t[k].runs += 1;
-                        t[k].detected += usize::from(found.contains(id));
-                        t[k].exact += usize::from(found == [*id] && !ambiguous);
-                        t[k].ambiguous += usize::from(ambiguous);
-                        t[k].extra += usize::from(found.iter().any(|f| f != id));
-                    }
-                }
-            });
+    common::for_each_seed(SEEDS, |seed| {
+        let base = random_scenario(seed);
+        let null = diagnose_scalar(&base);
+        {
+            let mut n = nulls.lock().unwrap();
+            n.0 += 1;
+            if null.verdict != Verdict::Consistent {
+                let found: Vec<&str> = null
+                    .effects
+                    .iter()
+                    .map(|e| e.effect.id().as_str())
+                    .collect();
+                n.1.push(format!(
+                    "seed {seed}: {found:?}, {} spans",
+                    null.spans.len()
+                ));
+            }
+        }
+        // The detection table on every other seed (it is measured, not asserted).
+        if seed % 2 == 1 {
+            return;
+        }
+        for (k, id) in SCALAR_IDS.iter().enumerate() {
+            let mut s = base.clone();
+            let e = scale_to_rms(
+                &s,
+                &random_effect(*id, &s, seed),
+                SCALAR_SIZE_IN_SIGMA * s.noise_ut[0],
+            );
+            s.effects = vec![e];
+            let d = diagnose_scalar(&s);
+            tallies.lock().unwrap()[k].record(*id, &d);
         }
     });
     let tallies = tallies.into_inner().unwrap();

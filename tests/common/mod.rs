@@ -64,3 +64,21 @@ pub fn matrix(v: &serde_json::Value) -> [[f64; 3]; 3] {
     let rows: Vec<Vec<f64>> = v.as_array().unwrap().iter().map(floats).collect();
     std::array::from_fn(|j| std::array::from_fn(|k| rows[j][k]))
 }
+
+/// Runs `f(seed)` for seeds 1..=`seeds` on every core, each seed once (the statistics studies).
+pub fn for_each_seed(seeds: u64, f: impl Fn(u64) + Sync) {
+    let next = std::sync::atomic::AtomicU64::new(1);
+    std::thread::scope(|scope| {
+        for _ in 0..std::thread::available_parallelism().map_or(2, |n| n.get()) {
+            scope.spawn(|| {
+                loop {
+                    let seed = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if seed > seeds {
+                        break;
+                    }
+                    f(seed);
+                }
+            });
+        }
+    });
+}
