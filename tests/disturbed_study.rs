@@ -187,18 +187,27 @@ fn errors(model: &Model, truth_a: &Matrix3<f64>, truth_offset: [f64; 3]) -> (f64
     )
 }
 
-/// Largest error over standard error among A's components and the offset's.
-fn worst_z(cal: &Calibration, truth_a: &Matrix3<f64>, truth_offset: [f64; 3]) -> f64 {
+/// Largest error over standard error among A's components and the offset's, and which it is.
+fn worst_z(cal: &Calibration, truth_a: &Matrix3<f64>, truth_offset: [f64; 3]) -> (f64, String) {
     let model = cal.model();
     let (a_se, _) = cal.standard_errors();
     let o_se = cal.offset_se_ut();
     let o = scalar::centre(&model.a, model.b_ut);
     let za = (0..9).map(|i| {
         let (j, k) = (i / 3, i % 3);
-        (model.a[j][k] - truth_a[(j, k)]).abs() / a_se[j][k]
+        (
+            (model.a[j][k] - truth_a[(j, k)]).abs() / a_se[j][k],
+            format!("A[{j}][{k}]"),
+        )
     });
-    let zo = (0..3).map(|k| (o[k] - truth_offset[k]).abs() / o_se[k]);
-    za.chain(zo).fold(0.0, f64::max)
+    let zo = (0..3).map(|k| {
+        (
+            (o[k] - truth_offset[k]).abs() / o_se[k],
+            format!("offset[{k}]"),
+        )
+    });
+    za.chain(zo)
+        .fold((0.0, String::new()), |m, z| if z.0 > m.0 { z } else { m })
 }
 
 /// RMS residual of a model on a recording against the truth: per axis (vector) or of the magnitude (scalar).
@@ -300,7 +309,7 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
         }
         Err(_) => (f64::INFINITY, f64::INFINITY),
     };
-    let z = worst_z(&cal, &truth_a, truth_offset);
+    let (z, z_at) = worst_z(&cal, &truth_a, truth_offset);
     let spans: Vec<(f64, f64)> = d.spans.iter().map(|sp| (sp.t0_s, sp.t1_s)).collect();
     // A clean held-out recording of the same bench: another trajectory and noise (the held-out always has the
     // attitude, to compute the truth).
@@ -336,7 +345,7 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
         tl.good += 1;
     } else {
         tl.bad.push(format!(
-            "{what}: worst z {z:.2}, A err {a_err:.4} (bound {a_bound:.4}), offset err {o_err:.3} µT \
+            "{what}: worst z {z:.2} ({z_at}), A err {a_err:.4} (bound {a_bound:.4}), offset err {o_err:.3} µT \
              (bound {o_bound:.3})"
         ));
     }
@@ -466,12 +475,13 @@ fn check(t: &Tally, f: &Floor) {
 fn vector_method_calibrates_around_gross_disturbances() {
     let t = study(true);
     report("vector method", &t);
-    // Measured 2026-11-24: 91.0 % good, 98.2 % located, 2 worse, 0 of 50 false alarms, none refused. The issue asks
-    // 95 % good and none worse: not reached (docs/diagnosis.md says where it falls short); these floors keep what is.
+    // Measured 2026-11-24: 94.5 % good (91.0 % before the cluster-robust standard errors), 98.2 % located, 2 worse,
+    // 0 of 50 false alarms, none refused. The issue asks 95 % good and none worse: not reached (docs/diagnosis.md
+    // says where it falls short); these floors keep what is.
     check(
         &t,
         &Floor {
-            good_pct: 88.0,
+            good_pct: 92.0,
             located_pct: 96.0,
             worse: 3,
             false_alarm_pct: 1.0,

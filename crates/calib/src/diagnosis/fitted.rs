@@ -53,9 +53,11 @@ pub(crate) fn coefficient(sol: &Solution, col: usize, sigma2: f64) -> Option<(f6
         .map(|p| (sol.beta[p], (sol.inverse[(p, p)] * sigma2).sqrt()))
 }
 
-/// Standard errors of `A` and `b` from a vector-method solution on centred readings (allowing for autocorrelated
-/// residuals, as the effects' are): `b = b' − A·mean`, so
-/// `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the covariance of row `j`'s `(a_j, b'_j)`.
+/// Standard errors of `A` and `b` from a vector-method solution on centred readings: of each quantity the larger of
+/// its variance from the residual variance (allowing for autocorrelated residuals, as the effects' are) and its
+/// cluster-robust variance (allowing for residuals that vary with the regressors in stretches of the recording, as
+/// a disturbance's tail does). `b = b' − A·mean`, so `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the
+/// covariance of row `j`'s `(a_j, b'_j)`.
 pub(crate) fn linear_se(
     problem: &Problem,
     sol: &Solution,
@@ -63,23 +65,34 @@ pub(crate) fn linear_se(
     raw_mean: [f64; 3],
 ) -> (Mat3, [f64; 3]) {
     let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0) * problem.autocorrelation(sol);
+    let cluster = problem.cluster_covariance(sol);
     let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
-    let cov = |c: usize, d: usize| match (pos(c), pos(d)) {
-        (Some(p), Some(q)) => sol.inverse[(p, q)] * s2,
-        _ => 0.0,
-    };
-    let a_se: Mat3 =
-        std::array::from_fn(|j| std::array::from_fn(|k| cov(4 * j + k, 4 * j + k).sqrt()));
-    let b_se = std::array::from_fn(|j| {
-        let g = [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0];
-        let mut v = 0.0;
-        for r in 0..4 {
-            for c in 0..4 {
-                v += g[r] * cov(4 * j + r, 4 * j + c) * g[c];
+    // The variance of Σ g_r·θ_(4j+r) under each covariance, the larger one.
+    let var = |j: usize, g: [f64; 4]| {
+        let quad = |cov: &dyn Fn(usize, usize) -> f64| {
+            let mut v = 0.0;
+            for r in 0..4 {
+                for c in 0..4 {
+                    if let (Some(p), Some(q)) = (pos(4 * j + r), pos(4 * j + c)) {
+                        v += g[r] * cov(p, q) * g[c];
+                    }
+                }
             }
-        }
-        v.max(0.0).sqrt()
+            v
+        };
+        let model = quad(&|p, q| sol.inverse[(p, q)] * s2);
+        let robust = cluster.as_ref().map_or(0.0, |m| quad(&|p, q| m[(p, q)]));
+        model.max(robust).max(0.0)
+    };
+    let a_se: Mat3 = std::array::from_fn(|j| {
+        std::array::from_fn(|k| {
+            let mut g = [0.0; 4];
+            g[k] = 1.0;
+            var(j, g).sqrt()
+        })
     });
+    let b_se =
+        std::array::from_fn(|j| var(j, [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0]).sqrt());
     (a_se, b_se)
 }
 

@@ -647,6 +647,7 @@ impl<'a> Setup<'a> {
             (0..CV_BLOCKS).map(|_| BlockStats::new(columns)).collect();
         let mut clean_blocks = blocks.clone();
         let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
+        let mut batch_stats = Vec::with_capacity(parts.len());
         let mut active = vec![0usize; cands.len()];
         for (batch, part) in parts.iter().enumerate() {
             let b = batch / (AUTOCORRELATION_BATCHES / CV_BLOCKS);
@@ -654,6 +655,9 @@ impl<'a> Setup<'a> {
             blocks[b].add(&part.other);
             clean_blocks[b].add(&part.clean);
             batches.put(batch, &part.batch);
+            let mut all = part.clean.clone();
+            all.add(&part.other);
+            batch_stats.push(all);
             for (a, p) in active.iter_mut().zip(&part.active) {
                 *a += p;
             }
@@ -669,7 +673,7 @@ impl<'a> Setup<'a> {
                 }
             }
         }
-        Problem::new(blocks, clean_blocks, batches, noise_var)
+        Problem::new(blocks, clean_blocks, batches, batch_stats, noise_var)
     }
 
     /// [`Setup::accumulate`] over the samples of one batch (`i·BATCHES/n` = `batch`); a candidate's zero regressors

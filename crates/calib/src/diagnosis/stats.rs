@@ -4,6 +4,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
+/// Neighbouring batches whose scores are taken as correlated (Bartlett weights, as Newey and West): a disturbance's
+/// field that changes slowly as the sensor moves spans several batches.
+const SCORE_LAGS: usize = 4;
+
 /// `XᵀX`, `Xᵀy` and `yᵀy` of the rows of one block.
 #[derive(Clone, Debug)]
 pub(crate) struct BlockStats {
@@ -185,6 +189,9 @@ pub(crate) struct Problem {
     /// Per block, the clean rows (a subset of `blocks`): what held-out residuals are judged on.
     pub clean: Vec<BlockStats>,
     pub batches: Batches,
+    /// Per autocorrelation batch, every included row: the scores of a fit batch by batch, for standard errors that
+    /// see residuals correlated with the regressors over stretches of time.
+    pub batch_stats: Vec<BlockStats>,
     /// All included rows.
     pub total: BlockStats,
     /// The clean rows.
@@ -198,6 +205,7 @@ impl Problem {
         mut blocks: Vec<BlockStats>,
         mut clean: Vec<BlockStats>,
         batches: Batches,
+        mut batch_stats: Vec<BlockStats>,
         noise_var: DVector<f64>,
     ) -> Problem {
         let columns = noise_var.len();
@@ -211,10 +219,14 @@ impl Problem {
         };
         let total = sum(&mut blocks);
         let clean_total = sum(&mut clean);
+        for b in &mut batch_stats {
+            b.symmetrise();
+        }
         Problem {
             blocks,
             clean,
             batches,
+            batch_stats,
             total,
             clean_total,
             noise_var,
@@ -315,6 +327,46 @@ impl Problem {
         self.batches.autocorrelation(sol, sigma2).max(1.0)
     }
 
+    /// The cluster-robust (sandwich) covariance of a solution fitted on every included row, with the batches as
+    /// clusters: `(XᵀX)⁻¹·Σ_b s_b·s_bᵀ·(XᵀX)⁻¹·B/(B−1)`, `s_b` the batch's score at the solution (its errors-in-variables
+    /// correction included). Unlike the covariance from the residual variance, it grows when residuals that vary
+    /// with the regressors gather in some stretches of the recording (a disturbance's tail below the gross
+    /// threshold), which bias the fit as much as they scatter it. `None` with fewer than two batches.
+    pub fn cluster_covariance(&self, sol: &Solution) -> Option<DMatrix<f64>> {
+        let k = sol.columns.len();
+        let used: Vec<&BlockStats> = self.batch_stats.iter().filter(|b| b.rows > 0).collect();
+        if used.len() < 2 {
+            return None;
+        }
+        let scores: Vec<DVector<f64>> = used
+            .iter()
+            .map(|b| {
+                DVector::from_iterator(
+                    k,
+                    sol.columns.iter().enumerate().map(|(r, &i)| {
+                        let mut v = b.xty[i] + b.samples as f64 * self.noise_var[i] * sol.beta[r];
+                        for (s, &j) in sol.columns.iter().enumerate() {
+                            v -= b.xtx[(i, j)] * sol.beta[s];
+                        }
+                        v
+                    }),
+                )
+            })
+            .collect();
+        let mut meat = DMatrix::zeros(k, k);
+        for lag in 0..=SCORE_LAGS.min(scores.len() - 1) {
+            let w = 1.0 - lag as f64 / (SCORE_LAGS + 1) as f64;
+            for (x, y) in scores.iter().zip(&scores[lag..]) {
+                meat.ger(w, x, y, 1.0);
+                if lag > 0 {
+                    meat.ger(w, y, x, 1.0);
+                }
+            }
+        }
+        let clusters = used.len() as f64;
+        Some(&sol.inverse * meat * &sol.inverse * (clusters / (clusters - 1.0)))
+    }
+
     /// Blocked cross-validation: the held-out residual sum of squares of the clean rows, summed over the blocks,
     /// each predicted by a fit on the other blocks' `rows`.
     pub fn cv_rss_on(&self, rows: Rows, columns: &[usize]) -> Option<f64> {
@@ -388,6 +440,7 @@ mod tests {
             blocks.clone(),
             blocks,
             Batches::new(1, 1, 3),
+            Vec::new(),
             DVector::zeros(3),
         )
     }
