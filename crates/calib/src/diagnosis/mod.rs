@@ -64,6 +64,8 @@ pub const MIN_SAMPLES: usize = 50;
 const CV_BLOCKS: usize = 5;
 /// Contiguous batches for the residual's autocorrelation (method of batch means).
 const AUTOCORRELATION_BATCHES: usize = 100;
+/// The step (µT) of the field along which the scalar method's regressors are differentiated for their noise.
+const NOISE_STEP_UT: f64 = 0.01;
 const _: () = assert!(
     AUTOCORRELATION_BATCHES.is_multiple_of(CV_BLOCKS),
     "each batch lies within one block"
@@ -698,6 +700,7 @@ impl<'a> Setup<'a> {
         let first = (batch * n).div_ceil(AUTOCORRELATION_BATCHES);
         let end = ((batch + 1) * n).div_ceil(AUTOCORRELATION_BATCHES);
         let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
+        let mut cross: Vec<(usize, f64)> = Vec::new();
         let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
         let probes: Vec<candidates::Probes> = cands.iter().map(Candidate::probes).collect();
         for i in (first..end).filter(|&i| included[i]) {
@@ -740,6 +743,47 @@ impl<'a> Setup<'a> {
                 let rho = self.base_rho(i);
                 stats.add_row(&entries, -rho);
                 part.batch.add_row(0, 0, &entries, -rho);
+                // The observation −ρ and every regressor carry the same reading noise n: −ρ's is −(Aᵀu)·n, a
+                // regressor x's is ∇x·n, so cov(x, −ρ) = −∇x·d with d = Σₙ·Aᵀu. Left in, it is a correlation the
+                // fit would credit to whatever regressor the noise bends most (a cubic in the field): its
+                // derivative along d, per column, corrects Xᵀy.
+                let f = self.input.noise.floor_ut;
+                let au = frames::mat_t_vec(&self.base.a, u);
+                let d: [f64; 3] = std::array::from_fn(|k| f[k] * f[k] * au[k]);
+                let ad = frames::mat_vec(&self.base.a, d);
+                let size = frames::norm(ad);
+                if size > 0.0 {
+                    let field = s.field[i];
+                    let du = frames::scale(
+                        frames::sub(ad, frames::scale(u, frames::dot(u, ad))),
+                        1.0 / frames::norm(field),
+                    );
+                    cross.clear();
+                    for (k, (r, q)) in SYM.iter().enumerate() {
+                        let mut g = du[*r] * mc[*q] + u[*r] * d[*q];
+                        if r != q {
+                            g += du[*q] * mc[*r] + u[*q] * d[*r];
+                        }
+                        cross.push((k, g));
+                    }
+                    cross.extend((0..3).map(|k| (6 + k, du[k])));
+                    let mut shifted = ctx;
+                    shifted.field_ut = frames::add(field, frames::scale(ad, NOISE_STEP_UT / size));
+                    for (c, (cand, probe)) in cands.iter().zip(&probes).enumerate() {
+                        let moved = probe.regressors(&shifted);
+                        for k in 0..cand.n {
+                            let dreg = frames::scale(
+                                frames::sub(moved[k], regs[c][k]),
+                                size / NOISE_STEP_UT,
+                            );
+                            let g = -(frames::dot(du, regs[c][k]) + frames::dot(u, dreg));
+                            if g != 0.0 {
+                                cross.push((cand.first + k, g));
+                            }
+                        }
+                    }
+                    stats.add_noise_cross(&cross);
+                }
             }
         }
         part

@@ -13,6 +13,9 @@ const SCORE_LAGS: usize = 4;
 pub(crate) struct BlockStats {
     pub xtx: DMatrix<f64>,
     pub xty: DVector<f64>,
+    /// `−Σ cov(x, y)` of the rows' noise, where the regressors and the observation share the sensor's noise (the
+    /// scalar method): added to `Xᵀy` by the errors-in-variables correction.
+    pub xty_noise: DVector<f64>,
     pub yty: f64,
     /// Rows accumulated.
     pub rows: usize,
@@ -25,6 +28,7 @@ impl BlockStats {
         BlockStats {
             xtx: DMatrix::zeros(columns, columns),
             xty: DVector::zeros(columns),
+            xty_noise: DVector::zeros(columns),
             yty: 0.0,
             rows: 0,
             samples: 0,
@@ -47,6 +51,13 @@ impl BlockStats {
         self.rows += 1;
     }
 
+    /// Adds one row's `−cov(x, y)` of the noise, as (column, value) pairs.
+    pub fn add_noise_cross(&mut self, entries: &[(usize, f64)]) {
+        for &(i, v) in entries {
+            self.xty_noise[i] += v;
+        }
+    }
+
     /// Mirrors the accumulated lower triangle into the upper one.
     pub fn symmetrise(&mut self) {
         let n = self.xtx.nrows();
@@ -60,6 +71,7 @@ impl BlockStats {
     pub fn add(&mut self, other: &BlockStats) {
         self.xtx += &other.xtx;
         self.xty += &other.xty;
+        self.xty_noise += &other.xty_noise;
         self.yty += other.yty;
         self.rows += other.rows;
         self.samples += other.samples;
@@ -274,6 +286,7 @@ impl Problem {
                 }
                 if corrected {
                     xtx[(r, r)] -= block.samples as f64 * self.noise_var[i];
+                    xty[r] += block.xty_noise[i];
                 }
             }
             yty += block.yty;
@@ -286,6 +299,13 @@ impl Problem {
         let beta = &inverse * &xty;
         // RSS of the fitted rows with these coefficients (the uncorrected quadratic form: actual residuals).
         let mut rss = yty - 2.0 * beta.dot(&xty);
+        if corrected {
+            for (_, block) in fitted() {
+                for (r, &i) in supported.iter().enumerate() {
+                    rss += 2.0 * beta[r] * block.xty_noise[i];
+                }
+            }
+        }
         for (_, block) in fitted() {
             for (r, &i) in supported.iter().enumerate() {
                 for (s, &j) in supported.iter().enumerate() {
@@ -344,7 +364,9 @@ impl Problem {
                 DVector::from_iterator(
                     k,
                     sol.columns.iter().enumerate().map(|(r, &i)| {
-                        let mut v = b.xty[i] + b.samples as f64 * self.noise_var[i] * sol.beta[r];
+                        let mut v = b.xty[i]
+                            + b.xty_noise[i]
+                            + b.samples as f64 * self.noise_var[i] * sol.beta[r];
                         for (s, &j) in sol.columns.iter().enumerate() {
                             v -= b.xtx[(i, j)] * sol.beta[s];
                         }
