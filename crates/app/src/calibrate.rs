@@ -126,21 +126,25 @@ impl Calibration {
 
     /// Standard errors of the offset `−A⁻¹·b` of the final model, µT: from the scalar fit's centre covariance, or
     /// propagated through `dc = −A⁻¹·(dA·c + db)` from the vector fit's covariance (rows independent); for a model
-    /// extended by the diagnosis, from its standard errors with the entries' covariances neglected.
+    /// extended by the diagnosis, the larger of that and the diagnosis' own (its problem's covariance, see
+    /// [`magcal_calib::diagnosis::LinearSe`]).
     pub fn offset_se_ut(&self) -> [f64; 3] {
-        let model = self.model();
+        let base = self.base_offset_se_ut();
+        match self.diagnosis.as_ref().and_then(|d| d.extended.se) {
+            Some(se) => std::array::from_fn(|k| base[k].max(se.offset_ut[k])),
+            None => base,
+        }
+    }
+
+    /// [`Calibration::offset_se_ut`] of the base fit.
+    fn base_offset_se_ut(&self) -> [f64; 3] {
+        let model = self.base_model();
         let c = scalar::centre(&model.a, model.b_ut);
-        let row_var: [f64; 3] = match (
-            &self.fit,
-            self.diagnosis.as_ref().and_then(|d| d.extended.se),
-        ) {
-            (Fit::Scalar(s), None) => {
+        let row_var: [f64; 3] = match &self.fit {
+            Fit::Scalar(s) => {
                 return std::array::from_fn(|k| s.centre_cov_ut2[k][k].sqrt());
             }
-            (_, Some((a_se, b_se))) => std::array::from_fn(|j| {
-                (0..3).map(|k| (c[k] * a_se[j][k]).powi(2)).sum::<f64>() + b_se[j].powi(2)
-            }),
-            (Fit::Vector(v), None) => std::array::from_fn(|j| {
+            Fit::Vector(v) => std::array::from_fn(|j| {
                 let g = [c[0], c[1], c[2], 1.0];
                 (0..4)
                     .flat_map(|r| (0..4).map(move |s| (r, s)))
@@ -158,14 +162,19 @@ impl Calibration {
         })
     }
 
-    /// Standard errors of the final model's `A` and `b`.
+    /// Standard errors of the final model's `A` and `b`: the base fit's, or for a model extended by the diagnosis
+    /// the larger of those and the diagnosis' own.
     pub fn standard_errors(&self) -> ([[f64; 3]; 3], [f64; 3]) {
-        if let Some(se) = self.diagnosis.as_ref().and_then(|d| d.extended.se) {
-            return se;
-        }
-        match &self.fit {
+        let (a, b) = match &self.fit {
             Fit::Vector(v) => (v.a_se, v.b_se_ut),
             Fit::Scalar(s) => (s.a_se, s.b_se_ut),
+        };
+        match self.diagnosis.as_ref().and_then(|d| d.extended.se) {
+            Some(se) => (
+                std::array::from_fn(|j| std::array::from_fn(|k| a[j][k].max(se.a[j][k]))),
+                std::array::from_fn(|j| b[j].max(se.b_ut[j])),
+            ),
+            None => (a, b),
         }
     }
 }

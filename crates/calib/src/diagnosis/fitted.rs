@@ -7,7 +7,7 @@ use crate::model::Model;
 
 use super::candidates::Candidate;
 use super::stats::{Problem, Solution};
-use super::{Param, ParamValue};
+use super::{LinearSe, Param, ParamValue};
 
 /// The linear part of a solution: `A` and `b`, back from centred readings (`raw_mean`) and, for the scalar method,
 /// from the linearisation about `base`.
@@ -53,28 +53,31 @@ pub(crate) fn coefficient(sol: &Solution, col: usize, sigma2: f64) -> Option<(f6
         .map(|p| (sol.beta[p], (sol.inverse[(p, p)] * sigma2).sqrt()))
 }
 
-/// Standard errors of `A` and `b` from a vector-method solution on centred readings: of each quantity the larger of
-/// its variance from the residual variance (allowing for autocorrelated residuals, as the effects' are) and its
-/// cluster-robust variance (allowing for residuals that vary with the regressors in stretches of the recording, as
-/// a disturbance's tail does). `b = b' − A·mean`, so `var(b_j) = gᵀ·C_j·g` with `g = (−mean, 1)` and `C_j` the
-/// covariance of row `j`'s `(a_j, b'_j)`.
+/// Standard errors of the linear part `A`, `b` of a solution and of its offset `c = −A⁻¹·b` (`a`, `b`: the linear
+/// part they are taken at). Of each quantity, the larger of its variance from the residual variance (allowing for
+/// autocorrelated residuals, as the effects' are) and its cluster-robust variance (allowing for residuals that vary
+/// with the regressors in stretches of the recording, as a disturbance's tail does), with the covariances of the
+/// entries it is made of. With readings centred on `raw_mean` the fitted offset is `b' = b + A·mean`, so
+/// `db = db' − dA·mean` and `dc = −A⁻¹·(db' + dA·(c − mean))`.
 pub(crate) fn linear_se(
     problem: &Problem,
     sol: &Solution,
     rows: f64,
+    vector: bool,
+    (a, b): (&Mat3, [f64; 3]),
     raw_mean: [f64; 3],
-) -> (Mat3, [f64; 3]) {
+) -> LinearSe {
     let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0) * problem.autocorrelation(sol);
     let cluster = problem.cluster_covariance(sol);
     let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
-    // The variance of Σ g_r·θ_(4j+r) under each covariance, the larger one.
-    let var = |j: usize, g: [f64; 4]| {
+    // The variance of Σ g·θ over (column, g) pairs under each covariance, the larger one.
+    let var = |g: &[(usize, f64)]| {
         let quad = |cov: &dyn Fn(usize, usize) -> f64| {
             let mut v = 0.0;
-            for r in 0..4 {
-                for c in 0..4 {
-                    if let (Some(p), Some(q)) = (pos(4 * j + r), pos(4 * j + c)) {
-                        v += g[r] * cov(p, q) * g[c];
+            for &(c, x) in g {
+                for &(d, y) in g {
+                    if let (Some(p), Some(q)) = (pos(c), pos(d)) {
+                        v += x * cov(p, q) * y;
                     }
                 }
             }
@@ -82,18 +85,44 @@ pub(crate) fn linear_se(
         };
         let model = quad(&|p, q| sol.inverse[(p, q)] * s2);
         let robust = cluster.as_ref().map_or(0.0, |m| quad(&|p, q| m[(p, q)]));
-        model.max(robust).max(0.0)
+        model.max(robust).max(0.0).sqrt()
     };
-    let a_se: Mat3 = std::array::from_fn(|j| {
-        std::array::from_fn(|k| {
-            let mut g = [0.0; 4];
-            g[k] = 1.0;
-            var(j, g).sqrt()
-        })
+    // The columns of A's entry (j, k) and of b'_j.
+    let a_col = |j: usize, k: usize| {
+        if vector {
+            4 * j + k
+        } else {
+            SYM.iter()
+                .position(|&(r, s)| (r, s) == (j.min(k), j.max(k)))
+                .expect("a symmetric pair")
+        }
+    };
+    let b_col = |j: usize| if vector { 4 * j + 3 } else { 6 + j };
+    let a_se: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| var(&[(a_col(j, k), 1.0)])));
+    let b_se = std::array::from_fn(|j| {
+        let mut g = vec![(b_col(j), 1.0)];
+        g.extend((0..3).map(|k| (a_col(j, k), -raw_mean[k])));
+        var(&g)
     });
-    let b_se =
-        std::array::from_fn(|j| var(j, [-raw_mean[0], -raw_mean[1], -raw_mean[2], 1.0]).sqrt());
-    (a_se, b_se)
+    let inv = nalgebra::Matrix3::from_fn(|j, k| a[j][k])
+        .try_inverse()
+        .unwrap_or_else(nalgebra::Matrix3::zeros);
+    let c: [f64; 3] = std::array::from_fn(|k| -(0..3).map(|j| inv[(k, j)] * b[j]).sum::<f64>());
+    let lever = frames::sub(c, raw_mean);
+    let offset_se = std::array::from_fn(|k| {
+        let mut g = Vec::with_capacity(12);
+        for j in 0..3 {
+            let w = -inv[(k, j)];
+            g.push((b_col(j), w));
+            g.extend((0..3).map(|m| (a_col(j, m), w * lever[m])));
+        }
+        var(&g)
+    });
+    LinearSe {
+        a: a_se,
+        b_ut: b_se,
+        offset_ut: offset_se,
+    }
 }
 
 /// Index pairs of the scalar method's symmetric `A` parameters (as in [`crate::scalar`]).

@@ -222,12 +222,23 @@ pub struct FitSummary {
     pub a: Mat3,
     /// `b`, µT.
     pub b_ut: [f64; 3],
-    /// Standard errors of `A` and `b` (vector method; the scalar method's come from its own fit).
-    pub se: Option<(Mat3, [f64; 3])>,
+    /// Standard errors of `A`, `b` and the offset, from the diagnosis' problem.
+    pub se: Option<LinearSe>,
     /// Residual RMS (per axis, or of |B|), µT.
     pub rms_ut: f64,
     /// Held-out residual RMS, µT.
     pub holdout_rms_ut: f64,
+}
+
+/// Standard errors of a fit's linear part.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinearSe {
+    /// Of `A`'s entries.
+    pub a: Mat3,
+    /// Of `b`, µT.
+    pub b_ut: [f64; 3],
+    /// Of the offset `−A⁻¹·b`, µT.
+    pub offset_ut: [f64; 3],
 }
 
 /// Per-sample residuals before and after, for plots: one component per calibrated axis (vector) or one (|B|).
@@ -1157,14 +1168,28 @@ impl Setup<'_> {
             base: FitSummary {
                 a: base_a,
                 b_ut: base_b,
-                se: vector.then(|| linear_se(problem, &base12, rows, self.raw_mean)),
+                se: Some(linear_se(
+                    problem,
+                    &base12,
+                    rows,
+                    vector,
+                    (&base_a, base_b),
+                    self.raw_mean,
+                )),
                 rms_ut: rms(problem.clean_rss(&base12)),
                 holdout_rms_ut: rms(base_cv),
             },
             extended: FitSummary {
                 a: ext_a,
                 b_ut: ext_b,
-                se: vector.then(|| linear_se(problem, &last, rows, self.raw_mean)),
+                se: Some(linear_se(
+                    problem,
+                    &last,
+                    rows,
+                    vector,
+                    (&ext_a, ext_b),
+                    self.raw_mean,
+                )),
                 rms_ut: rms(problem.clean_rss(&last)),
                 holdout_rms_ut: rms(round.sel.last_cv),
             },
@@ -1329,14 +1354,18 @@ impl Setup<'_> {
             }
             SpanKind::SensorFixed {
                 offset_ut,
-                told_apart,
+                told_apart: true,
             } => format!(
-                "{when}: a field of {:.1} µT fixed to the sensor{} — modelled (bias_window), the samples it explains kept",
+                "{when}: a field of {:.1} µT fixed to the sensor — modelled (bias_window), the samples it explains kept",
+                frames::norm(offset_ut)
+            ),
+            SpanKind::SensorFixed { offset_ut, .. } => format!(
+                "{when}: a constant field of {:.1} µT, fixed to the sensor or to the room: the two cannot be told apart                  here{} — left out of the calibration",
                 frames::norm(offset_ut),
-                if told_apart {
+                if self.vector {
                     ""
                 } else {
-                    " (or to the room: the two cannot be told apart here)"
+                    " (the magnitude alone does not show the frame)"
                 }
             ),
             SpanKind::RoomFixed { field_ned_ut } => format!(
