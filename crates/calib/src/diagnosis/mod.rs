@@ -1360,7 +1360,8 @@ impl Setup<'_> {
                 frames::norm(offset_ut)
             ),
             SpanKind::SensorFixed { offset_ut, .. } => format!(
-                "{when}: a constant field of {:.1} µT, fixed to the sensor or to the room: the two cannot be told apart                  here{} — left out of the calibration",
+                "{when}: a constant field of {:.1} µT, fixed to the sensor or to the room: the two cannot be told apart \
+                 here{} — left out of the calibration",
                 frames::norm(offset_ut),
                 if self.vector {
                     ""
