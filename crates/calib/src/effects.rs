@@ -268,6 +268,18 @@ pub enum Effect {
 /// μ0/(4π) in µT·m³/(A·m²).
 const MU0_OVER_4PI_UT: f64 = 0.1;
 
+/// How much the true field differs from the assumed one (NED, µT) when its declination and inclination are off by
+/// these angles (degrees), its magnitude the same.
+fn field_direction_shift_ned(
+    field_ned_ut: [f64; 3],
+    declination_error_deg: f64,
+    inclination_error_deg: f64,
+) -> [f64; 3] {
+    let (d, i, m) = frames::field_angles(field_ned_ut);
+    let truth = frames::field_from_angles(d + declination_error_deg, i + inclination_error_deg, m);
+    frames::sub(truth, field_ned_ut)
+}
+
 impl Effect {
     /// The effect's id.
     pub fn id(&self) -> EffectId {
@@ -285,6 +297,22 @@ impl Effect {
             Effect::Disturbance { .. } => EffectId::Disturbance,
             Effect::BiasWindow { .. } => EffectId::BiasWindow,
             Effect::MagnetNearby { .. } => EffectId::MagnetNearby,
+        }
+    }
+
+    /// The world-frame field this effect adds, NED, µT, when it is the same at every sample (a wrong direction of
+    /// the assumed field `field_ned_ut`): its perturbation is this rotated into sensor axes. `None` otherwise.
+    pub fn constant_world_field_ut(&self, field_ned_ut: [f64; 3]) -> Option<[f64; 3]> {
+        match *self {
+            Effect::FieldDirectionError {
+                declination_error_deg,
+                inclination_error_deg,
+            } => Some(field_direction_shift_ned(
+                field_ned_ut,
+                declination_error_deg,
+                inclination_error_deg,
+            )),
+            _ => None,
         }
     }
 
@@ -340,15 +368,14 @@ impl Effect {
                 declination_error_deg,
                 inclination_error_deg,
             } => match ctx.world {
-                Some(w) => {
-                    let (d, i, m) = frames::field_angles(w.field_ned_ut);
-                    let truth = frames::field_from_angles(
-                        d + declination_error_deg,
-                        i + inclination_error_deg,
-                        m,
-                    );
-                    frames::mat_t_vec(&w.sensor_to_ned, frames::sub(truth, w.field_ned_ut))
-                }
+                Some(w) => frames::mat_t_vec(
+                    &w.sensor_to_ned,
+                    field_direction_shift_ned(
+                        w.field_ned_ut,
+                        declination_error_deg,
+                        inclination_error_deg,
+                    ),
+                ),
                 None => [0.0; 3],
             },
             Effect::Nonlinearity { cubic_per_ut2 } => [

@@ -1,7 +1,10 @@
 //! The candidate effects a recording can test, the reasons the others cannot be tested, and each candidate's
 //! regressors — taken from [`Effect::perturbation_ut`], the same definition the simulator injects.
 
+use std::cell::Cell;
+
 use crate::effects::{Context, Effect, EffectId};
+use crate::frames;
 
 use super::samples::Samples;
 use super::scan::Scan;
@@ -112,6 +115,7 @@ impl Candidate {
                     [with(k, STEP), with(k, -STEP)]
                 }
             }),
+            world: Cell::new(None),
         }
     }
 }
@@ -125,23 +129,56 @@ pub(crate) struct Probes {
     n: usize,
     linear: bool,
     effects: [[Effect; 2]; 3],
+    /// For an effect that adds the same world-frame field at every sample: the assumed field and, per parameter,
+    /// the regressor in NED it gives (computed once, rotated per sample).
+    world: Cell<Option<([f64; 3], [[f64; 3]; 3])>>,
 }
 
 impl Probes {
     /// The regressors at one sample: column `k` is the perturbation per unit of parameter `k`, in calibrated axes
     /// (linearised at zero by central differences for a non-linear effect).
     pub fn regressors(&self, ctx: &Context<'_>) -> [[f64; 3]; 3] {
+        if let Some(w) = ctx.world
+            && let Some(ned) = self.world_columns(w.field_ned_ut)
+        {
+            return ned.map(|col| frames::mat_t_vec(&w.sensor_to_ned, col));
+        }
         let mut out = [[0.0; 3]; 3];
         for (col, [plus, minus]) in out.iter_mut().zip(&self.effects).take(self.n) {
             *col = if self.linear {
                 plus.perturbation_ut(ctx)
             } else {
                 let (plus, minus) = (plus.perturbation_ut(ctx), minus.perturbation_ut(ctx));
-                std::array::from_fn(|j| (plus[j] - minus[j]) / (2.0 * STEP))
+                difference(plus, minus)
             };
         }
         out
     }
+
+    /// The NED regressors of an effect that adds the same world-frame field at every sample, for the assumed field.
+    fn world_columns(&self, field_ned_ut: [f64; 3]) -> Option<[[f64; 3]; 3]> {
+        if let Some((f, cols)) = self.world.get()
+            && f == field_ned_ut
+        {
+            return Some(cols);
+        }
+        let mut cols = [[0.0; 3]; 3];
+        for (col, [plus, minus]) in cols.iter_mut().zip(&self.effects).take(self.n) {
+            let plus = plus.constant_world_field_ut(field_ned_ut)?;
+            *col = if self.linear {
+                plus
+            } else {
+                difference(plus, minus.constant_world_field_ut(field_ned_ut)?)
+            };
+        }
+        self.world.set(Some((field_ned_ut, cols)));
+        Some(cols)
+    }
+}
+
+/// The central difference of two probes at ±[`STEP`].
+fn difference(plus: [f64; 3], minus: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|j| (plus[j] - minus[j]) / (2.0 * STEP))
 }
 
 /// An effect that cannot be tested on this recording, and why.
