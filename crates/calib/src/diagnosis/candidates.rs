@@ -124,6 +124,9 @@ impl Candidate {
 /// second-order terms are ~1e-4 of the first for errors of a degree).
 const STEP: f64 = 1e-2;
 
+/// An assumed world field (NED, µT) and, per parameter, the NED regressor it gives.
+type WorldColumns = ([f64; 3], [[f64; 3]; 3]);
+
 /// A candidate's effects with one parameter set: per parameter, at 1 (a linear effect) or at ±[`STEP`].
 pub(crate) struct Probes {
     n: usize,
@@ -131,7 +134,7 @@ pub(crate) struct Probes {
     effects: [[Effect; 2]; 3],
     /// For an effect that adds the same world-frame field at every sample: the assumed field and, per parameter,
     /// the regressor in NED it gives (computed once, rotated per sample).
-    world: Cell<Option<([f64; 3], [[f64; 3]; 3])>>,
+    world: Cell<Option<WorldColumns>>,
 }
 
 impl Probes {
