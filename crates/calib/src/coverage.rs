@@ -23,33 +23,22 @@ pub struct Coverage {
 }
 
 impl Coverage {
-    /// Measures the spread of raw readings (µT).
+    /// Measures the spread of raw readings (µT), summed on all threads.
     pub fn of(raw_ut: &[[f64; 3]]) -> Coverage {
         let n = raw_ut.len().max(1) as f64;
-        let mean = raw_ut
-            .iter()
-            .fold(Vector3::zeros(), |acc, m| acc + Vector3::from(*m))
-            / n;
-        let cov = raw_ut.iter().fold(Matrix3::zeros(), |acc, m| {
-            let d = Vector3::from(*m) - mean;
-            acc + d * d.transpose()
-        }) / n;
-        Coverage::from_covariance(&cov)
-    }
-
-    /// [`Coverage::of`] readings held as vectors, summed on all threads.
-    pub(crate) fn of_vectors(raw: &[Vector3<f64>]) -> Coverage {
-        let n = raw.len().max(1) as f64;
-        let sum =
-            |r: std::ops::Range<usize>| raw[r].iter().fold(Vector3::zeros(), |acc, m| acc + m);
-        let mean = crate::chunks::fold(raw.len(), sum, |a, b| a + b).unwrap_or_default() / n;
+        let sum = |r: std::ops::Range<usize>| {
+            raw_ut[r]
+                .iter()
+                .fold(Vector3::zeros(), |acc, m| acc + Vector3::from(*m))
+        };
+        let mean = crate::chunks::fold(raw_ut.len(), sum, |a, b| a + b).unwrap_or_default() / n;
         let products = |r: std::ops::Range<usize>| {
-            raw[r].iter().fold(Matrix3::zeros(), |acc, m| {
-                let d = m - mean;
+            raw_ut[r].iter().fold(Matrix3::zeros(), |acc, m| {
+                let d = Vector3::from(*m) - mean;
                 acc + d * d.transpose()
             })
         };
-        let cov = crate::chunks::fold(raw.len(), products, |a, b| a + b).unwrap_or_default() / n;
+        let cov = crate::chunks::fold(raw_ut.len(), products, |a, b| a + b).unwrap_or_default() / n;
         Coverage::from_covariance(&cov)
     }
 

@@ -60,6 +60,9 @@ const NOT_AN_ELLIPSOID: f64 = 0.2;
 /// Parameters: the centre (x, y, z) and the six entries of the symmetric `A` (xx, yy, zz, xy, xz, yz).
 const P: usize = 9;
 const MAX_ITERATIONS: usize = 100;
+/// A step whose decrease departs from the quadratic model's prediction by more than this fraction of it has the
+/// model's matrix made anew (see [`Problem::minimise`]).
+const MODEL_AGREEMENT: f64 = 0.1;
 /// Rounds of settling the prior's weight on the residual variance.
 const MAX_ROUNDS: usize = 8;
 /// Cells of direction for the weights and the cluster-robust standard errors.
@@ -85,6 +88,10 @@ pub struct ScalarOptions<'a> {
     /// Estimates only, quickly: no noise correction, no uncertainties (zero), no refusal of an undetermined centre
     /// (for the seeds of a robust fit).
     pub quick: bool,
+    /// A fit to start the iterations from (one with nearly the same weights, in a robust fit's reweighting): the
+    /// minimum is the same to the iterations' tolerance, reached in fewer passes. Unused where it fits worse than
+    /// the linear sphere fit the iterations otherwise start from.
+    pub start: Option<&'a ScalarFit>,
 }
 
 /// The result of a scalar fit.
@@ -196,12 +203,12 @@ impl RobustProblem for ScalarProblem<'_> {
         }
     }
 
-    fn quick_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, true)
+    fn quick_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, true, start)
     }
 
-    fn final_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, false)
+    fn final_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, false, start)
     }
 
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
@@ -219,7 +226,12 @@ impl RobustProblem for ScalarProblem<'_> {
 }
 
 impl ScalarProblem<'_> {
-    fn fit_with(&self, weights: &[f64], quick: bool) -> Result<ScalarFit, FitError> {
+    fn fit_with(
+        &self,
+        weights: &[f64],
+        quick: bool,
+        start: Option<&ScalarFit>,
+    ) -> Result<ScalarFit, FitError> {
         fit(
             &self.raw_ut,
             &ScalarOptions {
@@ -228,6 +240,7 @@ impl ScalarProblem<'_> {
                 weights: Some(weights),
                 raw_noise_var_ut2: self.raw_noise_var_ut2,
                 quick,
+                start,
             },
         )
     }
@@ -285,9 +298,11 @@ fn residual(
 
 /// What the raw noise (variances `s2` per axis) adds on average to `r·∇r` of one reading, to second order: the
 /// magnitude's bias `½·tr(∇²f·Σ)` times the gradient, plus the covariance of the reading's noise in `r` and in `∇r`.
+/// `a2` is `A·A`, made once per pass.
 fn noise_score(
     m: &Vector3<f64>,
     a: &Matrix3<f64>,
+    a2: &Matrix3<f64>,
     c: &Vector3<f64>,
     s2: &Vector3<f64>,
     grad: &[f64; P],
@@ -297,12 +312,16 @@ fn noise_score(
     let len = v.norm();
     let u = v / len;
     let w = a * u;
-    let proj = Matrix3::identity() - u * u.transpose();
-    let k = a * proj * a / len;
-    let bias = 0.5 * (0..3).map(|i| k[(i, i)] * s2[i]).sum::<f64>();
+    // With P = I − u·uᵀ and A symmetric: K = A·P·A/|v| = (A² − w·wᵀ)/|v|, and P·A·x = A·x − u·(w·x).
+    let bias = 0.5
+        * (0..3)
+            .map(|i| (a2[(i, i)] - w[i] * w[i]) * s2[i])
+            .sum::<f64>()
+        / len;
     let sw = s2.component_mul(&w);
-    let kw = k * sw;
-    let z = proj * a * sw / len;
+    let kw = (a2 * sw - w * w.dot(&sw)) / len;
+    let asw = a * sw;
+    let z = (asw - u * w.dot(&sw)) / len;
     let mut out = [0.0; P];
     for i in 0..3 {
         out[i] = bias * grad[i] - kw[i];
@@ -328,53 +347,110 @@ fn unpack(p: &SVector<f64, P>) -> (Vector3<f64>, Matrix3<f64>) {
     (p.fixed_rows::<3>(0).into_owned(), a)
 }
 
-fn pass(
-    raw: &[Vector3<f64>],
+/// The entries of the upper triangle of a `P`×`P` matrix, row by row.
+const TRIANGLE: usize = P * (P + 1) / 2;
+
+/// One accumulation at `p`: `JᵀWr` (less the noise's share with `noise`) and `Σwr²`, and with `JTJ` the matrix
+/// `JᵀWJ` (zero without: a pass for the gradient alone costs a fraction of one with the matrix).
+fn pass<const JTJ: bool>(
+    raw: &[[f64; 3]],
     w: &[f64],
     p: &SVector<f64, P>,
     field_ut: f64,
     noise: Option<&Vector3<f64>>,
 ) -> Pass {
     let (c, a) = unpack(p);
-    // Per chunk: JᵀWJ (all of it: fixed bounds let the products vectorise), JᵀWr and Σwr², in plain arrays.
     let chunk = |range: std::ops::Range<usize>| {
-        let (mut jtj, mut jtr, mut rss) = ([[0.0; P]; P], [0.0; P], 0.0);
-        for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
-            if wi == 0.0 {
-                continue;
-            }
-            let (r, j) = residual(m, &a, &c, field_ut);
-            let wj = j.map(|v| wi * v);
-            match noise {
-                None => (0..P).for_each(|x| jtr[x] += wj[x] * r),
-                Some(s2) => {
-                    let k = noise_score(m, &a, &c, s2, &j);
-                    (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
-                }
-            }
-            for (row, wx) in jtj.iter_mut().zip(wj) {
-                for (e, jy) in row.iter_mut().zip(j) {
-                    *e += wx * jy;
-                }
-            }
-            rss += wi * r * r;
+        let (raw, w) = (&raw[range.clone()], &w[range]);
+        match noise {
+            None => accumulate::<JTJ, false>(raw, w, &a, &c, field_ut, &Vector3::zeros()),
+            Some(s2) => accumulate::<JTJ, true>(raw, w, &a, &c, field_ut, s2),
         }
-        (jtj, jtr, rss)
     };
     let (jtj, jtr, rss) = chunks::fold(raw.len(), chunk, |x, y| {
         (
-            std::array::from_fn(|r| std::array::from_fn(|c| x.0[r][c] + y.0[r][c])),
+            std::array::from_fn(|e| x.0[e] + y.0[e]),
             std::array::from_fn(|i| x.1[i] + y.1[i]),
             x.2 + y.2,
         )
     })
     .unwrap_or_else(|| chunk(0..0));
-    // Symmetric: the upper triangle as summed, mirrored.
     Pass {
-        jtj: SMatrix::<f64, P, P>::from_fn(|x, y| jtj[x.min(y)][x.max(y)]),
+        jtj: mirror(&jtj),
         jtr: SVector::<f64, P>::from(jtr),
         rss,
     }
+}
+
+/// The sums of one chunk: the upper triangle of `JᵀWJ` row by row (with `JTJ`), `JᵀWr` less the noise's share
+/// (with `NOISE`, of variances `s2`) and `Σwr²`, in plain arrays.
+fn accumulate<const JTJ: bool, const NOISE: bool>(
+    raw: &[[f64; 3]],
+    w: &[f64],
+    a: &Matrix3<f64>,
+    c: &Vector3<f64>,
+    field_ut: f64,
+    s2: &Vector3<f64>,
+) -> ([f64; TRIANGLE], [f64; P], f64) {
+    let (mut jtj, mut jtr, mut rss) = ([0.0; TRIANGLE], [0.0; P], 0.0);
+    let a2 = a * a;
+    for (m, &wi) in raw.iter().zip(w) {
+        if wi == 0.0 {
+            continue;
+        }
+        let m = Vector3::from(*m);
+        let (r, j) = residual(&m, a, c, field_ut);
+        let wj = j.map(|v| wi * v);
+        if NOISE {
+            let k = noise_score(&m, a, &a2, c, s2, &j);
+            (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
+        } else {
+            (0..P).for_each(|x| jtr[x] += wj[x] * r);
+        }
+        if JTJ {
+            let mut e = 0;
+            for x in 0..P {
+                for y in x..P {
+                    jtj[e] += wj[x] * j[y];
+                    e += 1;
+                }
+            }
+        }
+        rss += wi * r * r;
+    }
+    (jtj, jtr, rss)
+}
+
+/// The symmetric matrix of an upper triangle summed row by row.
+fn mirror(upper: &[f64; TRIANGLE]) -> SMatrix<f64, P, P> {
+    let mut full = SMatrix::<f64, P, P>::zeros();
+    let mut e = 0;
+    for x in 0..P {
+        for y in x..P {
+            full[(x, y)] = upper[e];
+            full[(y, x)] = upper[e];
+            e += 1;
+        }
+    }
+    full
+}
+
+/// `Σwr²` alone at parameters `p`: the objective without its derivatives.
+fn rss(raw: &[[f64; 3]], w: &[f64], p: &SVector<f64, P>, field_ut: f64) -> f64 {
+    let (c, a) = unpack(p);
+    chunks::fold(
+        raw.len(),
+        |range| {
+            raw[range.clone()]
+                .iter()
+                .zip(&w[range])
+                .filter(|(_, wi)| **wi != 0.0)
+                .map(|(m, wi)| wi * ((a * (Vector3::from(*m) - c)).norm() - field_ut).powi(2))
+                .sum::<f64>()
+        },
+        |x, y| x + y,
+    )
+    .unwrap_or_default()
 }
 
 /// The shape prior's precision (per unit of `A`'s mean gain²): free centre and overall scale, each gain's departure
@@ -395,13 +471,13 @@ fn shape_precision(gain: f64) -> SMatrix<f64, P, P> {
 }
 
 /// A weighted linear sphere fit: `|m|² = 2·c·m + k`, centred for conditioning. Returns the centre and radius.
-fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
+fn sphere(raw: &[[f64; 3]], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
     let sum = |range: std::ops::Range<usize>| {
         raw[range.clone()]
             .iter()
             .zip(&w[range])
             .fold((Vector3::zeros(), 0.0), |(s, n), (m, wi)| {
-                (s + m * *wi, n + wi)
+                (s + Vector3::from(*m) * *wi, n + wi)
             })
     };
     let (sum, w_sum) =
@@ -410,7 +486,7 @@ fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
     let products = |range: std::ops::Range<usize>| {
         let (mut xtx, mut xty) = (nalgebra::Matrix4::<f64>::zeros(), Vector4::<f64>::zeros());
         for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
-            let d = m - mean;
+            let d = Vector3::from(*m) - mean;
             let x = Vector4::new(2.0 * d.x, 2.0 * d.y, 2.0 * d.z, 1.0);
             xtx += x * x.transpose() * wi;
             xty += x * (d.norm_squared() * wi);
@@ -428,13 +504,13 @@ fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
 /// Each reading's cell of direction about `centre`, the weights that keep any cell from outweighing the rotation
 /// ([`capped_cell_weights`]), and the number of occupied cells.
 fn direction_weights(
-    raw: &[Vector3<f64>],
+    raw: &[[f64; 3]],
     base: &[f64],
     centre: &Vector3<f64>,
     grid: &SphereGrid,
 ) -> (Vec<f64>, Vec<usize>, usize) {
     let cell: Vec<usize> = chunks::map(raw.len(), |i| {
-        let d = raw[i] - centre;
+        let d = Vector3::from(raw[i]) - centre;
         grid.cell([d.x, d.y, d.z]).unwrap_or(0)
     });
     let w = capped_cell_weights(&cell, base, grid.len());
@@ -448,8 +524,9 @@ fn direction_weights(
 
 /// The problem as the solver sees it: the usable readings, their weights and cells, the magnitude aimed at and the
 /// shape prior.
-struct Problem {
-    raw: Vec<Vector3<f64>>,
+struct Problem<'a> {
+    /// The usable readings: the caller's own when every reading is usable.
+    raw: Cow<'a, [[f64; 3]]>,
     /// Weights, the direction weights included.
     w: Vec<f64>,
     w_sum: f64,
@@ -474,14 +551,37 @@ struct Solution {
     iterations: usize,
 }
 
-impl Problem {
+impl Problem<'_> {
     fn pass(&self, p: &SVector<f64, P>, noise: Option<&Vector3<f64>>) -> Pass {
-        pass(&self.raw, &self.w, p, self.target, noise)
+        pass::<true>(&self.raw, &self.w, p, self.target, noise)
+    }
+
+    /// [`Problem::pass`] without the matrix, which stays `jtj`.
+    fn gradient(
+        &self,
+        p: &SVector<f64, P>,
+        noise: Option<&Vector3<f64>>,
+        jtj: SMatrix<f64, P, P>,
+    ) -> Pass {
+        Pass {
+            jtj,
+            ..pass::<false>(&self.raw, &self.w, p, self.target, noise)
+        }
+    }
+
+    /// The objective: the weighted sum of squares plus the prior weighted by `sigma2`.
+    fn objective(&self, rss: f64, p: &SVector<f64, P>, sigma2: f64) -> f64 {
+        rss + sigma2 * (p.transpose() * self.q * p)[(0, 0)]
     }
 
     /// Levenberg–Marquardt on the magnitude residual plus the prior weighted by `sigma2`, from `p` (where the
     /// accumulation is `at`). Stops when a step's predicted decrease is at the rounding level of the sum of `n`
     /// squares (`√n·ε` of it): such a step cannot be told from rounding by evaluating it, so it is not evaluated.
+    ///
+    /// A trial is evaluated by the objective and its gradient alone, and `JᵀWJ` is carried over from where it was
+    /// last made: near the minimum it changes little, and the steps still lead to where the gradient vanishes (only
+    /// faster to evaluate). It is made anew where the quadratic model it gives is off by more than
+    /// [`MODEL_AGREEMENT`] (the step's decrease against the predicted one), or a step fails with it carried over.
     fn minimise(
         &self,
         mut p: SVector<f64, P>,
@@ -490,11 +590,11 @@ impl Problem {
         iterations: &mut usize,
     ) -> (SVector<f64, P>, Pass) {
         let q = &self.q;
-        let objective =
-            |at: &Pass, p: &SVector<f64, P>| at.rss + sigma2 * (p.transpose() * q * p)[(0, 0)];
         let rounding = f64::EPSILON * (self.raw.len() as f64).sqrt();
-        let mut phi = objective(&at, &p);
+        let mut phi = self.objective(at.rss, &p, sigma2);
         let mut lambda = 1e-3;
+        // Whether `at.jtj` was made at `p`.
+        let mut fresh = true;
         while *iterations < MAX_ITERATIONS {
             let h = at.jtj + q * sigma2;
             let g = at.jtr + q * p * sigma2;
@@ -517,15 +617,23 @@ impl Problem {
             }
             *iterations += 1;
             let trial = p + step;
-            let t = self.pass(&trial, None);
-            let t_phi = objective(&t, &trial);
+            let t = self.gradient(&trial, None, at.jtj);
+            let t_phi = self.objective(t.rss, &trial, sigma2);
             if t_phi.is_finite() && t_phi <= phi {
                 let decrease = phi - t_phi;
-                (p, at, phi) = (trial, t, t_phi);
+                (p, at, phi, fresh) = (trial, t, t_phi, false);
                 lambda = (lambda / 10.0).max(1e-12);
                 if decrease <= 1e-10 * phi {
                     break;
                 }
+                // `g` and `h` are half the objective's gradient and Hessian: the model's decrease is twice `predicted`.
+                if (decrease - 2.0 * predicted).abs() > MODEL_AGREEMENT * 2.0 * predicted {
+                    at = self.pass(&p, None);
+                    fresh = true;
+                }
+            } else if !fresh {
+                at = self.pass(&p, None);
+                fresh = true;
             } else {
                 lambda *= 10.0;
                 if lambda > 1e12 || predicted.abs() <= 1e-12 * phi {
@@ -537,12 +645,34 @@ impl Problem {
     }
 
     /// The fit with the prior weighted by the residual variance: start from the sphere's residual and refit until
-    /// the fit's own residual variance settles.
-    fn settle(&self, p0: SVector<f64, P>, rounds: usize) -> Solution {
+    /// the fit's own residual variance settles. The first weight comes from the sphere `p0`; the iterations start
+    /// from `start` where it fits better.
+    fn settle(
+        &self,
+        p0: SVector<f64, P>,
+        start: Option<SVector<f64, P>>,
+        rounds: usize,
+    ) -> Solution {
         let mut iterations = 0;
-        let mut p = p0;
-        let mut at = self.pass(&p, None);
-        let mut sigma2 = (at.rss / self.dof).max(f64::MIN_POSITIVE);
+        let (mut p, mut at, mut sigma2);
+        match start {
+            Some(s) => {
+                let rss0 = rss(&self.raw, &self.w, &p0, self.target);
+                sigma2 = (rss0 / self.dof).max(f64::MIN_POSITIVE);
+                let t = self.pass(&s, None);
+                let better = self.objective(t.rss, &s, sigma2) <= self.objective(rss0, &p0, sigma2);
+                (p, at) = if better {
+                    (s, t)
+                } else {
+                    (p0, self.pass(&p0, None))
+                };
+            }
+            None => {
+                p = p0;
+                at = self.pass(&p, None);
+                sigma2 = (at.rss / self.dof).max(f64::MIN_POSITIVE);
+            }
+        }
         for _ in 0..rounds {
             (p, at) = self.minimise(p, at, sigma2, &mut iterations);
             let settled = (at.rss / self.dof).max(f64::MIN_POSITIVE);
@@ -572,7 +702,7 @@ impl Problem {
                     .iter()
                     .zip(&w[range])
                     .map(|(m, wi)| {
-                        let au = a * (a * (m - c)).normalize();
+                        let au = a * (a * (Vector3::from(*m) - c)).normalize();
                         wi * (0..3).map(|k| au[k] * au[k] * raw_var[k]).sum::<f64>()
                     })
                     .sum::<f64>()
@@ -588,13 +718,15 @@ impl Problem {
         }
     }
 
-    /// Gauss–Newton on the score less the noise's share of it, from `sol`. Returns whether it converged.
+    /// Gauss–Newton on the score less the noise's share of it, from `sol` (whose `JᵀWJ`, made at the plain fit, serves
+    /// every step: the correction is small, and the steps lead to where the corrected score vanishes all the same).
+    /// Returns whether it converged.
     fn correct(&self, sol: &mut Solution, noise: &Vector3<f64>) -> bool {
         let q = &self.q;
         let mut converged = false;
         for _ in 0..MAX_CORRECTION_STEPS {
             sol.iterations += 1;
-            let at = self.pass(&sol.p, Some(noise));
+            let at = self.gradient(&sol.p, Some(noise), sol.at.jtj);
             let h = at.jtj + q * sol.sigma2;
             let g = at.jtr + q * sol.p * sol.sigma2;
             let Some(step) = h.cholesky().map(|ch| ch.solve(&(-g))) else {
@@ -611,48 +743,73 @@ impl Problem {
                 break;
             }
         }
-        sol.at = self.pass(&sol.p, Some(noise));
+        // The accumulation at the last step's end comes with the covariance ([`Problem::covariance`]).
         converged
     }
 
     /// The parameters' covariance: the larger, in every direction, of the model-based one and the delete-one-cell
     /// jackknife over the cells of direction (each cell's score through the information without that cell). Also
-    /// returns how much of the shape the prior informs.
+    /// returns how much of the shape the prior informs, and the accumulation at `sol.p` (the cells' sums).
     fn covariance(
         &self,
         sol: &Solution,
         noise: Option<&Vector3<f64>>,
-    ) -> Option<(SMatrix<f64, P, P>, f64)> {
+    ) -> Option<(SMatrix<f64, P, P>, f64, Pass)> {
         let (c, a) = unpack(&sol.p);
-        let h = sol.at.jtj + self.q * sol.sigma2;
-        let h_inv = h.try_inverse()?;
-        let model_based = h_inv * sol.sigma2;
-        // Per cell of direction: the score and the information, summed over the chunks of samples.
+        let a2 = a * a;
+        // Per cell of direction: the score and the upper triangle of the information, summed over the chunks of
+        // samples; and the sum of squares.
         let cells_of = |range: std::ops::Range<usize>| {
-            let mut scores = vec![SVector::<f64, P>::zeros(); self.grid.len()];
-            let mut info = vec![SMatrix::<f64, P, P>::zeros(); self.grid.len()];
+            let mut scores = vec![[0.0; P]; self.grid.len()];
+            let mut info = vec![[0.0; TRIANGLE]; self.grid.len()];
+            let mut rss = 0.0;
             for k in range {
-                let (m, wk) = (&self.raw[k], self.w[k]);
+                let (m, wk) = (Vector3::from(self.raw[k]), self.w[k]);
                 if wk == 0.0 {
                     continue;
                 }
-                let (r, j) = residual(m, &a, &c, self.target);
-                let jv = SVector::<f64, P>::from(j);
-                let mut score = jv * r;
-                if let Some(s2) = noise {
-                    score -= SVector::<f64, P>::from(noise_score(m, &a, &c, s2, &j));
+                let (r, j) = residual(&m, &a, &c, self.target);
+                let (score, cell) = (&mut scores[self.cell[k]], &mut info[self.cell[k]]);
+                match noise {
+                    None => (0..P).for_each(|x| score[x] += wk * (j[x] * r)),
+                    Some(s2) => {
+                        let n = noise_score(&m, &a, &a2, &c, s2, &j);
+                        (0..P).for_each(|x| score[x] += wk * (j[x] * r - n[x]));
+                    }
                 }
-                scores[self.cell[k]] += score * wk;
-                info[self.cell[k]] += jv * jv.transpose() * wk;
+                let wj = j.map(|v| wk * v);
+                let mut e = 0;
+                for x in 0..P {
+                    for y in x..P {
+                        cell[e] += wj[x] * j[y];
+                        e += 1;
+                    }
+                }
+                rss += wk * r * r;
             }
-            (scores, info)
+            (scores, info, rss)
         };
-        let (scores, info) = chunks::fold(self.raw.len(), cells_of, |mut x, y| {
-            x.0.iter_mut().zip(&y.0).for_each(|(a, b)| *a += b);
-            x.1.iter_mut().zip(&y.1).for_each(|(a, b)| *a += b);
+        let (scores, info, rss) = chunks::fold(self.raw.len(), cells_of, |mut x, y| {
+            for (a, b) in x.0.iter_mut().zip(&y.0) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            for (a, b) in x.1.iter_mut().zip(&y.1) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            x.2 += y.2;
             x
         })
         .unwrap_or_else(|| cells_of(0..0));
+        let scores: Vec<SVector<f64, P>> = scores.into_iter().map(SVector::from).collect();
+        let info: Vec<SMatrix<f64, P, P>> = info.iter().map(mirror).collect();
+        let at = Pass {
+            jtj: info.iter().sum(),
+            jtr: scores.iter().sum(),
+            rss,
+        };
+        let h = at.jtj + self.q * sol.sigma2;
+        let h_inv = h.try_inverse()?;
+        let model_based = h_inv * sol.sigma2;
         let cells: Vec<usize> = (0..self.grid.len())
             .filter(|&k| scores[k].iter().any(|v| *v != 0.0))
             .collect();
@@ -676,8 +833,9 @@ impl Problem {
         };
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
-        Some((cov, share))
+        Some((cov, share, at))
     }
+
     /// From the plain fit: refuse what the coverage cannot determine, remove the noise's share of the score, and
     /// return the parameters' covariance with the prior's share of the shape.
     fn refine(
@@ -690,20 +848,25 @@ impl Problem {
             || FitError::Singular("the magnitude residual's normal matrix has no inverse");
         // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful
         // where the fit is.
-        let (plain_cov, _) = self.covariance(sol, None).ok_or_else(singular)?;
+        let (plain_cov, plain_share, plain_at) = self.covariance(sol, None).ok_or_else(singular)?;
         check_determined(
             weakest(&plain_cov),
             sol.p.fixed_rows::<3>(3).sum() / 3.0,
             target,
         )?;
         let noise = Vector3::from(opts.raw_noise_var_ut2);
-        let noise = noise
+        let Some(s2) = noise
             .iter()
             .any(|v| *v > 0.0)
-            .then(|| self.bounded_noise(sol, noise));
-        if let Some(s2) = &noise {
+            .then(|| self.bounded_noise(sol, noise))
+        else {
+            sol.at = plain_at;
+            return Ok((plain_cov, plain_share));
+        };
+        sol.at = plain_at;
+        {
             let plain = sol.p;
-            let converged = self.correct(sol, s2);
+            let converged = self.correct(sol, &s2);
             let moved = sol.p - plain;
             let gain = plain.fixed_rows::<3>(3).sum() / 3.0;
             let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
@@ -718,7 +881,9 @@ impl Problem {
                 });
             }
         }
-        self.covariance(sol, noise.as_ref()).ok_or_else(singular)
+        let (cov, share, at) = self.covariance(sol, Some(&s2)).ok_or_else(singular)?;
+        sol.at = at;
+        Ok((cov, share))
     }
 }
 
@@ -739,24 +904,36 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     if let Some(w) = opts.weights {
         assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
     }
-    let rows: Vec<usize> = (0..raw_ut.len())
-        .filter(|&i| {
-            raw_ut[i].iter().all(|v| v.is_finite()) && opts.weights.is_none_or(|w| w[i] > 0.0)
-        })
-        .collect();
-    let n = rows.len();
+    let usable = |i: usize| {
+        raw_ut[i].iter().all(|v| v.is_finite()) && opts.weights.is_none_or(|w| w[i] > 0.0)
+    };
+    let n = chunks::fold(
+        raw_ut.len(),
+        |range| range.filter(|&i| usable(i)).count(),
+        |x, y| x + y,
+    )
+    .unwrap_or(0);
     if n < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
             needed: MIN_SAMPLES,
             got: n,
         });
     }
-    let raw: Vec<Vector3<f64>> = rows.iter().map(|&i| Vector3::from(raw_ut[i])).collect();
-    let base: Vec<f64> = rows
-        .iter()
-        .map(|&i| opts.weights.map_or(1.0, |w| w[i]))
-        .collect();
-    let coverage = Coverage::of_vectors(&raw);
+    // The usable readings and their weights: the caller's own when all are usable, copies otherwise.
+    let (raw, base): (Cow<'_, [[f64; 3]]>, Cow<'_, [f64]>) = if n == raw_ut.len() {
+        (
+            Cow::Borrowed(raw_ut),
+            opts.weights
+                .map_or_else(|| Cow::Owned(vec![1.0; n]), Cow::Borrowed),
+        )
+    } else {
+        let rows = (0..raw_ut.len()).filter(|&i| usable(i));
+        (
+            rows.clone().map(|i| raw_ut[i]).collect(),
+            rows.map(|i| opts.weights.map_or(1.0, |w| w[i])).collect(),
+        )
+    };
+    let coverage = Coverage::of(&raw);
     if !opts.skip_coverage_check {
         coverage.check()?;
     }
@@ -785,7 +962,20 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     for k in 0..3 {
         p0[3 + k] = gain;
     }
-    let mut sol = problem.settle(p0, if opts.quick { 1 } else { MAX_ROUNDS });
+    // A start's `A` in this fit's units: aimed at this fit's target rather than at the start's magnitude.
+    let start = opts
+        .start
+        .map(|s| {
+            let mut p = SVector::<f64, P>::zeros();
+            p.fixed_rows_mut::<3>(0)
+                .copy_from(&Vector3::from(s.centre_ut));
+            for (idx, (r, c)) in SYM.iter().enumerate() {
+                p[3 + idx] = s.a[*r][*c] * target / s.field_ut;
+            }
+            p
+        })
+        .filter(|p| p.iter().all(|v| v.is_finite()));
+    let mut sol = problem.settle(p0, start, if opts.quick { 1 } else { MAX_ROUNDS });
     let (cov, shape_prior_share) = if opts.quick {
         (SMatrix::<f64, P, P>::zeros(), 0.0)
     } else {
