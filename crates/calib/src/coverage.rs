@@ -223,20 +223,26 @@ impl SphereGrid {
 /// their samples by such cells; a still stretch is one direction, however long). `cell` is each sample's cell of a
 /// grid of `cells` cells.
 pub fn capped_cell_weights(cell: &[usize], base: &[f64], cells: usize) -> Vec<f64> {
-    let mut count = vec![0.0; cells];
-    for (c, w) in cell.iter().zip(base) {
-        count[*c] += w;
-    }
+    // Each chunk's totals per cell, merged in order; the weights on all threads.
+    let totals = |r: std::ops::Range<usize>| {
+        let mut count = vec![0.0; cells];
+        for (c, w) in cell[r.clone()].iter().zip(&base[r]) {
+            count[*c] += w;
+        }
+        count
+    };
+    let count = crate::chunks::fold(cell.len(), totals, |mut x, y| {
+        x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
+        x
+    })
+    .unwrap_or_else(|| vec![0.0; cells]);
     let mut occupied: Vec<f64> = count.iter().copied().filter(|c| *c > 0.0).collect();
     if occupied.is_empty() {
         return base.to_vec();
     }
     let mid = occupied.len() / 2;
     let cap = 2.0 * *occupied.select_nth_unstable_by(mid, f64::total_cmp).1;
-    cell.iter()
-        .zip(base)
-        .map(|(c, w)| w * (cap / count[*c]).min(1.0))
-        .collect()
+    crate::chunks::map(cell.len(), |i| base[i] * (cap / count[cell[i]]).min(1.0))
 }
 
 /// Fraction of the sphere of directions visited, on a [`SphereGrid`] of about `cells` equal-area cells.

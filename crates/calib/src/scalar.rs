@@ -129,6 +129,9 @@ pub struct ScalarFit {
     /// The direction (sensor axes) along which the centre is least certain, and the centre's standard error there
     /// (raw units, µT).
     pub weakest: ([f64; 3], f64),
+    /// `JᵀWJ` near the solution per unit of weight, in the solver's parameters: where a fit started from this one
+    /// begins (scaled by its own weight, so a fit to a subsample can start a fit to all samples).
+    normal: SMatrix<f64, P, P>,
 }
 
 impl ScalarFit {
@@ -268,19 +271,30 @@ struct Pass {
     jtj: SMatrix<f64, P, P>,
     jtr: SVector<f64, P>,
     rss: f64,
+    /// Whether `jtj` was made at `p` (or carried over from elsewhere, see [`Problem::minimise`]).
+    fresh: bool,
 }
 
-/// The magnitude residual of one reading and its gradient in the parameters.
+/// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
+struct Local {
+    d: Vector3<f64>,
+    u: Vector3<f64>,
+    inv_len: f64,
+}
+
+/// The magnitude residual of one reading, its gradient in the parameters, and where the reading sits.
+#[inline]
 fn residual(
     m: &Vector3<f64>,
     a: &Matrix3<f64>,
     c: &Vector3<f64>,
     field_ut: f64,
-) -> (f64, [f64; P]) {
+) -> (f64, [f64; P], Local) {
     let d = m - c;
     let v = a * d;
     let norm = v.norm();
-    let u = v / norm;
+    let inv_len = 1.0 / norm;
+    let u = v * inv_len;
     let au = a * u;
     let mut j = [0.0; P];
     for k in 0..3 {
@@ -293,35 +307,33 @@ fn residual(
             u[*r] * d[*s] + u[*s] * d[*r]
         };
     }
-    (norm - field_ut, j)
+    (norm - field_ut, j, Local { d, u, inv_len })
 }
 
 /// What the raw noise (variances `s2` per axis) adds on average to `r·∇r` of one reading, to second order: the
 /// magnitude's bias `½·tr(∇²f·Σ)` times the gradient, plus the covariance of the reading's noise in `r` and in `∇r`.
-/// `a2` is `A·A`, made once per pass.
+/// `a2` is `A·A`, made once per pass; `at` and `grad` are the reading's place and gradient from [`residual`].
+#[inline]
 fn noise_score(
-    m: &Vector3<f64>,
+    at: &Local,
     a: &Matrix3<f64>,
     a2: &Matrix3<f64>,
-    c: &Vector3<f64>,
     s2: &Vector3<f64>,
     grad: &[f64; P],
 ) -> [f64; P] {
-    let d = m - c;
-    let v = a * d;
-    let len = v.norm();
-    let u = v / len;
-    let w = a * u;
+    let Local { d, u, inv_len } = at;
+    // `A·u`, the gradient in the centre with its sign turned.
+    let w = Vector3::new(-grad[0], -grad[1], -grad[2]);
     // With P = I − u·uᵀ and A symmetric: K = A·P·A/|v| = (A² − w·wᵀ)/|v|, and P·A·x = A·x − u·(w·x).
     let bias = 0.5
         * (0..3)
             .map(|i| (a2[(i, i)] - w[i] * w[i]) * s2[i])
             .sum::<f64>()
-        / len;
+        * inv_len;
     let sw = s2.component_mul(&w);
-    let kw = (a2 * sw - w * w.dot(&sw)) / len;
-    let asw = a * sw;
-    let z = (asw - u * w.dot(&sw)) / len;
+    let w_sw = w.dot(&sw);
+    let kw = (a2 * sw - w * w_sw) * *inv_len;
+    let z = (a * sw - u * w_sw) * *inv_len;
     let mut out = [0.0; P];
     for i in 0..3 {
         out[i] = bias * grad[i] - kw[i];
@@ -379,6 +391,7 @@ fn pass<const JTJ: bool>(
         jtj: mirror(&jtj),
         jtr: SVector::<f64, P>::from(jtr),
         rss,
+        fresh: JTJ,
     }
 }
 
@@ -399,10 +412,10 @@ fn accumulate<const JTJ: bool, const NOISE: bool>(
             continue;
         }
         let m = Vector3::from(*m);
-        let (r, j) = residual(&m, a, c, field_ut);
+        let (r, j, local) = residual(&m, a, c, field_ut);
         let wj = j.map(|v| wi * v);
         if NOISE {
-            let k = noise_score(&m, a, &a2, c, s2, &j);
+            let k = noise_score(&local, a, &a2, s2, &j);
             (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
         } else {
             (0..P).for_each(|x| jtr[x] += wj[x] * r);
@@ -514,10 +527,18 @@ fn direction_weights(
         grid.cell([d.x, d.y, d.z]).unwrap_or(0)
     });
     let w = capped_cell_weights(&cell, base, grid.len());
-    let mut occupied = vec![false; grid.len()];
-    for (c, wi) in cell.iter().zip(base) {
-        occupied[*c] |= *wi > 0.0;
-    }
+    let occupied = |r: std::ops::Range<usize>| {
+        let mut occupied = vec![false; grid.len()];
+        for (c, wi) in cell[r.clone()].iter().zip(&base[r]) {
+            occupied[*c] |= *wi > 0.0;
+        }
+        occupied
+    };
+    let occupied = chunks::fold(cell.len(), occupied, |mut x, y| {
+        x.iter_mut().zip(&y).for_each(|(x, y)| *x |= y);
+        x
+    })
+    .unwrap_or_default();
     let cells = occupied.iter().filter(|o| **o).count();
     (w, cell, cells)
 }
@@ -593,8 +614,6 @@ impl Problem<'_> {
         let rounding = f64::EPSILON * (self.raw.len() as f64).sqrt();
         let mut phi = self.objective(at.rss, &p, sigma2);
         let mut lambda = 1e-3;
-        // Whether `at.jtj` was made at `p`.
-        let mut fresh = true;
         while *iterations < MAX_ITERATIONS {
             let h = at.jtj + q * sigma2;
             let g = at.jtr + q * p * sigma2;
@@ -621,7 +640,7 @@ impl Problem<'_> {
             let t_phi = self.objective(t.rss, &trial, sigma2);
             if t_phi.is_finite() && t_phi <= phi {
                 let decrease = phi - t_phi;
-                (p, at, phi, fresh) = (trial, t, t_phi, false);
+                (p, at, phi) = (trial, t, t_phi);
                 lambda = (lambda / 10.0).max(1e-12);
                 if decrease <= 1e-10 * phi {
                     break;
@@ -629,11 +648,9 @@ impl Problem<'_> {
                 // `g` and `h` are half the objective's gradient and Hessian: the model's decrease is twice `predicted`.
                 if (decrease - 2.0 * predicted).abs() > MODEL_AGREEMENT * 2.0 * predicted {
                     at = self.pass(&p, None);
-                    fresh = true;
                 }
-            } else if !fresh {
+            } else if !at.fresh {
                 at = self.pass(&p, None);
-                fresh = true;
             } else {
                 lambda *= 10.0;
                 if lambda > 1e12 || predicted.abs() <= 1e-12 * phi {
@@ -646,20 +663,20 @@ impl Problem<'_> {
 
     /// The fit with the prior weighted by the residual variance: start from the sphere's residual and refit until
     /// the fit's own residual variance settles. The first weight comes from the sphere `p0`; the iterations start
-    /// from `start` where it fits better.
+    /// from `start` (parameters and the `JᵀWJ` made near them) where it fits better.
     fn settle(
         &self,
         p0: SVector<f64, P>,
-        start: Option<SVector<f64, P>>,
+        start: Option<(SVector<f64, P>, SMatrix<f64, P, P>)>,
         rounds: usize,
     ) -> Solution {
         let mut iterations = 0;
         let (mut p, mut at, mut sigma2);
         match start {
-            Some(s) => {
+            Some((s, jtj)) => {
                 let rss0 = rss(&self.raw, &self.w, &p0, self.target);
                 sigma2 = (rss0 / self.dof).max(f64::MIN_POSITIVE);
-                let t = self.pass(&s, None);
+                let t = self.gradient(&s, None, jtj);
                 let better = self.objective(t.rss, &s, sigma2) <= self.objective(rss0, &p0, sigma2);
                 (p, at) = if better {
                     (s, t)
@@ -768,12 +785,12 @@ impl Problem<'_> {
                 if wk == 0.0 {
                     continue;
                 }
-                let (r, j) = residual(&m, &a, &c, self.target);
+                let (r, j, local) = residual(&m, &a, &c, self.target);
                 let (score, cell) = (&mut scores[self.cell[k]], &mut info[self.cell[k]]);
                 match noise {
                     None => (0..P).for_each(|x| score[x] += wk * (j[x] * r)),
                     Some(s2) => {
-                        let n = noise_score(&m, &a, &a2, &c, s2, &j);
+                        let n = noise_score(&local, &a, &a2, s2, &j);
                         (0..P).for_each(|x| score[x] += wk * (j[x] * r - n[x]));
                     }
                 }
@@ -806,6 +823,7 @@ impl Problem<'_> {
             jtj: info.iter().sum(),
             jtr: scores.iter().sum(),
             rss,
+            fresh: true,
         };
         let h = at.jtj + self.q * sol.sigma2;
         let h_inv = h.try_inverse()?;
@@ -942,7 +960,8 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     ))?;
     let grid = SphereGrid::new(DIRECTION_CELLS);
     let (w, cell, cells) = direction_weights(&raw, &base, &c0, &grid);
-    let w_sum: f64 = w.iter().sum();
+    let w_sum =
+        chunks::fold(w.len(), |r| w[r].iter().sum::<f64>(), |x, y| x + y).unwrap_or_default();
     // The fit aims at the given magnitude, or at the sphere's radius (rescaled to the ellipsoid's volume after).
     let target = opts.field_ut.unwrap_or(r0);
     let gain = target / r0;
@@ -972,9 +991,9 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
             for (idx, (r, c)) in SYM.iter().enumerate() {
                 p[3 + idx] = s.a[*r][*c] * target / s.field_ut;
             }
-            p
+            (p, s.normal * w_sum)
         })
-        .filter(|p| p.iter().all(|v| v.is_finite()));
+        .filter(|(p, jtj)| p.iter().chain(jtj.iter()).all(|v| v.is_finite()));
     let mut sol = problem.settle(p0, start, if opts.quick { 1 } else { MAX_ROUNDS });
     let (cov, shape_prior_share) = if opts.quick {
         (SMatrix::<f64, P, P>::zeros(), 0.0)
@@ -1049,6 +1068,7 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         direction_cells: problem.cells,
         shape_prior_share,
         weakest,
+        normal: sol.at.jtj / problem.w_sum,
     })
 }
 
