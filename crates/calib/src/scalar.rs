@@ -63,6 +63,9 @@ const MAX_ITERATIONS: usize = 100;
 /// A step whose decrease departs from the quadratic model's prediction by more than this fraction of it has the
 /// model's matrix made anew (see [`Problem::minimise`]).
 const MODEL_AGREEMENT: f64 = 0.1;
+/// A step of the noise correction made with a carried matrix must be this many times smaller (in the matrix's
+/// metric, the square of the distance) than the step before; otherwise the matrix is made anew.
+const CARRIED_SHRINK: f64 = 100.0;
 /// Rounds of settling the prior's weight on the residual variance.
 const MAX_ROUNDS: usize = 8;
 /// Cells of direction for the weights and the cluster-robust standard errors.
@@ -273,6 +276,8 @@ struct Pass {
     rss: f64,
     /// Whether `jtj` was made at `p` (or carried over from elsewhere, see [`Problem::minimise`]).
     fresh: bool,
+    /// Whether `jtj` was made at `p` or carried over through a step its quadratic model predicted.
+    trusted: bool,
 }
 
 /// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
@@ -392,6 +397,7 @@ fn pass<const JTJ: bool>(
         jtr: SVector::<f64, P>::from(jtr),
         rss,
         fresh: JTJ,
+        trusted: JTJ,
     }
 }
 
@@ -632,7 +638,12 @@ impl Problem<'_> {
             // What the quadratic model promises: a decrease at the rounding level of the sum means we are there.
             let predicted = -(g.dot(&step)) - 0.5 * (step.transpose() * h * step)[(0, 0)];
             if predicted.abs() <= rounding * phi {
-                break;
+                if at.trusted {
+                    break;
+                }
+                // A matrix carried over without a step to vouch for it: make it here and look again.
+                at = self.pass(&p, None);
+                continue;
             }
             *iterations += 1;
             let trial = p + step;
@@ -640,14 +651,20 @@ impl Problem<'_> {
             let t_phi = self.objective(t.rss, &trial, sigma2);
             if t_phi.is_finite() && t_phi <= phi {
                 let decrease = phi - t_phi;
+                // `g` and `h` are half the objective's gradient and Hessian: the model's decrease is twice
+                // `predicted`. Their ratio is 2 − 1/k where the matrix overstates the curvature along the step k
+                // times: within MODEL_AGREEMENT, the next step closes at least 90 % of the remaining distance.
+                let agrees =
+                    (decrease - 2.0 * predicted).abs() <= MODEL_AGREEMENT * 2.0 * predicted;
                 (p, at, phi) = (trial, t, t_phi);
                 lambda = (lambda / 10.0).max(1e-12);
-                if decrease <= 1e-10 * phi {
-                    break;
-                }
-                // `g` and `h` are half the objective's gradient and Hessian: the model's decrease is twice `predicted`.
-                if (decrease - 2.0 * predicted).abs() > MODEL_AGREEMENT * 2.0 * predicted {
+                if agrees {
+                    at.trusted = true;
+                } else {
                     at = self.pass(&p, None);
+                }
+                if decrease <= 1e-10 * phi && agrees {
+                    break;
                 }
             } else if !at.fresh {
                 at = self.pass(&p, None);
@@ -735,27 +752,54 @@ impl Problem<'_> {
         }
     }
 
-    /// Gauss–Newton on the score less the noise's share of it, from `sol` (whose `JᵀWJ`, made at the plain fit, serves
-    /// every step: the correction is small, and the steps lead to where the corrected score vanishes all the same).
-    /// Returns whether it converged.
+    /// Gauss–Newton on the score less the noise's share of it, from `sol` (whose `JᵀWJ` was made at the plain fit).
+    /// The matrix is carried from step to step (gradient passes only) while each step shrinks at least
+    /// [`CARRIED_SHRINK`] times from the last in its metric: then it leads where the corrected score vanishes all
+    /// the same. Where a step does not, the matrix is made at that point and at every step after it, as the plain
+    /// Gauss–Newton does (on a cap the weak directions' curvature changes along the correction). Returns whether it
+    /// converged.
     fn correct(&self, sol: &mut Solution, noise: &Vector3<f64>) -> bool {
         let q = &self.q;
+        let solve = |at: &Pass, p: &SVector<f64, P>| {
+            let h = at.jtj + q * sol.sigma2;
+            let g = at.jtr + q * p * sol.sigma2;
+            h.cholesky()
+                .map(|ch| ch.solve(&(-g)))
+                .map(|step| (step, (step.transpose() * h * step)[(0, 0)]))
+        };
         let mut converged = false;
+        // The matrix, whether it was made at the current point, whether it may be carried, the last step's size.
+        let (mut jtj, mut made_here, mut carry, mut last) = (sol.at.jtj, true, true, f64::INFINITY);
         for _ in 0..MAX_CORRECTION_STEPS {
             sol.iterations += 1;
-            let at = self.gradient(&sol.p, Some(noise), sol.at.jtj);
-            let h = at.jtj + q * sol.sigma2;
-            let g = at.jtr + q * sol.p * sol.sigma2;
-            let Some(step) = h.cholesky().map(|ch| ch.solve(&(-g))) else {
+            let at = if made_here || carry {
+                self.gradient(&sol.p, Some(noise), jtj)
+            } else {
+                made_here = true;
+                self.pass(&sol.p, Some(noise))
+            };
+            jtj = at.jtj;
+            let Some(mut solved) = solve(&at, &sol.p) else {
                 break;
             };
+            if !made_here && solved.1 * CARRIED_SHRINK > last {
+                // The carried matrix's model fails here: make it at this point, and at every step after.
+                let at = self.pass(&sol.p, Some(noise));
+                (jtj, carry) = (at.jtj, false);
+                let Some(again) = solve(&at, &sol.p) else {
+                    break;
+                };
+                solved = again;
+            }
+            let (step, size) = solved;
             sol.p += step;
+            (last, made_here) = (size, false);
             // Done when the step is a negligible fraction of the parameters' uncertainty, or of the parameters.
             let tiny = step
                 .iter()
                 .zip(sol.p.iter())
                 .all(|(d, x)| d.abs() <= 1e-12 * (x.abs() + 1.0));
-            if tiny || (step.transpose() * h * step)[(0, 0)] <= 1e-8 * sol.sigma2 {
+            if tiny || size <= 1e-8 * sol.sigma2 {
                 converged = true;
                 break;
             }
@@ -824,6 +868,7 @@ impl Problem<'_> {
             jtr: scores.iter().sum(),
             rss,
             fresh: true,
+            trusted: true,
         };
         let h = at.jtj + self.q * sol.sigma2;
         let h_inv = h.try_inverse()?;
