@@ -11,8 +11,9 @@
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
 //!    plausible ones.
-//! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle); then the samples whose residual exceeds
-//!    [`GROSS_SIGMA`] times the scale make spans — merged across gaps of up to [`SPAN_GAP_S`] and widened over
+//! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle); then the samples
+//!    whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps of up to [`SPAN_GAP_S`]
+//!    and widened over
 //!    their ramps (neighbours above [`RAMP_SIGMA`]) — which are excluded, and the rest is fitted by plain (weighted
 //!    0/1) least squares; twice, with the spans of the new fit. A whole span goes, not only its gross samples: a
 //!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
@@ -64,12 +65,10 @@ pub trait RobustProblem: Sized + Sync {
     }
     /// A problem of every `stride`-th sample, for cheap seeds.
     fn every(&self, stride: usize) -> Self;
-    /// A quick fit (estimates only) with per-sample weights in `[0, 1]`. `start`, a fit with nearly the same
-    /// weights, is where an iterative solver may start: the result is the same to the solver's convergence
-    /// tolerance, reached in fewer passes.
-    fn quick_fit(&self, weights: &[f64], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
-    /// The full fit (uncertainties and checks) with 0/1 weights; `start` as for [`RobustProblem::quick_fit`].
-    fn final_fit(&self, weights: &[f64], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
+    /// A quick fit (estimates only) with per-sample weights in `[0, 1]`.
+    fn quick_fit(&self, weights: &[f64]) -> Result<Self::Fit, FitError>;
+    /// The full fit (uncertainties and checks) with 0/1 weights.
+    fn final_fit(&self, weights: &[f64]) -> Result<Self::Fit, FitError>;
     /// Each sample's residual size under a fit (NaN where the sample is unusable).
     fn residuals(&self, fit: &Self::Fit) -> Vec<f64>;
     /// The linear model of a fit.
@@ -128,7 +127,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     }
     // No seed could be fitted: the full data decides (and its error says why).
     let Some((_, _, seed)) = best else {
-        let fit = problem.final_fit(&vec![1.0; n], None)?;
+        let fit = problem.final_fit(&vec![1.0; n])?;
         let residual_ut = problem.residuals(&fit);
         let sigma_ut = scale::<P>(&residual_ut);
         return Ok(Robust {
@@ -144,7 +143,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     let mut residual_ut = problem.residuals(&fit);
     for _ in 0..FULL_ITERATIONS {
         let w = biweight(&residual_ut, scale::<P>(&residual_ut));
-        let quick = problem.quick_fit(&w, Some(&fit));
+        let quick = problem.quick_fit(&w);
         drop(w);
         match quick {
             Ok(f) if plausible(&P::model(&f).a) || !plausible(&P::model(&fit).a) => fit = f,
@@ -161,10 +160,9 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     }
     let mut sigma_ut = scale::<P>(&residual_ut);
     let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
-    let mut final_fit: Option<P::Fit> = None;
+    let mut final_fit = None;
     for pass in 0..SPAN_PASSES {
-        let start = final_fit.as_ref().unwrap_or(&fit);
-        let (f, k) = fit_outside(problem, &residual_ut, sigma_ut, t_s, kept, start)?;
+        let (f, k) = fit_outside(problem, &residual_ut, sigma_ut, t_s, kept)?;
         residual_ut = problem.residuals(&f);
         sigma_ut = scale::<P>(&residual_ut);
         final_fit = Some(f);
@@ -201,12 +199,11 @@ fn fit_outside<P: RobustProblem>(
     sigma_ut: f64,
     t_s: Option<&[f64]>,
     mut kept: Vec<bool>,
-    start: &P::Fit,
 ) -> Result<(P::Fit, Vec<bool>), FitError> {
     let mut factor = 1.0;
     loop {
         let weights: Vec<f64> = kept.iter().map(|k| if *k { 1.0 } else { 0.0 }).collect();
-        match problem.final_fit(&weights, Some(start)) {
+        match problem.final_fit(&weights) {
             Ok(f) => return Ok((f, kept)),
             Err(e) if kept.iter().all(|k| *k) => return Err(e),
             Err(_) => {
@@ -294,7 +291,7 @@ fn seed_spans(n: usize) -> Vec<(usize, usize)> {
 
 /// IRLS with the biweight from the fit on `w0`: the fit and the scale of its residual, or `None` if a fit fails.
 fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P::Fit, f64)> {
-    let mut fit = p.quick_fit(w0, None).ok()?;
+    let mut fit = p.quick_fit(w0).ok()?;
     let mut w_prev = w0.to_vec();
     for _ in 0..iterations {
         let e = p.residuals(&fit);
@@ -304,9 +301,7 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
             .zip(&w_prev)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        let Ok(next) = p.quick_fit(&w, Some(&fit)) else {
-            break;
-        };
+        let Ok(next) = p.quick_fit(&w) else { break };
         // Reweighting can wander off to a matrix that explains a still stretch and part of a disturbance: a
         // plausible fit is not given up for an implausible one.
         if plausible(&P::model(&fit).a) && !plausible(&P::model(&next).a) {
@@ -427,7 +422,7 @@ mod tests {
                 y: self.y.iter().step_by(stride).copied().collect(),
             }
         }
-        fn quick_fit(&self, w: &[f64], _: Option<&(f64, f64)>) -> Result<(f64, f64), FitError> {
+        fn quick_fit(&self, w: &[f64]) -> Result<(f64, f64), FitError> {
             let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
             for i in 0..self.len() {
                 sw += w[i];
@@ -443,8 +438,8 @@ mod tests {
             let a = (sw * sxy - sx * sy) / det;
             Ok((a, (sy - a * sx) / sw))
         }
-        fn final_fit(&self, w: &[f64], _: Option<&(f64, f64)>) -> Result<(f64, f64), FitError> {
-            self.quick_fit(w, None)
+        fn final_fit(&self, w: &[f64]) -> Result<(f64, f64), FitError> {
+            self.quick_fit(w)
         }
         fn residuals(&self, f: &(f64, f64)) -> Vec<f64> {
             (0..self.len())
@@ -505,6 +500,6 @@ mod tests {
         let p = line(2000, 0..0);
         let r = fit(&p, None).unwrap();
         assert_eq!(r.excluded(), 0);
-        assert_eq!(r.fit, p.quick_fit(&vec![1.0; 2000], None).unwrap());
+        assert_eq!(r.fit, p.quick_fit(&vec![1.0; 2000]).unwrap());
     }
 }

@@ -60,12 +60,6 @@ const NOT_AN_ELLIPSOID: f64 = 0.2;
 /// Parameters: the centre (x, y, z) and the six entries of the symmetric `A` (xx, yy, zz, xy, xz, yz).
 const P: usize = 9;
 const MAX_ITERATIONS: usize = 100;
-/// A step whose decrease departs from the quadratic model's prediction by more than this fraction of it has the
-/// model's matrix made anew (see [`Problem::minimise`]).
-const MODEL_AGREEMENT: f64 = 0.1;
-/// A step of the noise correction made with a carried matrix must be this many times smaller (in the matrix's
-/// metric, the square of the distance) than the step before; otherwise the matrix is made anew.
-const CARRIED_SHRINK: f64 = 100.0;
 /// Rounds of settling the prior's weight on the residual variance.
 const MAX_ROUNDS: usize = 8;
 /// Cells of direction for the weights and the cluster-robust standard errors.
@@ -91,10 +85,6 @@ pub struct ScalarOptions<'a> {
     /// Estimates only, quickly: no noise correction, no uncertainties (zero), no refusal of an undetermined centre
     /// (for the seeds of a robust fit).
     pub quick: bool,
-    /// A fit to start the iterations from (one with nearly the same weights, in a robust fit's reweighting): the
-    /// minimum is the same to the iterations' tolerance, reached in fewer passes. Unused where it fits worse than
-    /// the linear sphere fit the iterations otherwise start from.
-    pub start: Option<&'a ScalarFit>,
 }
 
 /// The result of a scalar fit.
@@ -132,9 +122,6 @@ pub struct ScalarFit {
     /// The direction (sensor axes) along which the centre is least certain, and the centre's standard error there
     /// (raw units, µT).
     pub weakest: ([f64; 3], f64),
-    /// `JᵀWJ` near the solution per unit of weight, in the solver's parameters: where a fit started from this one
-    /// begins (scaled by its own weight, so a fit to a subsample can start a fit to all samples).
-    normal: SMatrix<f64, P, P>,
 }
 
 impl ScalarFit {
@@ -209,12 +196,12 @@ impl RobustProblem for ScalarProblem<'_> {
         }
     }
 
-    fn quick_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, true, start)
+    fn quick_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, true)
     }
 
-    fn final_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, false, start)
+    fn final_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, false)
     }
 
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
@@ -232,12 +219,7 @@ impl RobustProblem for ScalarProblem<'_> {
 }
 
 impl ScalarProblem<'_> {
-    fn fit_with(
-        &self,
-        weights: &[f64],
-        quick: bool,
-        start: Option<&ScalarFit>,
-    ) -> Result<ScalarFit, FitError> {
+    fn fit_with(&self, weights: &[f64], quick: bool) -> Result<ScalarFit, FitError> {
         fit(
             &self.raw_ut,
             &ScalarOptions {
@@ -246,7 +228,6 @@ impl ScalarProblem<'_> {
                 weights: Some(weights),
                 raw_noise_var_ut2: self.raw_noise_var_ut2,
                 quick,
-                start,
             },
         )
     }
@@ -274,10 +255,6 @@ struct Pass {
     jtj: SMatrix<f64, P, P>,
     jtr: SVector<f64, P>,
     rss: f64,
-    /// Whether `jtj` was made at `p` (or carried over from elsewhere, see [`Problem::minimise`]).
-    fresh: bool,
-    /// Whether `jtj` was made at `p` or carried over through a step its quadratic model predicted.
-    trusted: bool,
 }
 
 /// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
@@ -367,9 +344,8 @@ fn unpack(p: &SVector<f64, P>) -> (Vector3<f64>, Matrix3<f64>) {
 /// The entries of the upper triangle of a `P`×`P` matrix, row by row.
 const TRIANGLE: usize = P * (P + 1) / 2;
 
-/// One accumulation at `p`: `JᵀWr` (less the noise's share with `noise`) and `Σwr²`, and with `JTJ` the matrix
-/// `JᵀWJ` (zero without: a pass for the gradient alone costs a fraction of one with the matrix).
-fn pass<const JTJ: bool>(
+/// One accumulation at `p`: `JᵀWJ`, `JᵀWr` (less the noise's share with `noise`) and `Σwr²`.
+fn pass(
     raw: &[[f64; 3]],
     w: &[f64],
     p: &SVector<f64, P>,
@@ -380,8 +356,8 @@ fn pass<const JTJ: bool>(
     let chunk = |range: std::ops::Range<usize>| {
         let (raw, w) = (&raw[range.clone()], &w[range]);
         match noise {
-            None => accumulate::<JTJ, false>(raw, w, &a, &c, field_ut, &Vector3::zeros()),
-            Some(s2) => accumulate::<JTJ, true>(raw, w, &a, &c, field_ut, s2),
+            None => accumulate::<false>(raw, w, &a, &c, field_ut, &Vector3::zeros()),
+            Some(s2) => accumulate::<true>(raw, w, &a, &c, field_ut, s2),
         }
     };
     let (jtj, jtr, rss) = chunks::fold(raw.len(), chunk, |x, y| {
@@ -396,14 +372,12 @@ fn pass<const JTJ: bool>(
         jtj: mirror(&jtj),
         jtr: SVector::<f64, P>::from(jtr),
         rss,
-        fresh: JTJ,
-        trusted: JTJ,
     }
 }
 
-/// The sums of one chunk: the upper triangle of `JᵀWJ` row by row (with `JTJ`), `JᵀWr` less the noise's share
-/// (with `NOISE`, of variances `s2`) and `Σwr²`, in plain arrays.
-fn accumulate<const JTJ: bool, const NOISE: bool>(
+/// The sums of one chunk: the upper triangle of `JᵀWJ` row by row, `JᵀWr` less the noise's share (with `NOISE`,
+/// of variances `s2`) and `Σwr²`, in plain arrays.
+fn accumulate<const NOISE: bool>(
     raw: &[[f64; 3]],
     w: &[f64],
     a: &Matrix3<f64>,
@@ -426,13 +400,11 @@ fn accumulate<const JTJ: bool, const NOISE: bool>(
         } else {
             (0..P).for_each(|x| jtr[x] += wj[x] * r);
         }
-        if JTJ {
-            let mut e = 0;
-            for x in 0..P {
-                for y in x..P {
-                    jtj[e] += wj[x] * j[y];
-                    e += 1;
-                }
+        let mut e = 0;
+        for x in 0..P {
+            for y in x..P {
+                jtj[e] += wj[x] * j[y];
+                e += 1;
             }
         }
         rss += wi * r * r;
@@ -452,24 +424,6 @@ fn mirror(upper: &[f64; TRIANGLE]) -> SMatrix<f64, P, P> {
         }
     }
     full
-}
-
-/// `Σwr²` alone at parameters `p`: the objective without its derivatives.
-fn rss(raw: &[[f64; 3]], w: &[f64], p: &SVector<f64, P>, field_ut: f64) -> f64 {
-    let (c, a) = unpack(p);
-    chunks::fold(
-        raw.len(),
-        |range| {
-            raw[range.clone()]
-                .iter()
-                .zip(&w[range])
-                .filter(|(_, wi)| **wi != 0.0)
-                .map(|(m, wi)| wi * ((a * (Vector3::from(*m) - c)).norm() - field_ut).powi(2))
-                .sum::<f64>()
-        },
-        |x, y| x + y,
-    )
-    .unwrap_or_default()
 }
 
 /// The shape prior's precision (per unit of `A`'s mean gain²): free centre and overall scale, each gain's departure
@@ -580,20 +534,7 @@ struct Solution {
 
 impl Problem<'_> {
     fn pass(&self, p: &SVector<f64, P>, noise: Option<&Vector3<f64>>) -> Pass {
-        pass::<true>(&self.raw, &self.w, p, self.target, noise)
-    }
-
-    /// [`Problem::pass`] without the matrix, which stays `jtj`.
-    fn gradient(
-        &self,
-        p: &SVector<f64, P>,
-        noise: Option<&Vector3<f64>>,
-        jtj: SMatrix<f64, P, P>,
-    ) -> Pass {
-        Pass {
-            jtj,
-            ..pass::<false>(&self.raw, &self.w, p, self.target, noise)
-        }
+        pass(&self.raw, &self.w, p, self.target, noise)
     }
 
     /// The objective: the weighted sum of squares plus the prior weighted by `sigma2`.
@@ -604,11 +545,6 @@ impl Problem<'_> {
     /// Levenberg–Marquardt on the magnitude residual plus the prior weighted by `sigma2`, from `p` (where the
     /// accumulation is `at`). Stops when a step's predicted decrease is at the rounding level of the sum of `n`
     /// squares (`√n·ε` of it): such a step cannot be told from rounding by evaluating it, so it is not evaluated.
-    ///
-    /// A trial is evaluated by the objective and its gradient alone, and `JᵀWJ` is carried over from where it was
-    /// last made: near the minimum it changes little, and the steps still lead to where the gradient vanishes (only
-    /// faster to evaluate). It is made anew where the quadratic model it gives is off by more than
-    /// [`MODEL_AGREEMENT`] (the step's decrease against the predicted one), or a step fails with it carried over.
     fn minimise(
         &self,
         mut p: SVector<f64, P>,
@@ -638,36 +574,19 @@ impl Problem<'_> {
             // What the quadratic model promises: a decrease at the rounding level of the sum means we are there.
             let predicted = -(g.dot(&step)) - 0.5 * (step.transpose() * h * step)[(0, 0)];
             if predicted.abs() <= rounding * phi {
-                if at.trusted {
-                    break;
-                }
-                // A matrix carried over without a step to vouch for it: make it here and look again.
-                at = self.pass(&p, None);
-                continue;
+                break;
             }
             *iterations += 1;
             let trial = p + step;
-            let t = self.gradient(&trial, None, at.jtj);
+            let t = self.pass(&trial, None);
             let t_phi = self.objective(t.rss, &trial, sigma2);
             if t_phi.is_finite() && t_phi <= phi {
                 let decrease = phi - t_phi;
-                // `g` and `h` are half the objective's gradient and Hessian: the model's decrease is twice
-                // `predicted`. Their ratio is 2 − 1/k where the matrix overstates the curvature along the step k
-                // times: within MODEL_AGREEMENT, the next step closes at least 90 % of the remaining distance.
-                let agrees =
-                    (decrease - 2.0 * predicted).abs() <= MODEL_AGREEMENT * 2.0 * predicted;
                 (p, at, phi) = (trial, t, t_phi);
                 lambda = (lambda / 10.0).max(1e-12);
-                if agrees {
-                    at.trusted = true;
-                } else {
-                    at = self.pass(&p, None);
-                }
-                if decrease <= 1e-10 * phi && agrees {
+                if decrease <= 1e-10 * phi {
                     break;
                 }
-            } else if !at.fresh {
-                at = self.pass(&p, None);
             } else {
                 lambda *= 10.0;
                 if lambda > 1e12 || predicted.abs() <= 1e-12 * phi {
@@ -679,34 +598,12 @@ impl Problem<'_> {
     }
 
     /// The fit with the prior weighted by the residual variance: start from the sphere's residual and refit until
-    /// the fit's own residual variance settles. The first weight comes from the sphere `p0`; the iterations start
-    /// from `start` (parameters and the `JᵀWJ` made near them) where it fits better.
-    fn settle(
-        &self,
-        p0: SVector<f64, P>,
-        start: Option<(SVector<f64, P>, SMatrix<f64, P, P>)>,
-        rounds: usize,
-    ) -> Solution {
+    /// the fit's own residual variance settles.
+    fn settle(&self, p0: SVector<f64, P>, rounds: usize) -> Solution {
         let mut iterations = 0;
-        let (mut p, mut at, mut sigma2);
-        match start {
-            Some((s, jtj)) => {
-                let rss0 = rss(&self.raw, &self.w, &p0, self.target);
-                sigma2 = (rss0 / self.dof).max(f64::MIN_POSITIVE);
-                let t = self.gradient(&s, None, jtj);
-                let better = self.objective(t.rss, &s, sigma2) <= self.objective(rss0, &p0, sigma2);
-                (p, at) = if better {
-                    (s, t)
-                } else {
-                    (p0, self.pass(&p0, None))
-                };
-            }
-            None => {
-                p = p0;
-                at = self.pass(&p, None);
-                sigma2 = (at.rss / self.dof).max(f64::MIN_POSITIVE);
-            }
-        }
+        let mut p = p0;
+        let mut at = self.pass(&p, None);
+        let mut sigma2 = (at.rss / self.dof).max(f64::MIN_POSITIVE);
         for _ in 0..rounds {
             (p, at) = self.minimise(p, at, sigma2, &mut iterations);
             let settled = (at.rss / self.dof).max(f64::MIN_POSITIVE);
@@ -752,54 +649,25 @@ impl Problem<'_> {
         }
     }
 
-    /// Gauss–Newton on the score less the noise's share of it, from `sol` (whose `JᵀWJ` was made at the plain fit).
-    /// The matrix is carried from step to step (gradient passes only) while each step shrinks at least
-    /// [`CARRIED_SHRINK`] times from the last in its metric: then it leads where the corrected score vanishes all
-    /// the same. Where a step does not, the matrix is made at that point and at every step after it, as the plain
-    /// Gauss–Newton does (on a cap the weak directions' curvature changes along the correction). Returns whether it
-    /// converged.
+    /// Gauss–Newton on the score less the noise's share of it, from `sol`. Returns whether it converged.
     fn correct(&self, sol: &mut Solution, noise: &Vector3<f64>) -> bool {
         let q = &self.q;
-        let solve = |at: &Pass, p: &SVector<f64, P>| {
-            let h = at.jtj + q * sol.sigma2;
-            let g = at.jtr + q * p * sol.sigma2;
-            h.cholesky()
-                .map(|ch| ch.solve(&(-g)))
-                .map(|step| (step, (step.transpose() * h * step)[(0, 0)]))
-        };
         let mut converged = false;
-        // The matrix, whether it was made at the current point, whether it may be carried, the last step's size.
-        let (mut jtj, mut made_here, mut carry, mut last) = (sol.at.jtj, true, true, f64::INFINITY);
         for _ in 0..MAX_CORRECTION_STEPS {
             sol.iterations += 1;
-            let at = if made_here || carry {
-                self.gradient(&sol.p, Some(noise), jtj)
-            } else {
-                made_here = true;
-                self.pass(&sol.p, Some(noise))
-            };
-            jtj = at.jtj;
-            let Some(mut solved) = solve(&at, &sol.p) else {
+            let at = self.pass(&sol.p, Some(noise));
+            let h = at.jtj + q * sol.sigma2;
+            let g = at.jtr + q * sol.p * sol.sigma2;
+            let Some(step) = h.cholesky().map(|ch| ch.solve(&(-g))) else {
                 break;
             };
-            if !made_here && solved.1 * CARRIED_SHRINK > last {
-                // The carried matrix's model fails here: make it at this point, and at every step after.
-                let at = self.pass(&sol.p, Some(noise));
-                (jtj, carry) = (at.jtj, false);
-                let Some(again) = solve(&at, &sol.p) else {
-                    break;
-                };
-                solved = again;
-            }
-            let (step, size) = solved;
             sol.p += step;
-            (last, made_here) = (size, false);
             // Done when the step is a negligible fraction of the parameters' uncertainty, or of the parameters.
             let tiny = step
                 .iter()
                 .zip(sol.p.iter())
                 .all(|(d, x)| d.abs() <= 1e-12 * (x.abs() + 1.0));
-            if tiny || size <= 1e-8 * sol.sigma2 {
+            if tiny || (step.transpose() * h * step)[(0, 0)] <= 1e-8 * sol.sigma2 {
                 converged = true;
                 break;
             }
@@ -867,8 +735,6 @@ impl Problem<'_> {
             jtj: info.iter().sum(),
             jtr: scores.iter().sum(),
             rss,
-            fresh: true,
-            trusted: true,
         };
         let h = at.jtj + self.q * sol.sigma2;
         let h_inv = h.try_inverse()?;
@@ -1026,20 +892,7 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     for k in 0..3 {
         p0[3 + k] = gain;
     }
-    // A start's `A` in this fit's units: aimed at this fit's target rather than at the start's magnitude.
-    let start = opts
-        .start
-        .map(|s| {
-            let mut p = SVector::<f64, P>::zeros();
-            p.fixed_rows_mut::<3>(0)
-                .copy_from(&Vector3::from(s.centre_ut));
-            for (idx, (r, c)) in SYM.iter().enumerate() {
-                p[3 + idx] = s.a[*r][*c] * target / s.field_ut;
-            }
-            (p, s.normal * w_sum)
-        })
-        .filter(|(p, jtj)| p.iter().chain(jtj.iter()).all(|v| v.is_finite()));
-    let mut sol = problem.settle(p0, start, if opts.quick { 1 } else { MAX_ROUNDS });
+    let mut sol = problem.settle(p0, if opts.quick { 1 } else { MAX_ROUNDS });
     let (cov, shape_prior_share) = if opts.quick {
         (SMatrix::<f64, P, P>::zeros(), 0.0)
     } else {
@@ -1113,7 +966,6 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         direction_cells: problem.cells,
         shape_prior_share,
         weakest,
-        normal: sol.at.jtj / problem.w_sum,
     })
 }
 

@@ -120,12 +120,11 @@ impl RobustProblem for VectorProblem<'_> {
         }
     }
 
-    /// Linear least squares: no iterations to start.
-    fn quick_fit(&self, weights: &[f64], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
+    fn quick_fit(&self, weights: &[f64]) -> Result<VectorFit, FitError> {
         self.fit_with(weights, true)
     }
 
-    fn final_fit(&self, weights: &[f64], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
+    fn final_fit(&self, weights: &[f64]) -> Result<VectorFit, FitError> {
         self.fit_with(weights, false)
     }
 
