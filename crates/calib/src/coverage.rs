@@ -23,33 +23,22 @@ pub struct Coverage {
 }
 
 impl Coverage {
-    /// Measures the spread of raw readings (µT).
+    /// Measures the spread of raw readings (µT), summed on all threads.
     pub fn of(raw_ut: &[[f64; 3]]) -> Coverage {
         let n = raw_ut.len().max(1) as f64;
-        let mean = raw_ut
-            .iter()
-            .fold(Vector3::zeros(), |acc, m| acc + Vector3::from(*m))
-            / n;
-        let cov = raw_ut.iter().fold(Matrix3::zeros(), |acc, m| {
-            let d = Vector3::from(*m) - mean;
-            acc + d * d.transpose()
-        }) / n;
-        Coverage::from_covariance(&cov)
-    }
-
-    /// [`Coverage::of`] readings held as vectors, summed on all threads.
-    pub(crate) fn of_vectors(raw: &[Vector3<f64>]) -> Coverage {
-        let n = raw.len().max(1) as f64;
-        let sum =
-            |r: std::ops::Range<usize>| raw[r].iter().fold(Vector3::zeros(), |acc, m| acc + m);
-        let mean = crate::chunks::fold(raw.len(), sum, |a, b| a + b).unwrap_or_default() / n;
+        let sum = |r: std::ops::Range<usize>| {
+            raw_ut[r]
+                .iter()
+                .fold(Vector3::zeros(), |acc, m| acc + Vector3::from(*m))
+        };
+        let mean = crate::chunks::fold(raw_ut.len(), sum, |a, b| a + b).unwrap_or_default() / n;
         let products = |r: std::ops::Range<usize>| {
-            raw[r].iter().fold(Matrix3::zeros(), |acc, m| {
-                let d = m - mean;
+            raw_ut[r].iter().fold(Matrix3::zeros(), |acc, m| {
+                let d = Vector3::from(*m) - mean;
                 acc + d * d.transpose()
             })
         };
-        let cov = crate::chunks::fold(raw.len(), products, |a, b| a + b).unwrap_or_default() / n;
+        let cov = crate::chunks::fold(raw_ut.len(), products, |a, b| a + b).unwrap_or_default() / n;
         Coverage::from_covariance(&cov)
     }
 
@@ -234,20 +223,26 @@ impl SphereGrid {
 /// their samples by such cells; a still stretch is one direction, however long). `cell` is each sample's cell of a
 /// grid of `cells` cells.
 pub fn capped_cell_weights(cell: &[usize], base: &[f64], cells: usize) -> Vec<f64> {
-    let mut count = vec![0.0; cells];
-    for (c, w) in cell.iter().zip(base) {
-        count[*c] += w;
-    }
+    // Each chunk's totals per cell, merged in order; the weights on all threads.
+    let totals = |r: std::ops::Range<usize>| {
+        let mut count = vec![0.0; cells];
+        for (c, w) in cell[r.clone()].iter().zip(&base[r]) {
+            count[*c] += w;
+        }
+        count
+    };
+    let count = crate::chunks::fold(cell.len(), totals, |mut x, y| {
+        x.iter_mut().zip(&y).for_each(|(x, y)| *x += y);
+        x
+    })
+    .unwrap_or_else(|| vec![0.0; cells]);
     let mut occupied: Vec<f64> = count.iter().copied().filter(|c| *c > 0.0).collect();
     if occupied.is_empty() {
         return base.to_vec();
     }
     let mid = occupied.len() / 2;
     let cap = 2.0 * *occupied.select_nth_unstable_by(mid, f64::total_cmp).1;
-    cell.iter()
-        .zip(base)
-        .map(|(c, w)| w * (cap / count[*c]).min(1.0))
-        .collect()
+    crate::chunks::map(cell.len(), |i| base[i] * (cap / count[cell[i]]).min(1.0))
 }
 
 /// Fraction of the sphere of directions visited, on a [`SphereGrid`] of about `cells` equal-area cells.

@@ -6,13 +6,14 @@
 //! 1. **Seeds from time spans.** Fits on contiguous spans of a third, a half and two thirds of the recording (and on
 //!    all of it), each refined by iteratively reweighted least squares with Tukey's biweight on the residual's size
 //!    against a scale from its median. A disturbance covering up to half the recording leaves at least one seed
-//!    clean. The seeds run on a subsample of at most [`SEED_SAMPLES`] samples.
+//!    clean. The seeds run on a subsample of at most [`SEED_SAMPLES`] samples, on all threads.
 //! 2. **The best seed** is the one with the smallest median residual over all samples — the state the recording is
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
 //!    plausible ones.
-//! 3. **On all samples**, a few reweighting passes from the best seed; then the samples whose residual exceeds
-//!    [`GROSS_SIGMA`] times the scale make spans — merged across gaps of up to [`SPAN_GAP_S`] and widened over
+//! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle); then the samples
+//!    whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps of up to [`SPAN_GAP_S`]
+//!    and widened over
 //!    their ramps (neighbours above [`RAMP_SIGMA`]) — which are excluded, and the rest is fitted by plain (weighted
 //!    0/1) least squares; twice, with the spans of the new fit. A whole span goes, not only its gross samples: a
 //!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
@@ -20,6 +21,7 @@
 //!    least-squares fit.
 
 use crate::FitError;
+use crate::chunks;
 use crate::frames::Mat3;
 use crate::model::Model;
 
@@ -44,12 +46,14 @@ const BIWEIGHT_SIGMA: f64 = 6.0;
 pub const PLAUSIBLE_GAIN_RATIO: f64 = 2.5;
 const SEED_ITERATIONS: usize = 20;
 const FULL_ITERATIONS: usize = 3;
+/// Reweighting stops when no sample's weight changes by more than this.
+const WEIGHTS_SETTLED: f64 = 1e-3;
 
 /// A fitting problem that can be solved with per-sample weights: what the robust fit needs of the vector and the
 /// scalar method.
-pub trait RobustProblem: Sized {
+pub trait RobustProblem: Sized + Sync {
     /// The fit it makes.
-    type Fit;
+    type Fit: Send;
     /// The median size of a residual of pure noise of unit standard deviation per axis (≈1.538 for the norm of a
     /// 3-vector, 0.6745 for the absolute value of a scalar).
     const MEDIAN_OF_UNIT: f64;
@@ -98,14 +102,17 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     let sub = (stride > 1).then(|| problem.every(stride));
     let seeds = sub.as_ref().unwrap_or(problem);
     let m = seeds.len();
-    // (plausible, scale, fit): plausible seeds first, then the smallest scale.
-    let mut best: Option<(bool, f64, P::Fit)> = None;
-    for (a, b) in seed_spans(m) {
+    // The seeds are fitted on all threads, then compared in order.
+    let spans = seed_spans(m);
+    let fitted = chunks::parts(spans.len(), |k| {
+        let (a, b) = spans[k];
         let mut w = vec![0.0; m];
         w[a..b].fill(1.0);
-        let Some((fit, scale)) = reweight(seeds, &w, SEED_ITERATIONS) else {
-            continue;
-        };
+        reweight(seeds, &w, SEED_ITERATIONS)
+    });
+    // (plausible, scale, fit): plausible seeds first, then the smallest scale.
+    let mut best: Option<(bool, f64, P::Fit)> = None;
+    for (fit, scale) in fitted.into_iter().flatten() {
         let a = P::model(&fit).a;
         let plausible = plausible(&a);
         // Seeds compare in raw units: a fit that shrinks the readings (a scalar fit's huge sphere through a cap, at
@@ -142,8 +149,14 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             Ok(f) if plausible(&P::model(&f).a) || !plausible(&P::model(&fit).a) => fit = f,
             _ => break,
         }
-        drop(std::mem::take(&mut residual_ut));
-        residual_ut = problem.residuals(&fit);
+        let residual_new = problem.residuals(&fit);
+        // Settled: the next weights are within 1e-3 of those the fit was made with, so another fit would repeat it
+        // (the seeds' reweighting stops by the same rule).
+        let settled = weight_change::<P>(&residual_ut, &residual_new) < WEIGHTS_SETTLED;
+        residual_ut = residual_new;
+        if settled {
+            break;
+        }
     }
     let mut sigma_ut = scale::<P>(&residual_ut);
     let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
@@ -295,7 +308,7 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
             break;
         }
         fit = next;
-        if change < 1e-3 {
+        if change < WEIGHTS_SETTLED {
             break;
         }
         w_prev = w;
@@ -330,16 +343,35 @@ fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
 /// Tukey's biweight of residual sizes `e` against the scale `s`.
 fn biweight(e: &[f64], s: f64) -> Vec<f64> {
     let c = BIWEIGHT_SIGMA * s.max(f64::MIN_POSITIVE);
-    e.iter()
-        .map(|x| {
-            let u = x / c;
-            if u.is_finite() && u < 1.0 {
-                (1.0 - u * u).powi(2)
-            } else {
-                0.0
-            }
-        })
-        .collect()
+    e.iter().map(|x| tukey(x / c)).collect()
+}
+
+/// Tukey's biweight of a residual in units of the cut-off.
+fn tukey(u: f64) -> f64 {
+    if u.is_finite() && u < 1.0 {
+        (1.0 - u * u).powi(2)
+    } else {
+        0.0
+    }
+}
+
+/// The largest change of a sample's biweight from residual sizes `before` to `after` (each against its own scale),
+/// without making either vector of weights.
+fn weight_change<P: RobustProblem>(before: &[f64], after: &[f64]) -> f64 {
+    let c = |e: &[f64]| BIWEIGHT_SIGMA * scale::<P>(e).max(f64::MIN_POSITIVE);
+    let (c0, c1) = (c(before), c(after));
+    chunks::fold(
+        before.len(),
+        |range| {
+            before[range.clone()]
+                .iter()
+                .zip(&after[range])
+                .map(|(x, y)| (tukey(x / c0) - tukey(y / c1)).abs())
+                .fold(0.0, f64::max)
+        },
+        f64::max,
+    )
+    .unwrap_or(0.0)
 }
 
 /// The runs of samples not `kept`, as ranges `[start, end)`.

@@ -257,17 +257,26 @@ struct Pass {
     rss: f64,
 }
 
-/// The magnitude residual of one reading and its gradient in the parameters.
+/// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
+struct Local {
+    d: Vector3<f64>,
+    u: Vector3<f64>,
+    inv_len: f64,
+}
+
+/// The magnitude residual of one reading, its gradient in the parameters, and where the reading sits.
+#[inline]
 fn residual(
     m: &Vector3<f64>,
     a: &Matrix3<f64>,
     c: &Vector3<f64>,
     field_ut: f64,
-) -> (f64, [f64; P]) {
+) -> (f64, [f64; P], Local) {
     let d = m - c;
     let v = a * d;
     let norm = v.norm();
-    let u = v / norm;
+    let inv_len = 1.0 / norm;
+    let u = v * inv_len;
     let au = a * u;
     let mut j = [0.0; P];
     for k in 0..3 {
@@ -280,29 +289,33 @@ fn residual(
             u[*r] * d[*s] + u[*s] * d[*r]
         };
     }
-    (norm - field_ut, j)
+    (norm - field_ut, j, Local { d, u, inv_len })
 }
 
 /// What the raw noise (variances `s2` per axis) adds on average to `r·∇r` of one reading, to second order: the
 /// magnitude's bias `½·tr(∇²f·Σ)` times the gradient, plus the covariance of the reading's noise in `r` and in `∇r`.
+/// `a2` is `A·A`, made once per pass; `at` and `grad` are the reading's place and gradient from [`residual`].
+#[inline]
 fn noise_score(
-    m: &Vector3<f64>,
+    at: &Local,
     a: &Matrix3<f64>,
-    c: &Vector3<f64>,
+    a2: &Matrix3<f64>,
     s2: &Vector3<f64>,
     grad: &[f64; P],
 ) -> [f64; P] {
-    let d = m - c;
-    let v = a * d;
-    let len = v.norm();
-    let u = v / len;
-    let w = a * u;
-    let proj = Matrix3::identity() - u * u.transpose();
-    let k = a * proj * a / len;
-    let bias = 0.5 * (0..3).map(|i| k[(i, i)] * s2[i]).sum::<f64>();
+    let Local { d, u, inv_len } = at;
+    // `A·u`, the gradient in the centre with its sign turned.
+    let w = Vector3::new(-grad[0], -grad[1], -grad[2]);
+    // With P = I − u·uᵀ and A symmetric: K = A·P·A/|v| = (A² − w·wᵀ)/|v|, and P·A·x = A·x − u·(w·x).
+    let bias = 0.5
+        * (0..3)
+            .map(|i| (a2[(i, i)] - w[i] * w[i]) * s2[i])
+            .sum::<f64>()
+        * inv_len;
     let sw = s2.component_mul(&w);
-    let kw = k * sw;
-    let z = proj * a * sw / len;
+    let w_sw = w.dot(&sw);
+    let kw = (a2 * sw - w * w_sw) * *inv_len;
+    let z = (a * sw - u * w_sw) * *inv_len;
     let mut out = [0.0; P];
     for i in 0..3 {
         out[i] = bias * grad[i] - kw[i];
@@ -328,53 +341,89 @@ fn unpack(p: &SVector<f64, P>) -> (Vector3<f64>, Matrix3<f64>) {
     (p.fixed_rows::<3>(0).into_owned(), a)
 }
 
+/// The entries of the upper triangle of a `P`×`P` matrix, row by row.
+const TRIANGLE: usize = P * (P + 1) / 2;
+
+/// One accumulation at `p`: `JᵀWJ`, `JᵀWr` (less the noise's share with `noise`) and `Σwr²`.
 fn pass(
-    raw: &[Vector3<f64>],
+    raw: &[[f64; 3]],
     w: &[f64],
     p: &SVector<f64, P>,
     field_ut: f64,
     noise: Option<&Vector3<f64>>,
 ) -> Pass {
     let (c, a) = unpack(p);
-    // Per chunk: JᵀWJ (all of it: fixed bounds let the products vectorise), JᵀWr and Σwr², in plain arrays.
     let chunk = |range: std::ops::Range<usize>| {
-        let (mut jtj, mut jtr, mut rss) = ([[0.0; P]; P], [0.0; P], 0.0);
-        for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
-            if wi == 0.0 {
-                continue;
-            }
-            let (r, j) = residual(m, &a, &c, field_ut);
-            let wj = j.map(|v| wi * v);
-            match noise {
-                None => (0..P).for_each(|x| jtr[x] += wj[x] * r),
-                Some(s2) => {
-                    let k = noise_score(m, &a, &c, s2, &j);
-                    (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
-                }
-            }
-            for (row, wx) in jtj.iter_mut().zip(wj) {
-                for (e, jy) in row.iter_mut().zip(j) {
-                    *e += wx * jy;
-                }
-            }
-            rss += wi * r * r;
+        let (raw, w) = (&raw[range.clone()], &w[range]);
+        match noise {
+            None => accumulate::<false>(raw, w, &a, &c, field_ut, &Vector3::zeros()),
+            Some(s2) => accumulate::<true>(raw, w, &a, &c, field_ut, s2),
         }
-        (jtj, jtr, rss)
     };
     let (jtj, jtr, rss) = chunks::fold(raw.len(), chunk, |x, y| {
         (
-            std::array::from_fn(|r| std::array::from_fn(|c| x.0[r][c] + y.0[r][c])),
+            std::array::from_fn(|e| x.0[e] + y.0[e]),
             std::array::from_fn(|i| x.1[i] + y.1[i]),
             x.2 + y.2,
         )
     })
     .unwrap_or_else(|| chunk(0..0));
-    // Symmetric: the upper triangle as summed, mirrored.
     Pass {
-        jtj: SMatrix::<f64, P, P>::from_fn(|x, y| jtj[x.min(y)][x.max(y)]),
+        jtj: mirror(&jtj),
         jtr: SVector::<f64, P>::from(jtr),
         rss,
     }
+}
+
+/// The sums of one chunk: the upper triangle of `JᵀWJ` row by row, `JᵀWr` less the noise's share (with `NOISE`,
+/// of variances `s2`) and `Σwr²`, in plain arrays.
+fn accumulate<const NOISE: bool>(
+    raw: &[[f64; 3]],
+    w: &[f64],
+    a: &Matrix3<f64>,
+    c: &Vector3<f64>,
+    field_ut: f64,
+    s2: &Vector3<f64>,
+) -> ([f64; TRIANGLE], [f64; P], f64) {
+    let (mut jtj, mut jtr, mut rss) = ([0.0; TRIANGLE], [0.0; P], 0.0);
+    let a2 = a * a;
+    for (m, &wi) in raw.iter().zip(w) {
+        if wi == 0.0 {
+            continue;
+        }
+        let m = Vector3::from(*m);
+        let (r, j, local) = residual(&m, a, c, field_ut);
+        let wj = j.map(|v| wi * v);
+        if NOISE {
+            let k = noise_score(&local, a, &a2, s2, &j);
+            (0..P).for_each(|x| jtr[x] += wj[x] * r - wi * k[x]);
+        } else {
+            (0..P).for_each(|x| jtr[x] += wj[x] * r);
+        }
+        let mut e = 0;
+        for x in 0..P {
+            for y in x..P {
+                jtj[e] += wj[x] * j[y];
+                e += 1;
+            }
+        }
+        rss += wi * r * r;
+    }
+    (jtj, jtr, rss)
+}
+
+/// The symmetric matrix of an upper triangle summed row by row.
+fn mirror(upper: &[f64; TRIANGLE]) -> SMatrix<f64, P, P> {
+    let mut full = SMatrix::<f64, P, P>::zeros();
+    let mut e = 0;
+    for x in 0..P {
+        for y in x..P {
+            full[(x, y)] = upper[e];
+            full[(y, x)] = upper[e];
+            e += 1;
+        }
+    }
+    full
 }
 
 /// The shape prior's precision (per unit of `A`'s mean gain²): free centre and overall scale, each gain's departure
@@ -395,13 +444,13 @@ fn shape_precision(gain: f64) -> SMatrix<f64, P, P> {
 }
 
 /// A weighted linear sphere fit: `|m|² = 2·c·m + k`, centred for conditioning. Returns the centre and radius.
-fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
+fn sphere(raw: &[[f64; 3]], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
     let sum = |range: std::ops::Range<usize>| {
         raw[range.clone()]
             .iter()
             .zip(&w[range])
             .fold((Vector3::zeros(), 0.0), |(s, n), (m, wi)| {
-                (s + m * *wi, n + wi)
+                (s + Vector3::from(*m) * *wi, n + wi)
             })
     };
     let (sum, w_sum) =
@@ -410,7 +459,7 @@ fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
     let products = |range: std::ops::Range<usize>| {
         let (mut xtx, mut xty) = (nalgebra::Matrix4::<f64>::zeros(), Vector4::<f64>::zeros());
         for (m, &wi) in raw[range.clone()].iter().zip(&w[range]) {
-            let d = m - mean;
+            let d = Vector3::from(*m) - mean;
             let x = Vector4::new(2.0 * d.x, 2.0 * d.y, 2.0 * d.z, 1.0);
             xtx += x * x.transpose() * wi;
             xty += x * (d.norm_squared() * wi);
@@ -428,28 +477,37 @@ fn sphere(raw: &[Vector3<f64>], w: &[f64]) -> Option<(Vector3<f64>, f64)> {
 /// Each reading's cell of direction about `centre`, the weights that keep any cell from outweighing the rotation
 /// ([`capped_cell_weights`]), and the number of occupied cells.
 fn direction_weights(
-    raw: &[Vector3<f64>],
+    raw: &[[f64; 3]],
     base: &[f64],
     centre: &Vector3<f64>,
     grid: &SphereGrid,
 ) -> (Vec<f64>, Vec<usize>, usize) {
     let cell: Vec<usize> = chunks::map(raw.len(), |i| {
-        let d = raw[i] - centre;
+        let d = Vector3::from(raw[i]) - centre;
         grid.cell([d.x, d.y, d.z]).unwrap_or(0)
     });
     let w = capped_cell_weights(&cell, base, grid.len());
-    let mut occupied = vec![false; grid.len()];
-    for (c, wi) in cell.iter().zip(base) {
-        occupied[*c] |= *wi > 0.0;
-    }
+    let occupied = |r: std::ops::Range<usize>| {
+        let mut occupied = vec![false; grid.len()];
+        for (c, wi) in cell[r.clone()].iter().zip(&base[r]) {
+            occupied[*c] |= *wi > 0.0;
+        }
+        occupied
+    };
+    let occupied = chunks::fold(cell.len(), occupied, |mut x, y| {
+        x.iter_mut().zip(&y).for_each(|(x, y)| *x |= y);
+        x
+    })
+    .unwrap_or_default();
     let cells = occupied.iter().filter(|o| **o).count();
     (w, cell, cells)
 }
 
 /// The problem as the solver sees it: the usable readings, their weights and cells, the magnitude aimed at and the
 /// shape prior.
-struct Problem {
-    raw: Vec<Vector3<f64>>,
+struct Problem<'a> {
+    /// The usable readings: the caller's own when every reading is usable.
+    raw: Cow<'a, [[f64; 3]]>,
     /// Weights, the direction weights included.
     w: Vec<f64>,
     w_sum: f64,
@@ -474,9 +532,14 @@ struct Solution {
     iterations: usize,
 }
 
-impl Problem {
+impl Problem<'_> {
     fn pass(&self, p: &SVector<f64, P>, noise: Option<&Vector3<f64>>) -> Pass {
         pass(&self.raw, &self.w, p, self.target, noise)
+    }
+
+    /// The objective: the weighted sum of squares plus the prior weighted by `sigma2`.
+    fn objective(&self, rss: f64, p: &SVector<f64, P>, sigma2: f64) -> f64 {
+        rss + sigma2 * (p.transpose() * self.q * p)[(0, 0)]
     }
 
     /// Levenberg–Marquardt on the magnitude residual plus the prior weighted by `sigma2`, from `p` (where the
@@ -490,10 +553,8 @@ impl Problem {
         iterations: &mut usize,
     ) -> (SVector<f64, P>, Pass) {
         let q = &self.q;
-        let objective =
-            |at: &Pass, p: &SVector<f64, P>| at.rss + sigma2 * (p.transpose() * q * p)[(0, 0)];
         let rounding = f64::EPSILON * (self.raw.len() as f64).sqrt();
-        let mut phi = objective(&at, &p);
+        let mut phi = self.objective(at.rss, &p, sigma2);
         let mut lambda = 1e-3;
         while *iterations < MAX_ITERATIONS {
             let h = at.jtj + q * sigma2;
@@ -518,7 +579,7 @@ impl Problem {
             *iterations += 1;
             let trial = p + step;
             let t = self.pass(&trial, None);
-            let t_phi = objective(&t, &trial);
+            let t_phi = self.objective(t.rss, &trial, sigma2);
             if t_phi.is_finite() && t_phi <= phi {
                 let decrease = phi - t_phi;
                 (p, at, phi) = (trial, t, t_phi);
@@ -572,7 +633,7 @@ impl Problem {
                     .iter()
                     .zip(&w[range])
                     .map(|(m, wi)| {
-                        let au = a * (a * (m - c)).normalize();
+                        let au = a * (a * (Vector3::from(*m) - c)).normalize();
                         wi * (0..3).map(|k| au[k] * au[k] * raw_var[k]).sum::<f64>()
                     })
                     .sum::<f64>()
@@ -611,48 +672,73 @@ impl Problem {
                 break;
             }
         }
-        sol.at = self.pass(&sol.p, Some(noise));
+        // The accumulation at the last step's end comes with the covariance ([`Problem::covariance`]).
         converged
     }
 
     /// The parameters' covariance: the larger, in every direction, of the model-based one and the delete-one-cell
     /// jackknife over the cells of direction (each cell's score through the information without that cell). Also
-    /// returns how much of the shape the prior informs.
+    /// returns how much of the shape the prior informs, and the accumulation at `sol.p` (the cells' sums).
     fn covariance(
         &self,
         sol: &Solution,
         noise: Option<&Vector3<f64>>,
-    ) -> Option<(SMatrix<f64, P, P>, f64)> {
+    ) -> Option<(SMatrix<f64, P, P>, f64, Pass)> {
         let (c, a) = unpack(&sol.p);
-        let h = sol.at.jtj + self.q * sol.sigma2;
-        let h_inv = h.try_inverse()?;
-        let model_based = h_inv * sol.sigma2;
-        // Per cell of direction: the score and the information, summed over the chunks of samples.
+        let a2 = a * a;
+        // Per cell of direction: the score and the upper triangle of the information, summed over the chunks of
+        // samples; and the sum of squares.
         let cells_of = |range: std::ops::Range<usize>| {
-            let mut scores = vec![SVector::<f64, P>::zeros(); self.grid.len()];
-            let mut info = vec![SMatrix::<f64, P, P>::zeros(); self.grid.len()];
+            let mut scores = vec![[0.0; P]; self.grid.len()];
+            let mut info = vec![[0.0; TRIANGLE]; self.grid.len()];
+            let mut rss = 0.0;
             for k in range {
-                let (m, wk) = (&self.raw[k], self.w[k]);
+                let (m, wk) = (Vector3::from(self.raw[k]), self.w[k]);
                 if wk == 0.0 {
                     continue;
                 }
-                let (r, j) = residual(m, &a, &c, self.target);
-                let jv = SVector::<f64, P>::from(j);
-                let mut score = jv * r;
-                if let Some(s2) = noise {
-                    score -= SVector::<f64, P>::from(noise_score(m, &a, &c, s2, &j));
+                let (r, j, local) = residual(&m, &a, &c, self.target);
+                let (score, cell) = (&mut scores[self.cell[k]], &mut info[self.cell[k]]);
+                match noise {
+                    None => (0..P).for_each(|x| score[x] += wk * (j[x] * r)),
+                    Some(s2) => {
+                        let n = noise_score(&local, &a, &a2, s2, &j);
+                        (0..P).for_each(|x| score[x] += wk * (j[x] * r - n[x]));
+                    }
                 }
-                scores[self.cell[k]] += score * wk;
-                info[self.cell[k]] += jv * jv.transpose() * wk;
+                let wj = j.map(|v| wk * v);
+                let mut e = 0;
+                for x in 0..P {
+                    for y in x..P {
+                        cell[e] += wj[x] * j[y];
+                        e += 1;
+                    }
+                }
+                rss += wk * r * r;
             }
-            (scores, info)
+            (scores, info, rss)
         };
-        let (scores, info) = chunks::fold(self.raw.len(), cells_of, |mut x, y| {
-            x.0.iter_mut().zip(&y.0).for_each(|(a, b)| *a += b);
-            x.1.iter_mut().zip(&y.1).for_each(|(a, b)| *a += b);
+        let (scores, info, rss) = chunks::fold(self.raw.len(), cells_of, |mut x, y| {
+            for (a, b) in x.0.iter_mut().zip(&y.0) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            for (a, b) in x.1.iter_mut().zip(&y.1) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            x.2 += y.2;
             x
         })
         .unwrap_or_else(|| cells_of(0..0));
+        let scores: Vec<SVector<f64, P>> = scores.into_iter().map(SVector::from).collect();
+        let info: Vec<SMatrix<f64, P, P>> = info.iter().map(mirror).collect();
+        let at = Pass {
+            jtj: info.iter().sum(),
+            jtr: scores.iter().sum(),
+            rss,
+        };
+        let h = at.jtj + self.q * sol.sigma2;
+        let h_inv = h.try_inverse()?;
+        let model_based = h_inv * sol.sigma2;
         let cells: Vec<usize> = (0..self.grid.len())
             .filter(|&k| scores[k].iter().any(|v| *v != 0.0))
             .collect();
@@ -676,8 +762,9 @@ impl Problem {
         };
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
-        Some((cov, share))
+        Some((cov, share, at))
     }
+
     /// From the plain fit: refuse what the coverage cannot determine, remove the noise's share of the score, and
     /// return the parameters' covariance with the prior's share of the shape.
     fn refine(
@@ -690,20 +777,25 @@ impl Problem {
             || FitError::Singular("the magnitude residual's normal matrix has no inverse");
         // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful
         // where the fit is.
-        let (plain_cov, _) = self.covariance(sol, None).ok_or_else(singular)?;
+        let (plain_cov, plain_share, plain_at) = self.covariance(sol, None).ok_or_else(singular)?;
         check_determined(
             weakest(&plain_cov),
             sol.p.fixed_rows::<3>(3).sum() / 3.0,
             target,
         )?;
         let noise = Vector3::from(opts.raw_noise_var_ut2);
-        let noise = noise
+        let Some(s2) = noise
             .iter()
             .any(|v| *v > 0.0)
-            .then(|| self.bounded_noise(sol, noise));
-        if let Some(s2) = &noise {
+            .then(|| self.bounded_noise(sol, noise))
+        else {
+            sol.at = plain_at;
+            return Ok((plain_cov, plain_share));
+        };
+        sol.at = plain_at;
+        {
             let plain = sol.p;
-            let converged = self.correct(sol, s2);
+            let converged = self.correct(sol, &s2);
             let moved = sol.p - plain;
             let gain = plain.fixed_rows::<3>(3).sum() / 3.0;
             let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
@@ -718,7 +810,9 @@ impl Problem {
                 });
             }
         }
-        self.covariance(sol, noise.as_ref()).ok_or_else(singular)
+        let (cov, share, at) = self.covariance(sol, Some(&s2)).ok_or_else(singular)?;
+        sol.at = at;
+        Ok((cov, share))
     }
 }
 
@@ -739,24 +833,36 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     if let Some(w) = opts.weights {
         assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
     }
-    let rows: Vec<usize> = (0..raw_ut.len())
-        .filter(|&i| {
-            raw_ut[i].iter().all(|v| v.is_finite()) && opts.weights.is_none_or(|w| w[i] > 0.0)
-        })
-        .collect();
-    let n = rows.len();
+    let usable = |i: usize| {
+        raw_ut[i].iter().all(|v| v.is_finite()) && opts.weights.is_none_or(|w| w[i] > 0.0)
+    };
+    let n = chunks::fold(
+        raw_ut.len(),
+        |range| range.filter(|&i| usable(i)).count(),
+        |x, y| x + y,
+    )
+    .unwrap_or(0);
     if n < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
             needed: MIN_SAMPLES,
             got: n,
         });
     }
-    let raw: Vec<Vector3<f64>> = rows.iter().map(|&i| Vector3::from(raw_ut[i])).collect();
-    let base: Vec<f64> = rows
-        .iter()
-        .map(|&i| opts.weights.map_or(1.0, |w| w[i]))
-        .collect();
-    let coverage = Coverage::of_vectors(&raw);
+    // The usable readings and their weights: the caller's own when all are usable, copies otherwise.
+    let (raw, base): (Cow<'_, [[f64; 3]]>, Cow<'_, [f64]>) = if n == raw_ut.len() {
+        (
+            Cow::Borrowed(raw_ut),
+            opts.weights
+                .map_or_else(|| Cow::Owned(vec![1.0; n]), Cow::Borrowed),
+        )
+    } else {
+        let rows = (0..raw_ut.len()).filter(|&i| usable(i));
+        (
+            rows.clone().map(|i| raw_ut[i]).collect(),
+            rows.map(|i| opts.weights.map_or(1.0, |w| w[i])).collect(),
+        )
+    };
+    let coverage = Coverage::of(&raw);
     if !opts.skip_coverage_check {
         coverage.check()?;
     }
@@ -765,7 +871,8 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     ))?;
     let grid = SphereGrid::new(DIRECTION_CELLS);
     let (w, cell, cells) = direction_weights(&raw, &base, &c0, &grid);
-    let w_sum: f64 = w.iter().sum();
+    let w_sum =
+        chunks::fold(w.len(), |r| w[r].iter().sum::<f64>(), |x, y| x + y).unwrap_or_default();
     // The fit aims at the given magnitude, or at the sphere's radius (rescaled to the ellipsoid's volume after).
     let target = opts.field_ut.unwrap_or(r0);
     let gain = target / r0;
