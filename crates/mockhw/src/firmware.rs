@@ -30,6 +30,9 @@ use magcal_sim::bench::{Bench, BenchConfig, BenchSample};
 const PACKET_BYTES: usize = 68;
 /// How long the board stays connected after its last line before it is unplugged.
 const UNPLUG_SETTLE: Duration = Duration::from_millis(200);
+/// A line the port cannot take for this long (nobody reads the other side) is dropped, as a board's full USB buffer
+/// drops it: the firmware goes on, and sees when it is told to stop.
+const SEND_TIMEOUT: Duration = Duration::from_secs(10);
 /// The two bytes a packet starts with.
 const PACKET_SIGNATURE: [u8; 2] = [117, 84];
 
@@ -405,13 +408,20 @@ impl<P: Read + Write> MotionCalFirmware<P> {
             garbled = bytes.iter().map(|b| b.rotate_left(3) | 0x80).collect();
             rest = &garbled;
         }
+        let mut blocked_since: Option<Instant> = None;
         while self.alive && !rest.is_empty() {
             match self.port.write(rest) {
                 Ok(0) => self.alive = false,
-                Ok(n) => rest = &rest[n..],
+                Ok(n) => {
+                    rest = &rest[n..];
+                    blocked_since = None;
+                }
                 Err(e)
                     if e.kind() == ErrorKind::WouldBlock || e.kind() == ErrorKind::Interrupted =>
                 {
+                    if blocked_since.get_or_insert_with(Instant::now).elapsed() > SEND_TIMEOUT {
+                        return;
+                    }
                     thread::sleep(Duration::from_micros(200));
                     self.receive();
                 }
