@@ -400,16 +400,22 @@ fn accumulate<const NOISE: bool>(
         } else {
             (0..P).for_each(|x| jtr[x] += wj[x] * r);
         }
-        let mut e = 0;
-        for x in 0..P {
-            for y in x..P {
-                jtj[e] += wj[x] * j[y];
-                e += 1;
-            }
-        }
+        add_upper(&mut jtj, &wj, &j);
         rss += wi * r * r;
     }
     (jtj, jtr, rss)
+}
+
+/// Adds `wj·jᵀ` to an upper triangle summed row by row.
+#[inline]
+fn add_upper(upper: &mut [f64; TRIANGLE], wj: &[f64; P], j: &[f64; P]) {
+    let mut e = 0;
+    for x in 0..P {
+        for y in x..P {
+            upper[e] += wj[x] * j[y];
+            e += 1;
+        }
+    }
 }
 
 /// The symmetric matrix of an upper triangle summed row by row.
@@ -706,14 +712,7 @@ impl Problem<'_> {
                         (0..P).for_each(|x| score[x] += wk * (j[x] * r - n[x]));
                     }
                 }
-                let wj = j.map(|v| wk * v);
-                let mut e = 0;
-                for x in 0..P {
-                    for y in x..P {
-                        cell[e] += wj[x] * j[y];
-                        e += 1;
-                    }
-                }
+                add_upper(cell, &j.map(|v| wk * v), &j);
                 rss += wk * r * r;
             }
             (scores, info, rss)
@@ -783,32 +782,29 @@ impl Problem<'_> {
             sol.p.fixed_rows::<3>(3).sum() / 3.0,
             target,
         )?;
+        sol.at = plain_at;
         let noise = Vector3::from(opts.raw_noise_var_ut2);
         let Some(s2) = noise
             .iter()
             .any(|v| *v > 0.0)
             .then(|| self.bounded_noise(sol, noise))
         else {
-            sol.at = plain_at;
             return Ok((plain_cov, plain_share));
         };
-        sol.at = plain_at;
-        {
-            let plain = sol.p;
-            let converged = self.correct(sol, &s2);
-            let moved = sol.p - plain;
-            let gain = plain.fixed_rows::<3>(3).sum() / 3.0;
-            let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
-                && moved.fixed_rows::<6>(3).amax() <= MAX_CORRECTION * gain;
-            if !converged || !small {
-                let (direction, se_raw) = weakest(&plain_cov);
-                return Err(FitError::Undetermined {
-                    direction,
-                    se_ut: se_raw * gain,
-                    field_ut: target,
-                    advice: rotate_advice(direction),
-                });
-            }
+        let plain = sol.p;
+        let converged = self.correct(sol, &s2);
+        let moved = sol.p - plain;
+        let gain = plain.fixed_rows::<3>(3).sum() / 3.0;
+        let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
+            && moved.fixed_rows::<6>(3).amax() <= MAX_CORRECTION * gain;
+        if !converged || !small {
+            let (direction, se_raw) = weakest(&plain_cov);
+            return Err(FitError::Undetermined {
+                direction,
+                se_ut: se_raw * gain,
+                field_ut: target,
+                advice: rotate_advice(direction),
+            });
         }
         let (cov, share, at) = self.covariance(sol, Some(&s2)).ok_or_else(singular)?;
         sol.at = at;
