@@ -276,7 +276,9 @@ impl Problem {
             .collect();
         let k = supported.len();
         let mut xtx = DMatrix::zeros(k, k);
-        let mut xty = DVector::zeros(k);
+        let mut xty = DVector::<f64>::zeros(k);
+        // The correction of Xᵀy for the noise it shares with the regressors, apart: the residuals use the plain one.
+        let mut xty_noise = DVector::<f64>::zeros(k);
         let mut yty = 0.0;
         for (_, block) in fitted() {
             for (r, &i) in supported.iter().enumerate() {
@@ -286,7 +288,7 @@ impl Problem {
                 }
                 if corrected {
                     xtx[(r, r)] -= block.samples as f64 * self.noise_var[i];
-                    xty[r] += block.xty_noise[i];
+                    xty_noise[r] += block.xty_noise[i];
                 }
             }
             yty += block.yty;
@@ -296,16 +298,9 @@ impl Problem {
             .cholesky()
             .map(|c| c.inverse())
             .or_else(|| xtx.clone().try_inverse())?;
-        let beta = &inverse * &xty;
+        let beta: DVector<f64> = &inverse * (&xty + &xty_noise);
         // RSS of the fitted rows with these coefficients (the uncorrected quadratic form: actual residuals).
         let mut rss = yty - 2.0 * beta.dot(&xty);
-        if corrected {
-            for (_, block) in fitted() {
-                for (r, &i) in supported.iter().enumerate() {
-                    rss += 2.0 * beta[r] * block.xty_noise[i];
-                }
-            }
-        }
         for (_, block) in fitted() {
             for (r, &i) in supported.iter().enumerate() {
                 for (s, &j) in supported.iter().enumerate() {
@@ -348,7 +343,8 @@ impl Problem {
     }
 
     /// The cluster-robust (sandwich) covariance of a solution fitted on every included row, with the batches as
-    /// clusters: `(XᵀX)⁻¹·Σ_b s_b·s_bᵀ·(XᵀX)⁻¹·B/(B−1)`, `s_b` the batch's score at the solution (its errors-in-variables
+    /// clusters: `(XᵀX)⁻¹·M·(XᵀX)⁻¹·B/(B−1)`, `M = Σ_b s_b·s_bᵀ` plus the products of neighbours up to [`SCORE_LAGS`]
+    /// apart with Bartlett weights (Newey–West), `s_b` the batch's score at the solution (its errors-in-variables
     /// correction included). Unlike the covariance from the residual variance, it grows when residuals that vary
     /// with the regressors gather in some stretches of the recording (a disturbance's tail below the gross
     /// threshold), which bias the fit as much as they scatter it. `None` with fewer than two batches.
