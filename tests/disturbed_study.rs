@@ -21,7 +21,9 @@
 //! The issue's targets (95 %, none worse, ≤ 1 % false alarms) are the aim; the assertions hold the levels measured
 //! so far, which fall short of them (see the tests' comments and docs/diagnosis.md).
 //!
-//! Heavy: `cargo test --release --test disturbed_study -- --ignored --nocapture` (CI runs it).
+//! Heavy: `cargo test --release --test disturbed_study -- --ignored --nocapture` (CI runs it). To look at some
+//! seeds: `MAGCAL_STUDY_SEEDS=15,66` runs only those (no floors are checked), and `MAGCAL_STUDY_DUMP=DIR` writes
+//! each run's recording to `DIR/seed_<seed>_<method>.csv` for `magcal-fit`.
 
 mod common;
 
@@ -273,6 +275,21 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
     s.effects = dist.iter().map(|(e, _)| *e).collect();
     let sim = simulate(&s).unwrap();
     let rec = &sim.recording;
+    if let Some(dir) = std::env::var_os("MAGCAL_STUDY_DUMP") {
+        let method = if vector { "vector" } else { "scalar" };
+        let dir = std::path::Path::new(&dir);
+        rec.write(&dir.join(format!("seed_{seed}_{method}.csv")))
+            .unwrap();
+        let truth = format!(
+            "field_ned_ut {:?} (|F| {:.3})\nA {:?}\nb_ut {:?}\n{:#?}\n",
+            s.field_ned_ut,
+            frames::norm(s.field_ned_ut),
+            s.sensor.a,
+            s.sensor.b_ut,
+            dist
+        );
+        std::fs::write(dir.join(format!("seed_{seed}_{method}.truth")), truth).unwrap();
+    }
     let what = format!(
         "seed {seed} {}: {:?}",
         if vector { "vector" } else { "scalar" },
@@ -427,9 +444,26 @@ fn report(name: &str, t: &Tally) {
     }
 }
 
+/// The seeds `MAGCAL_STUDY_SEEDS` names (comma-separated), if set.
+fn chosen_seeds() -> Option<Vec<u64>> {
+    let v = std::env::var("MAGCAL_STUDY_SEEDS").ok()?;
+    Some(
+        v.split(',')
+            .map(|s| {
+                s.trim()
+                    .parse()
+                    .expect("MAGCAL_STUDY_SEEDS: comma-separated seeds")
+            })
+            .collect(),
+    )
+}
+
 fn study(vector: bool) -> Tally {
     let tally = Mutex::new(Tally::default());
-    common::for_each_seed(SEEDS, |seed| run(seed, vector, &tally));
+    match chosen_seeds() {
+        Some(seeds) => seeds.iter().for_each(|&seed| run(seed, vector, &tally)),
+        None => common::for_each_seed(SEEDS, |seed| run(seed, vector, &tally)),
+    }
     tally.into_inner().unwrap()
 }
 
@@ -444,6 +478,9 @@ struct Floor {
 }
 
 fn check(t: &Tally, f: &Floor) {
+    if chosen_seeds().is_some() {
+        return;
+    }
     let pct = |a: usize, n: usize| 100.0 * a as f64 / n.max(1) as f64;
     assert!(
         pct(t.refused.len(), SEEDS as usize) <= f.refused_pct,
@@ -475,15 +512,16 @@ fn check(t: &Tally, f: &Floor) {
 fn vector_method_calibrates_around_gross_disturbances() {
     let t = study(true);
     report("vector method", &t);
-    // Measured 2026-11-24: 95.0 % good (91.0 % before the cluster-robust standard errors and leaving out the
-    // constants that could be fixed to either frame), 98.2 % located, 2 worse, 0 of 50 false alarms, none refused.
-    // The issue asks 95 % good and none worse: the second is not reached (docs/diagnosis.md says where it falls
-    // short); these floors keep what is, less one run.
+    // Measured 2026-11-24: 95.5 % good (91.0 % before the cluster-robust standard errors and leaving out the
+    // constants that could be fixed to either frame, 95.0 % before the robust fit's sixth seeds and concentration
+    // steps), 98.2 % located, 2 worse, 0 of 50 false alarms, none refused. The issue asks 95 % good and none worse:
+    // the second is not reached (docs/diagnosis.md says where it falls short); these floors keep what is, less one
+    // run.
     check(
         &t,
         &Floor {
-            good_pct: 94.5,
-            located_pct: 96.0,
+            good_pct: 95.0,
+            located_pct: 97.5,
             worse: 2,
             false_alarm_pct: 1.0,
             refused_pct: 0.0,
@@ -496,13 +534,14 @@ fn vector_method_calibrates_around_gross_disturbances() {
 fn scalar_method_calibrates_around_gross_disturbances() {
     let t = study(false);
     report("scalar method", &t);
-    // Measured 2026-11-24: 84.8 % good, 96.2 % located, 1 worse, 0 of 50 false alarms, 2 refused (the magnitude
-    // still varies by 20 % with two large fields in the room). Far from the issue's 95 %: see docs/diagnosis.md.
+    // Measured 2026-11-24: 92.0 % good (84.8 % before the robust fit's sixth seeds, concentration steps and shifted
+    // windows), 98.9 % located, 1 worse, 0 of 50 false alarms, 1 refused (a 230 µT field on the board for a fifth of
+    // the recording leaves a direction undetermined). Short of the issue's 95 %: see docs/diagnosis.md.
     check(
         &t,
         &Floor {
-            good_pct: 84.0,
-            located_pct: 95.0,
+            good_pct: 91.5,
+            located_pct: 98.0,
             worse: 1,
             false_alarm_pct: 1.0,
             refused_pct: 1.0,

@@ -409,3 +409,51 @@ fn exports_name_each_correction_left_out_with_its_size() {
         "{stdout}"
     );
 }
+
+#[test]
+fn a_field_fixed_in_the_room_during_a_scalar_recording_is_a_shifted_window_left_out() {
+    // 3 µT down in the room from 40 to 70 s, along most of the field (20, 0, 45): |B| rises by ~2.9 µT while the
+    // sensor tumbles, too little to be gross (8 times the noise of |B|).
+    let dir = tempfile::tempdir().unwrap();
+    let common = [
+        "--reference",
+        "none",
+        "--seed",
+        "3",
+        "--field-ned",
+        "20,0,45",
+    ];
+    let disturbed = simulate(
+        dir.path(),
+        "shift.csv",
+        &[
+            &common[..],
+            &["--effect", "disturbance:t0_s=40;t1_s=70;field_ned_ut=0,0,3"],
+        ]
+        .concat(),
+    );
+    let clean = simulate(dir.path(), "clean.csv", &common);
+    let r = fit_report(&disturbed, &[]);
+    let spans = r["diagnosis"]["spans"].as_array().unwrap();
+    assert_eq!(spans.len(), 1, "{spans:?}");
+    let sp = &spans[0];
+    assert_eq!(sp["kind"], "magnitude_shift");
+    assert!((sp["t0_s"].as_f64().unwrap() - 40.0).abs() < 0.5, "{sp}");
+    assert!((sp["t1_s"].as_f64().unwrap() - 70.0).abs() < 0.5, "{sp}");
+    assert!((sp["shift_ut"].as_f64().unwrap() - 2.9).abs() < 0.3, "{sp}");
+    assert_eq!(r["diagnosis"]["verdict"], "mismatch");
+    // The calibration is the clean recording's, within its standard errors.
+    let c = fit_report(&clean, &[]);
+    let (o, oc) = (
+        floats(&r["calibration"]["offset_ut"]),
+        floats(&c["calibration"]["offset_ut"]),
+    );
+    let se = floats(&r["calibration"]["offset_se_ut"]);
+    for k in 0..3 {
+        assert!(
+            (o[k] - oc[k]).abs() < 3.0 * se[k],
+            "{o:?} against {oc:?} ± {se:?}"
+        );
+    }
+    assert_eq!(c["diagnosis"]["spans"].as_array().unwrap().len(), 0);
+}

@@ -156,11 +156,14 @@ pub struct SpanReport {
     pub peak_ut: f64,
     /// The base fit's residual RMS in it, µT.
     pub rms_ut: f64,
-    /// `sensor_fixed`, `room_fixed`, `moving` or `unexplained`.
+    /// `sensor_fixed`, `room_fixed`, `magnitude_shift` (scalar method), `moving` or `unexplained`.
     pub kind: String,
     /// The constant field that explains it: in sensor axes (`sensor_fixed`) or NED (`room_fixed`), µT.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub field_ut: Option<[f64; 3]>,
+    /// The constant shift of |B| that explains it (`magnitude_shift`), µT.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shift_ut: Option<f64>,
     /// Modelled (the samples its constant explains kept, with an effect) or left out of the calibration.
     pub modelled: bool,
     /// In words.
@@ -323,11 +326,16 @@ impl DiagnosisReport {
                 .spans
                 .iter()
                 .map(|sp| {
+                    let shift_ut = match sp.kind {
+                        SpanKind::MagnitudeShift { shift_ut } => Some(shift_ut),
+                        _ => None,
+                    };
                     let (kind, field_ut) = match sp.kind {
                         SpanKind::SensorFixed { offset_ut, .. } => {
                             ("sensor_fixed", Some(offset_ut))
                         }
                         SpanKind::RoomFixed { field_ned_ut } => ("room_fixed", Some(field_ned_ut)),
+                        SpanKind::MagnitudeShift { .. } => ("magnitude_shift", None),
                         SpanKind::Moving => ("moving", None),
                         SpanKind::Unexplained => ("unexplained", None),
                     };
@@ -339,6 +347,7 @@ impl DiagnosisReport {
                         rms_ut: sp.rms_ut,
                         kind: kind.to_owned(),
                         field_ut,
+                        shift_ut,
                         modelled: sp.modelled,
                         explanation: sp.explanation.clone(),
                     }

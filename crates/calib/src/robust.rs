@@ -3,10 +3,12 @@
 //! A magnet passing the sensor, a magnet attached to the board for a minute, a glitch: such samples are off by tens
 //! of µT where the rest sit at the noise and the reference's own error. Least squares follows them; this fit does
 //! not:
-//! 1. **Seeds from time spans.** Fits on contiguous spans of a third, a half and two thirds of the recording (and on
-//!    all of it), each refined by iteratively reweighted least squares with Tukey's biweight on the residual's size
+//! 1. **Seeds from time spans.** Fits on contiguous spans of a sixth, a third, a half and two thirds of the recording
+//!    (and on all of it), each refined first by concentration steps (fit the half of all samples it fits best, until
+//!    that half settles: from a seed that is mostly clean this reaches the clean state even when every long span is
+//!    disturbed somewhere), then by iteratively reweighted least squares with Tukey's biweight on the residual's size
 //!    against a scale from its median. A disturbance covering up to half the recording leaves at least one seed
-//!    clean. The seeds run on a subsample of at most [`SEED_SAMPLES`] samples, on all threads.
+//!    clean or mostly clean. The seeds run on a subsample of at most [`SEED_SAMPLES`] samples, on all threads.
 //! 2. **The best seed** is the one with the smallest median residual over all samples — the state the recording is
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
@@ -19,6 +21,10 @@
 //!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
 //!    samples in between are no cleaner. Without gross disturbances nothing is excluded and the fit *is* the
 //!    least-squares fit.
+//! 4. **Shifted windows** (a problem that has them, see [`RobustProblem::shifted`]): a field fixed in the room for a
+//!    while changes the scalar method's magnitude by a constant whatever the attitude, often too little to be gross;
+//!    windows where the signed residual is shifted by a constant are found by a scan ([`shifted_windows`]) and
+//!    excluded too, and the rest fitted again.
 
 use crate::FitError;
 use crate::chunks;
@@ -45,6 +51,12 @@ const BIWEIGHT_SIGMA: f64 = 6.0;
 /// A matrix whose singular values differ by more than this factor is an implausible calibration.
 pub const PLAUSIBLE_GAIN_RATIO: f64 = 2.5;
 const SEED_ITERATIONS: usize = 20;
+/// Concentration steps of a seed, at most.
+const TRIM_STEPS: usize = 5;
+/// Concentration steps stop when at most one sample in this many changed sides.
+const TRIM_SETTLED: usize = 100;
+/// The share of the samples a concentration step fits.
+const TRIM_SHARE: f64 = 0.5;
 const FULL_ITERATIONS: usize = 3;
 /// Reweighting stops when no sample's weight changes by more than this.
 const WEIGHTS_SETTLED: f64 = 1e-3;
@@ -73,6 +85,11 @@ pub trait RobustProblem: Sized + Sync {
     fn residuals(&self, fit: &Self::Fit) -> Vec<f64>;
     /// The linear model of a fit.
     fn model(fit: &Self::Fit) -> Model;
+    /// The windows (sample ranges) where the residual of the `kept` samples is shifted by a constant too small to be
+    /// gross that the residual sizes do not show: none, unless a problem says otherwise.
+    fn shifted(&self, _fit: &Self::Fit, _kept: &[bool]) -> Vec<(usize, usize)> {
+        Vec::new()
+    }
 }
 
 /// A robust fit and what it left out.
@@ -178,6 +195,29 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             break;
         }
     }
+    // Windows shifted by a constant too small to be gross (a field fixed in the room, in the magnitude) go too, when
+    // the samples are in time order; the fit without them replaces the last one if it can be made.
+    if t_s.is_some() {
+        for _ in 0..SPAN_PASSES {
+            let fit = final_fit.as_ref().expect("at least one pass");
+            let windows = problem.shifted(fit, &kept);
+            if windows.is_empty() {
+                break;
+            }
+            let mut k = kept.clone();
+            for (a, b) in windows {
+                k[a..b].fill(false);
+            }
+            let weights: Vec<f64> = k.iter().map(|k| f64::from(u8::from(*k))).collect();
+            let Ok(f) = problem.final_fit(&weights) else {
+                break;
+            };
+            residual_ut = problem.residuals(&f);
+            sigma_ut = scale::<P>(&residual_ut);
+            final_fit = Some(f);
+            kept = k;
+        }
+    }
     // Samples the fit cannot use inside a span are not excluded by it.
     for (k, e) in kept.iter_mut().zip(&residual_ut) {
         *k |= !e.is_finite();
@@ -278,10 +318,10 @@ pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>) -> Vec<(usize, us
     out
 }
 
-/// The seeds' spans: all samples, and contiguous thirds, halves and two-thirds at offsets of a sixth.
+/// The seeds' spans: all samples, and contiguous sixths, thirds, halves and two-thirds at offsets of a sixth.
 fn seed_spans(n: usize) -> Vec<(usize, usize)> {
     let mut spans = vec![(0, n)];
-    for len6 in [2usize, 3, 4] {
+    for len6 in [1usize, 2, 3, 4] {
         for start6 in 0..=(6 - len6) {
             spans.push((start6 * n / 6, (start6 + len6) * n / 6));
         }
@@ -289,9 +329,29 @@ fn seed_spans(n: usize) -> Vec<(usize, usize)> {
     spans
 }
 
-/// IRLS with the biweight from the fit on `w0`: the fit and the scale of its residual, or `None` if a fit fails.
+/// From the fit on `w0`: concentration steps (the fit on the half of the samples it fits best, at most
+/// [`TRIM_STEPS`] times), then IRLS with the biweight: the fit and the scale of its residual, or `None` if the
+/// first fit fails.
 fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P::Fit, f64)> {
     let mut fit = p.quick_fit(w0).ok()?;
+    let mut kept_prev: Vec<bool> = Vec::new();
+    for _ in 0..TRIM_STEPS {
+        let e = p.residuals(&fit);
+        let cut = quantile(&e, TRIM_SHARE);
+        let kept: Vec<bool> = e.iter().map(|x| x.is_finite() && *x <= cut).collect();
+        // Settled: at most 1 % of the samples changed sides (the biweight's passes take it from there).
+        let moved = kept.iter().zip(&kept_prev).filter(|(a, b)| a != b).count();
+        if !kept_prev.is_empty() && moved * TRIM_SETTLED <= kept.len() {
+            break;
+        }
+        let w: Vec<f64> = kept.iter().map(|k| f64::from(u8::from(*k))).collect();
+        let Ok(next) = p.quick_fit(&w) else { break };
+        if plausible(&P::model(&fit).a) && !plausible(&P::model(&next).a) {
+            break;
+        }
+        fit = next;
+        kept_prev = kept;
+    }
     let mut w_prev = w0.to_vec();
     for _ in 0..iterations {
         let e = p.residuals(&fit);
@@ -340,6 +400,16 @@ fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
     f64::from_bits(key(f64::from_bits(median as u64)) as u64) / P::MEDIAN_OF_UNIT
 }
 
+/// The `q` quantile of the finite values of `e` (NaN if none).
+fn quantile(e: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let k = ((v.len() - 1) as f64 * q) as usize;
+    *v.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
 /// Tukey's biweight of residual sizes `e` against the scale `s`.
 fn biweight(e: &[f64], s: f64) -> Vec<f64> {
     let c = BIWEIGHT_SIGMA * s.max(f64::MIN_POSITIVE);
@@ -385,6 +455,69 @@ pub fn excluded_runs(kept: &[bool]) -> Vec<(usize, usize)> {
         }
     }
     runs
+}
+
+/// A window of the residual is shifted when its scan statistic exceeds this (in units of the residual's long-run
+/// variance, see [`long_run_variance`]: the evidence the diagnosis demands of the vector method's scanned disturbance
+/// window)…
+const SHIFT_SCAN_PENALTY: f64 = 24.0;
+/// …and its shift is at least this many times the sensor's noise: smaller ones are within the field's own wander
+/// across a room as the sensor moves (up to 2.2 times in |B| on the physical recordings), not a disturbance.
+const SHIFT_MIN_NOISE: f64 = 3.0;
+/// At most this many shifted windows are looked for.
+const MAX_SHIFTS: usize = 4;
+
+/// The windows where a signed residual `e` (in time order) is shifted by a constant among the `kept` samples, each
+/// found by the window scan on the samples the previous ones left, as sample ranges `[start, end)`: the scalar
+/// method's magnitude while a field is fixed in the room for a while, too small to be gross. A window holds at most
+/// half the samples scanned; `noise` is the noise of `e`.
+pub fn shifted_windows(e: &[f64], kept: &[bool], noise: f64) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    let mut free = kept.to_vec();
+    for _ in 0..MAX_SHIFTS {
+        let idx: Vec<usize> = (0..e.len())
+            .filter(|&i| free[i] && e[i].is_finite())
+            .collect();
+        let m = idx.len() as f64;
+        let mean = idx.iter().map(|&i| e[i]).sum::<f64>() / m;
+        let values: Vec<f64> = idx.iter().map(|&i| e[i] - mean).collect();
+        let sigma2 = values.iter().map(|v| v * v).sum::<f64>() / m;
+        let sigma2 = sigma2.max(long_run_variance(&values));
+        let Some(w) = crate::diagnosis::scan::window(&values, sigma2) else {
+            break;
+        };
+        let len = (w.end - w.start) as f64;
+        let shift = values[w.start..w.end].iter().sum::<f64>() / len;
+        // The rest's mean moves the opposite way: the shift against it.
+        let step = shift * m / (m - len);
+        if w.stat < SHIFT_SCAN_PENALTY || step.abs() < SHIFT_MIN_NOISE * noise || 2.0 * len > m {
+            break;
+        }
+        let (a, b) = (idx[w.start], idx[w.end - 1] + 1);
+        free[a..b].fill(false);
+        out.push((a, b));
+    }
+    out
+}
+
+/// Samples per block of [`long_run_variance`].
+const LONG_RUN_BLOCK: usize = 50;
+
+/// The variance of a mean of `x` per sample, from the spread of its means over blocks of
+/// [`LONG_RUN_BLOCK`] samples (their median absolute size, as a standard deviation): a residual that wanders slowly
+/// (a hand-held sensor moved through a room's field gradients) has one above its sample variance, and a few shifted
+/// blocks do not raise it.
+fn long_run_variance(x: &[f64]) -> f64 {
+    let mut means: Vec<f64> = x
+        .chunks_exact(LONG_RUN_BLOCK)
+        .map(|c| (c.iter().sum::<f64>() / LONG_RUN_BLOCK as f64).abs())
+        .collect();
+    if means.is_empty() {
+        return 0.0;
+    }
+    let mid = means.len() / 2;
+    let sd = *means.select_nth_unstable_by(mid, f64::total_cmp).1 / 0.674_49;
+    sd * sd * LONG_RUN_BLOCK as f64
 }
 
 /// Whether a matrix's gains are within [`PLAUSIBLE_GAIN_RATIO`] of each other.
@@ -481,6 +614,64 @@ mod tests {
         );
         assert_eq!(r.excluded(), 900);
         assert!(r.kept[..500].iter().all(|k| *k) && r.kept[500..1400].iter().all(|k| !*k));
+    }
+
+    #[test]
+    fn disturbances_in_every_third_of_the_recording_cannot_capture_the_fit() {
+        // 48 % disturbed, every seed of a third or more holds some of it; the sixth 1500..2000 is clean.
+        let disturbed = [200..450, 600..900, 1100..1400, 2100..2400, 2600..2900];
+        let mut p = line(3000, 0..0);
+        for r in disturbed.clone() {
+            for i in r {
+                p.y[i] += 30.0;
+            }
+        }
+        let r = fit(&p, None).unwrap();
+        assert!(
+            (r.fit.0 - 2.0).abs() < 0.01 && (r.fit.1 - 1.0).abs() < 0.05,
+            "{:?}",
+            r.fit
+        );
+        assert_eq!(r.excluded(), 1450);
+    }
+
+    /// White noise of unit variance, `n` samples.
+    fn white(n: usize, seed: u64) -> Vec<f64> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        (0..n).map(|_| StandardNormal.sample(&mut rng)).collect()
+    }
+
+    #[test]
+    fn a_shifted_window_is_found_and_noise_alone_finds_none() {
+        let kept = vec![true; 4000];
+        for seed in 0..5 {
+            assert_eq!(shifted_windows(&white(4000, seed), &kept, 1.0), vec![]);
+        }
+        let mut e = white(4000, 9);
+        for x in &mut e[1200..1600] {
+            *x += 5.0;
+        }
+        let found = shifted_windows(&e, &kept, 1.0);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let (a, b) = found[0];
+        assert!(a.abs_diff(1200) <= 5 && b.abs_diff(1600) <= 5, "{found:?}");
+        // The samples not kept are not looked at: the window there is not found.
+        let mut kept = kept;
+        kept[1100..1700].fill(false);
+        assert_eq!(shifted_windows(&e, &kept, 1.0), vec![]);
+    }
+
+    #[test]
+    fn a_slow_wander_is_not_a_shifted_window() {
+        // A residual that wanders by ±6 noise over 2000 samples: as a hand-held sensor moved through a room's field.
+        let e: Vec<f64> = white(8000, 3)
+            .iter()
+            .enumerate()
+            .map(|(i, x)| x + 6.0 * (i as f64 * std::f64::consts::TAU / 2000.0).sin())
+            .collect();
+        assert_eq!(shifted_windows(&e, &vec![true; 8000], 1.0), vec![]);
     }
 
     #[test]

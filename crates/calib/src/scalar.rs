@@ -216,6 +216,38 @@ impl RobustProblem for ScalarProblem<'_> {
     fn model(fit: &ScalarFit) -> Model {
         fit.model()
     }
+
+    /// A field fixed in the room adds a constant to the magnitude whatever the attitude: the windows where the
+    /// magnitude's residual is shifted, against the sensor's noise in |B| (none without a noise figure).
+    fn shifted(&self, fit: &ScalarFit, kept: &[bool]) -> Vec<(usize, usize)> {
+        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
+        let b = Vector3::from(fit.b_ut);
+        let var = Vector3::from(self.raw_noise_var_ut2);
+        let raw = &self.raw_ut;
+        let rho = chunks::map(raw.len(), |i| {
+            (a * Vector3::from(raw[i]) + b).norm() - fit.field_ut
+        });
+        // The noise of |B|: the raw noise seen along the field direction, averaged over (at most ~10 000) readings.
+        let stride = (raw.len() / 10_000).max(1);
+        let (sum, count) = raw
+            .iter()
+            .step_by(stride)
+            .filter_map(|m| {
+                let u = (a * Vector3::from(*m) + b).try_normalize(0.0)?;
+                Some(
+                    (a.transpose() * u)
+                        .component_mul(&(a.transpose() * u))
+                        .dot(&var),
+                )
+            })
+            .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+        let noise = (sum / count.max(1) as f64).sqrt();
+        if noise > 0.0 {
+            crate::robust::shifted_windows(&rho, kept, noise)
+        } else {
+            Vec::new()
+        }
+    }
 }
 
 impl ScalarProblem<'_> {

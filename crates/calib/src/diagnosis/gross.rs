@@ -7,6 +7,8 @@
 //!   `bias_window`, the samples inside kept;
 //! - **fixed to the room** — a constant in NED seen through the attitude (a magnet placed on the bench and taken
 //!   away): modelled as a `disturbance`;
+//! - **a shift of the magnitude** (scalar method) — a constant in |B| while the sensor turned: a field fixed in the
+//!   room adds `|F + D| − |F|` whatever the attitude, which the magnitude shows only as a constant; excluded;
 //! - **moving** — neither, while the sensor moved: a field that changes with where the sensor is (a magnet or
 //!   steel nearby): excluded, reported with its span and peak;
 //! - **unexplained** — neither, and the sensor did not move (something moved near it), or a glitch of a few
@@ -48,6 +50,11 @@ pub enum SpanKind {
     RoomFixed {
         /// The field, NED, µT.
         field_ned_ut: [f64; 3],
+    },
+    /// A constant shift of the magnitude while the sensor turned (scalar method): a field fixed in the room, µT.
+    MagnitudeShift {
+        /// The shift of |B|, µT.
+        shift_ut: f64,
     },
     /// A field that changed as the sensor moved: a magnet or steel nearby.
     Moving,
@@ -194,13 +201,22 @@ fn classify(
                 _ => unexplained,
             }
         }
-        Residual::Magnitude { rho, unit } => match along(&rho[a..b], &unit[a..b]) {
-            Some((offset, rss)) if explained(rss) => SpanKind::SensorFixed {
-                offset_ut: offset,
-                told_apart: false,
-            },
-            _ => unexplained,
-        },
+        Residual::Magnitude { rho, unit } => {
+            let shift_ut = rho[a..b].iter().sum::<f64>() / n;
+            let rss_shift: f64 = rho[a..b].iter().map(|r| (r - shift_ut).powi(2)).sum();
+            let body = along(&rho[a..b], &unit[a..b]);
+            let rss_body = body.map_or(f64::INFINITY, |(_, rss)| rss);
+            match body {
+                _ if turned && explained(rss_shift) && rss_shift < FRAME_MARGIN * rss_body => {
+                    SpanKind::MagnitudeShift { shift_ut }
+                }
+                Some((offset, rss)) if explained(rss) => SpanKind::SensorFixed {
+                    offset_ut: offset,
+                    told_apart: false,
+                },
+                _ => unexplained,
+            }
+        }
     };
     Span {
         start: a,

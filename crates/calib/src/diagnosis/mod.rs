@@ -32,7 +32,7 @@ mod gross;
 mod guard;
 mod locate;
 mod samples;
-mod scan;
+pub(crate) mod scan;
 mod select;
 mod stats;
 
@@ -318,6 +318,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     let mut span_residual = Cow::Borrowed(base_residual.as_slice());
     let mut left_out: Vec<(usize, usize)> = Vec::new();
     let mut rejected = Vec::new();
+    setup.exclude_shifts(&span_residual, &mut kept);
     let mut round = setup.round(&span_residual, &kept, scale, &left_out)?;
     for _ in 1..ROUNDS {
         // Guard first: effects that make the model unphysical go, and if modelling the spans harms the clean
@@ -341,7 +342,8 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         let scale2 = setup.scale(&residual);
         let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
         let times = samples.has_time.then_some(&samples.t[..]);
-        let kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
+        let mut kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
+        setup.exclude_shifts(&residual, &mut kept2);
         if kept2 == kept {
             break;
         }
@@ -479,6 +481,18 @@ impl<'a> Setup<'a> {
             frames::norm(*e)
         } else {
             e[0].abs()
+        }
+    }
+
+    /// Scalar method with time: the windows where the magnitude's residual is shifted among the `kept` samples (a
+    /// field fixed in the room, too small to be gross) are no longer kept.
+    fn exclude_shifts(&self, residual: &[[f64; 3]], kept: &mut [bool]) {
+        if self.vector || !self.samples.has_time {
+            return;
+        }
+        let rho: Vec<f64> = residual.iter().map(|e| e[0]).collect();
+        for (a, b) in robust::shifted_windows(&rho, kept, self.noise_floor_ut) {
+            kept[a..b].fill(false);
         }
     }
 
@@ -1372,6 +1386,12 @@ impl Setup<'_> {
             SpanKind::RoomFixed { field_ned_ut } => format!(
                 "{when}: a field of {:.1} µT fixed in the room — modelled (disturbance), the samples it explains kept",
                 frames::norm(field_ned_ut)
+            ),
+            SpanKind::MagnitudeShift { shift_ut } => format!(
+                "{when}: the field's magnitude {} by {:.1} µT throughout while the sensor turned — a field fixed in \
+                 the room (a magnet or steel placed nearby, then taken away); left out of the calibration",
+                if shift_ut > 0.0 { "raised" } else { "lowered" },
+                shift_ut.abs()
             ),
             SpanKind::Moving => format!(
                 "{when}: up to {:.1} µT, changing as the sensor moved — a magnet or steel nearby; left out of the \

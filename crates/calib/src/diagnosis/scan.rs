@@ -117,25 +117,60 @@ const WINDOW_GRID: usize = 400;
 /// A disturbance covers at most this fraction of the recording (a longer one is a field error, not a transient).
 const WINDOW_MAX_FRACTION: f64 = 0.8;
 
+/// A residual the window scan sums: a vector (three components) or a scalar.
+pub(crate) trait Summed: Copy {
+    const ZERO: Self;
+    fn add(self, other: Self) -> Self;
+    fn sub(self, other: Self) -> Self;
+    /// The squared size.
+    fn size2(self) -> f64;
+}
+
+impl Summed for [f64; 3] {
+    const ZERO: Self = [0.0; 3];
+    fn add(self, other: Self) -> Self {
+        frames::add(self, other)
+    }
+    fn sub(self, other: Self) -> Self {
+        frames::sub(self, other)
+    }
+    fn size2(self) -> f64 {
+        frames::dot(self, self)
+    }
+}
+
+impl Summed for f64 {
+    const ZERO: Self = 0.0;
+    fn add(self, other: Self) -> Self {
+        self + other
+    }
+    fn sub(self, other: Self) -> Self {
+        self - other
+    }
+    fn size2(self) -> f64 {
+        self * self
+    }
+}
+
 /// The most likely window of a world-fixed disturbance in a vector residual seen through the attitude, `world`
 /// (`R·e` per sample, NED): the disturbance is a constant `d` there inside the window, so the statistic is
-/// `|Σ_window R·e|² / (L·σ²)`. Coarse grid first, then each boundary refined at sample resolution.
-pub(crate) fn window(world: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
+/// `|Σ_window R·e|² / (L·σ²)`. Coarse grid first, then each boundary refined at sample resolution. The same scan
+/// finds a window where a scalar residual (the magnitude's) is shifted by a constant.
+pub(crate) fn window<V: Summed>(world: &[V], sigma2: f64) -> Option<Scan> {
     let n = world.len();
     if n < 4 * MIN_SIDE {
         return None;
     }
-    let mut prefix = vec![[0.0; 3]; n + 1];
+    let mut prefix = vec![V::ZERO; n + 1];
     for i in 0..n {
-        prefix[i + 1] = frames::add(prefix[i], world[i]);
+        prefix[i + 1] = prefix[i].add(world[i]);
     }
     let max_len = (WINDOW_MAX_FRACTION * n as f64) as usize;
     let stat = |a: usize, b: usize| {
         if b <= a + MIN_SIDE || b - a > max_len {
             return f64::NEG_INFINITY;
         }
-        let s = frames::sub(prefix[b], prefix[a]);
-        frames::dot(s, s) / ((b - a) as f64 * sigma2)
+        prefix[b].sub(prefix[a]).size2() / ((b - a) as f64 * sigma2)
     };
     let g = WINDOW_GRID.min(n);
     let grid: Vec<usize> = (0..=g).map(|i| i * n / g).collect();
