@@ -457,3 +457,15 @@ fn a_field_fixed_in_the_room_during_a_scalar_recording_is_a_shifted_window_left_
     }
     assert_eq!(c["diagnosis"]["spans"].as_array().unwrap().len(), 0);
 }
+
+#[test]
+fn a_scalar_fit_never_blames_a_reference_it_does_not_have() {
+    // A hand-held QMC5883L recording without any attitude reference, its |B| residual above the sensor's noise.
+    let out = magcal_fit(&[common::real("qmc5883l/qmc5883l_filtered_raw.csv")
+        .to_str()
+        .unwrap()]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("left unexplained"), "{text}");
+    assert!(!text.contains("reference's own error"), "{text}");
+}

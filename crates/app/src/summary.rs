@@ -268,7 +268,7 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         let _ = writeln!(out, "  note: {note}");
     }
     if let Some(d) = &cal.diagnosis {
-        out += &diagnosis(d);
+        out += &diagnosis(d, matches!(cal.fit, Fit::Scalar(_)));
     }
     out
 }
@@ -278,16 +278,23 @@ fn noticeable(e: &FoundEffect) -> bool {
     e.holdout_rms_before_ut - e.holdout_rms_after_ut >= NOTICEABLE_GAIN * e.holdout_rms_before_ut
 }
 
-/// The diagnosis in a few lines.
-fn diagnosis(d: &Diagnosis) -> String {
+/// The diagnosis in a few lines (`scalar`: the scalar method, which has no attitude reference whose error the residual
+/// could be).
+fn diagnosis(d: &Diagnosis, scalar: bool) -> String {
     let mut out = String::new();
-    let reference = if d.reference_floor_ut > 0.5 * d.noise_floor_ut {
+    let reference = if d.reference_floor_ut <= 0.5 * d.noise_floor_ut {
+        String::new()
+    } else if scalar {
+        format!(
+            " (the residual beyond the sensor's noise, {:.2} µT, is left unexplained: the field's own variation where \
+             the sensor moved, or something none of the effects tested accounts for)",
+            d.reference_floor_ut
+        )
+    } else {
         format!(
             " (the residual beyond the sensor's noise, {:.2} µT, is the reference's own error)",
             d.reference_floor_ut
         )
-    } else {
-        String::new()
     };
     let verdict = match d.verdict {
         Finding::Consistent => {
@@ -380,10 +387,14 @@ fn diagnosis(d: &Diagnosis) -> String {
             d.base.holdout_rms_ut,
             d.extended.holdout_rms_ut,
             d.noise_floor_ut,
-            if reference.is_empty() {
-                String::new()
-            } else {
-                format!(", the reference's own error {:.3} µT", d.reference_floor_ut)
+            match (reference.is_empty(), scalar) {
+                (true, _) => String::new(),
+                (false, true) => format!(
+                    ", unexplained beyond the noise {:.3} µT",
+                    d.reference_floor_ut
+                ),
+                (false, false) =>
+                    format!(", the reference's own error {:.3} µT", d.reference_floor_ut),
             }
         );
     }
