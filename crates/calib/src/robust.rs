@@ -621,7 +621,7 @@ mod tests {
         // 48 % disturbed, every seed of a third or more holds some of it; the sixth 1500..2000 is clean.
         let disturbed = [200..450, 600..900, 1100..1400, 2100..2400, 2600..2900];
         let mut p = line(3000, 0..0);
-        for r in disturbed.clone() {
+        for r in disturbed {
             for i in r {
                 p.y[i] += 30.0;
             }
