@@ -187,29 +187,10 @@ pub(crate) fn window<V: Summed>(world: &[V], sigma2: f64) -> Option<Scan> {
         return None;
     }
     let step = n.div_ceil(g);
-    // Refine the start with the end fixed, then the end with the start fixed.
-    let (mut a, mut b) = (best.0, best.1);
-    let starts: Vec<f64> = (0..n)
-        .map(|x| {
-            if x + step >= a && x <= a + step {
-                stat(x, b)
-            } else {
-                f64::NEG_INFINITY
-            }
-        })
-        .collect();
-    a = argmax(&starts);
-    let ends: Vec<f64> = (0..=n)
-        .map(|x| {
-            if x + step >= b && x <= b + step {
-                stat(a, x)
-            } else {
-                f64::NEG_INFINITY
-            }
-        })
-        .collect();
-    b = argmax(&ends);
-    drop((starts, ends));
+    // Refine the start with the end fixed, then the end with the start fixed, each within a grid step.
+    let near = |x: usize, last: usize| x.saturating_sub(step)..=(x + step).min(last);
+    let a = argmax_of(near(best.0, n - 1), |x| stat(x, best.1));
+    let b = argmax_of(near(best.1, n), |x| stat(a, x));
     let best_stat = stat(a, b);
     Some(Scan {
         start: a,
@@ -220,11 +201,13 @@ pub(crate) fn window<V: Summed>(world: &[V], sigma2: f64) -> Option<Scan> {
     })
 }
 
-fn argmax(v: &[f64]) -> usize {
-    v.iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .map_or(0, |(i, _)| i)
+/// The `x` of `range` with the largest `f(x)` (the last of equals).
+fn argmax_of(range: std::ops::RangeInclusive<usize>, f: impl Fn(usize) -> f64) -> usize {
+    let start = *range.start();
+    range
+        .map(|x| (x, f(x)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(start, |(x, _)| x)
 }
 
 #[cfg(test)]
