@@ -13,11 +13,12 @@
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
 //!    plausible ones.
-//! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle); then the samples
-//!    whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps of up to [`SPAN_GAP_S`]
-//!    and widened over
-//!    their ramps (neighbours above [`RAMP_SIGMA`]) — which are excluded, and the rest is fitted by plain (weighted
-//!    0/1) least squares; twice, with the spans of the new fit. A whole span goes, not only its gross samples: a
+//! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle; on a subsample of at
+//!    most [`REWEIGHT_SAMPLES`] samples, which fixes the fit far more closely than the spans need); then the samples
+//!    of the whole recording whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps
+//!    of up to [`SPAN_GAP_S`] and widened over their ramps (neighbours above [`RAMP_SIGMA`]) — which are excluded,
+//!    and the rest is fitted by plain (weighted 0/1) least squares, from the fit before (an iterative solver needs
+//!    fewer passes); twice, with the spans of the new fit. A whole span goes, not only its gross samples: a
 //!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
 //!    samples in between are no cleaner. Without gross disturbances nothing is excluded and the fit *is* the
 //!    least-squares fit.
@@ -58,6 +59,9 @@ const TRIM_SETTLED: usize = 100;
 /// The share of the samples a concentration step fits.
 const TRIM_SHARE: f64 = 0.5;
 const FULL_ITERATIONS: usize = 3;
+/// The reweighting from the best seed runs on a subsample of at most this many samples: its fit only finds the gross
+/// spans, which the residuals of all samples then make.
+pub const REWEIGHT_SAMPLES: usize = 100_000;
 /// Reweighting stops when no sample's weight changes by more than this.
 const WEIGHTS_SETTLED: f64 = 1e-3;
 
@@ -77,10 +81,11 @@ pub trait RobustProblem: Sized + Sync {
     }
     /// A problem of every `stride`-th sample, for cheap seeds.
     fn every(&self, stride: usize) -> Self;
-    /// A quick fit (estimates only) with per-sample weights in `[0, 1]`.
-    fn quick_fit(&self, weights: &[f64]) -> Result<Self::Fit, FitError>;
-    /// The full fit (uncertainties and checks) with 0/1 weights.
-    fn final_fit(&self, weights: &[f64]) -> Result<Self::Fit, FitError>;
+    /// A quick fit (estimates only) with per-sample weights in `[0, 1]`; an iterative solver may `start` from a fit
+    /// of nearly the same samples.
+    fn quick_fit(&self, weights: &[f64], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
+    /// The full fit (uncertainties and checks) with 0/1 weights, maybe from `start` as [`Self::quick_fit`].
+    fn final_fit(&self, weights: &[f64], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
     /// Each sample's residual size under a fit (NaN where the sample is unusable).
     fn residuals(&self, fit: &Self::Fit) -> Vec<f64>;
     /// The linear model of a fit.
@@ -144,7 +149,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     }
     // No seed could be fitted: the full data decides (and its error says why).
     let Some((_, _, seed)) = best else {
-        let fit = problem.final_fit(&vec![1.0; n])?;
+        let fit = problem.final_fit(&vec![1.0; n], None)?;
         let residual_ut = problem.residuals(&fit);
         let sigma_ut = scale::<P>(&residual_ut);
         return Ok(Robust {
@@ -154,19 +159,23 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             residual_ut,
         });
     };
-    // On all samples: reweight from the best seed, then exclude the gross spans and fit the rest plainly.
+    // Reweight from the best seed on (at most [`REWEIGHT_SAMPLES`] of) all samples, then exclude the gross spans of
+    // all samples and fit the rest plainly.
     let mut fit = seed;
+    let stride = n.div_ceil(REWEIGHT_SAMPLES).max(1);
+    let thin = (stride > 1).then(|| problem.every(stride));
+    let reweighted = thin.as_ref().unwrap_or(problem);
     // Each per-sample vector is dropped before the next is made: memory stays at about two of them.
-    let mut residual_ut = problem.residuals(&fit);
+    let mut residual_ut = reweighted.residuals(&fit);
     for _ in 0..FULL_ITERATIONS {
         let w = biweight(&residual_ut, scale::<P>(&residual_ut));
-        let quick = problem.quick_fit(&w);
+        let quick = reweighted.quick_fit(&w, Some(&fit));
         drop(w);
         match quick {
             Ok(f) if plausible(&P::model(&f).a) || !plausible(&P::model(&fit).a) => fit = f,
             _ => break,
         }
-        let residual_new = problem.residuals(&fit);
+        let residual_new = reweighted.residuals(&fit);
         // Settled: the next weights are within 1e-3 of those the fit was made with, so another fit would repeat it
         // (the seeds' reweighting stops by the same rule).
         let settled = weight_change::<P>(&residual_ut, &residual_new) < WEIGHTS_SETTLED;
@@ -175,11 +184,16 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             break;
         }
     }
+    drop(thin);
+    if stride > 1 {
+        residual_ut = problem.residuals(&fit);
+    }
     let mut sigma_ut = scale::<P>(&residual_ut);
     let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
-    let mut final_fit = None;
+    let mut final_fit: Option<P::Fit> = None;
     for pass in 0..SPAN_PASSES {
-        let (f, k) = fit_outside(problem, &residual_ut, sigma_ut, t_s, kept)?;
+        let start = final_fit.as_ref().unwrap_or(&fit);
+        let (f, k) = fit_outside(problem, &residual_ut, sigma_ut, t_s, kept, start)?;
         residual_ut = problem.residuals(&f);
         sigma_ut = scale::<P>(&residual_ut);
         final_fit = Some(f);
@@ -209,7 +223,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
                 k[a..b].fill(false);
             }
             let weights: Vec<f64> = k.iter().map(|k| f64::from(u8::from(*k))).collect();
-            let Ok(f) = problem.final_fit(&weights) else {
+            let Ok(f) = problem.final_fit(&weights, Some(fit)) else {
                 break;
             };
             residual_ut = problem.residuals(&f);
@@ -230,7 +244,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     })
 }
 
-/// The final fit without the samples not `kept`. Excluding a span must never leave the recording undetermined (its
+/// The final fit without the samples not `kept`, from `start`. Excluding a span must never leave the recording undetermined (its
 /// coverage is what a calibration stands on): if the fit without them is refused, the spans are taken again at
 /// twice the scale, and so on, down to excluding nothing.
 fn fit_outside<P: RobustProblem>(
@@ -239,11 +253,12 @@ fn fit_outside<P: RobustProblem>(
     sigma_ut: f64,
     t_s: Option<&[f64]>,
     mut kept: Vec<bool>,
+    start: &P::Fit,
 ) -> Result<(P::Fit, Vec<bool>), FitError> {
     let mut factor = 1.0;
     loop {
         let weights: Vec<f64> = kept.iter().map(|k| if *k { 1.0 } else { 0.0 }).collect();
-        match problem.final_fit(&weights) {
+        match problem.final_fit(&weights, Some(start)) {
             Ok(f) => return Ok((f, kept)),
             Err(e) if kept.iter().all(|k| *k) => return Err(e),
             Err(_) => {
@@ -333,7 +348,7 @@ fn seed_spans(n: usize) -> Vec<(usize, usize)> {
 /// [`TRIM_STEPS`] times), then IRLS with the biweight: the fit and the scale of its residual, or `None` if the
 /// first fit fails.
 fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P::Fit, f64)> {
-    let mut fit = p.quick_fit(w0).ok()?;
+    let mut fit = p.quick_fit(w0, None).ok()?;
     let mut kept_prev: Vec<bool> = Vec::new();
     for _ in 0..TRIM_STEPS {
         let e = p.residuals(&fit);
@@ -345,7 +360,9 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
             break;
         }
         let w: Vec<f64> = kept.iter().map(|k| f64::from(u8::from(*k))).collect();
-        let Ok(next) = p.quick_fit(&w) else { break };
+        let Ok(next) = p.quick_fit(&w, None) else {
+            break;
+        };
         if plausible(&P::model(&fit).a) && !plausible(&P::model(&next).a) {
             break;
         }
@@ -361,7 +378,9 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
             .zip(&w_prev)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        let Ok(next) = p.quick_fit(&w) else { break };
+        let Ok(next) = p.quick_fit(&w, None) else {
+            break;
+        };
         // Reweighting can wander off to a matrix that explains a still stretch and part of a disturbance: a
         // plausible fit is not given up for an implausible one.
         if plausible(&P::model(&fit).a) && !plausible(&P::model(&next).a) {
@@ -555,7 +574,7 @@ mod tests {
                 y: self.y.iter().step_by(stride).copied().collect(),
             }
         }
-        fn quick_fit(&self, w: &[f64]) -> Result<(f64, f64), FitError> {
+        fn quick_fit(&self, w: &[f64], _: Option<&(f64, f64)>) -> Result<(f64, f64), FitError> {
             let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
             for i in 0..self.len() {
                 sw += w[i];
@@ -571,8 +590,8 @@ mod tests {
             let a = (sw * sxy - sx * sy) / det;
             Ok((a, (sy - a * sx) / sw))
         }
-        fn final_fit(&self, w: &[f64]) -> Result<(f64, f64), FitError> {
-            self.quick_fit(w)
+        fn final_fit(&self, w: &[f64], start: Option<&(f64, f64)>) -> Result<(f64, f64), FitError> {
+            self.quick_fit(w, start)
         }
         fn residuals(&self, f: &(f64, f64)) -> Vec<f64> {
             (0..self.len())
@@ -691,6 +710,6 @@ mod tests {
         let p = line(2000, 0..0);
         let r = fit(&p, None).unwrap();
         assert_eq!(r.excluded(), 0);
-        assert_eq!(r.fit, p.quick_fit(&vec![1.0; 2000]).unwrap());
+        assert_eq!(r.fit, p.quick_fit(&vec![1.0; 2000], None).unwrap());
     }
 }

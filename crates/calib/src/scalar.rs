@@ -60,6 +60,8 @@ const NOT_AN_ELLIPSOID: f64 = 0.2;
 /// Parameters: the centre (x, y, z) and the six entries of the symmetric `A` (xx, yy, zz, xy, xz, yz).
 const P: usize = 9;
 const MAX_ITERATIONS: usize = 100;
+/// A solver step this small, in standard errors of the parameters, is not taken.
+const NEGLIGIBLE_STEP_SE: f64 = 0.01;
 /// Rounds of settling the prior's weight on the residual variance.
 const MAX_ROUNDS: usize = 8;
 /// Cells of direction for the weights and the cluster-robust standard errors.
@@ -85,6 +87,9 @@ pub struct ScalarOptions<'a> {
     /// Estimates only, quickly: no noise correction, no uncertainties (zero), no refusal of an undetermined centre
     /// (for the seeds of a robust fit).
     pub quick: bool,
+    /// Where the solver starts: a fit of nearly the same readings (fewer passes over them than from the sphere
+    /// through them, the start without it).
+    pub start: Option<&'a ScalarFit>,
 }
 
 /// The result of a scalar fit.
@@ -196,12 +201,12 @@ impl RobustProblem for ScalarProblem<'_> {
         }
     }
 
-    fn quick_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, true)
+    fn quick_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, true, start)
     }
 
-    fn final_fit(&self, weights: &[f64]) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, false)
+    fn final_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
+        self.fit_with(weights, false, start)
     }
 
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
@@ -251,7 +256,12 @@ impl RobustProblem for ScalarProblem<'_> {
 }
 
 impl ScalarProblem<'_> {
-    fn fit_with(&self, weights: &[f64], quick: bool) -> Result<ScalarFit, FitError> {
+    fn fit_with(
+        &self,
+        weights: &[f64],
+        quick: bool,
+        start: Option<&ScalarFit>,
+    ) -> Result<ScalarFit, FitError> {
         fit(
             &self.raw_ut,
             &ScalarOptions {
@@ -260,6 +270,7 @@ impl ScalarProblem<'_> {
                 weights: Some(weights),
                 raw_noise_var_ut2: self.raw_noise_var_ut2,
                 quick,
+                start,
             },
         )
     }
@@ -609,9 +620,13 @@ impl Problem<'_> {
                 }
                 continue;
             };
-            // What the quadratic model promises: a decrease at the rounding level of the sum means we are there.
+            // What the quadratic model promises: a decrease at the rounding level of the sum means we are there; so
+            // does a hardly damped step of at most [`NEGLIGIBLE_STEP_SE`] standard errors (a step of k of them
+            // promises ½·k²·σ²): it would not move the estimates.
             let predicted = -(g.dot(&step)) - 0.5 * (step.transpose() * h * step)[(0, 0)];
-            if predicted.abs() <= rounding * phi {
+            let negligible =
+                lambda <= 1e-3 && predicted.abs() <= 0.5 * NEGLIGIBLE_STEP_SE.powi(2) * sigma2;
+            if predicted.abs() <= rounding * phi || negligible {
                 break;
             }
             *iterations += 1;
@@ -700,12 +715,15 @@ impl Problem<'_> {
                 break;
             };
             sol.p += step;
-            // Done when the step is a negligible fraction of the parameters' uncertainty, or of the parameters.
+            // Done when the step is a negligible fraction of the parameters' uncertainty ([`NEGLIGIBLE_STEP_SE`]:
+            // Gauss–Newton's next step would be far smaller still), or of the parameters.
             let tiny = step
                 .iter()
                 .zip(sol.p.iter())
                 .all(|(d, x)| d.abs() <= 1e-12 * (x.abs() + 1.0));
-            if tiny || (step.transpose() * h * step)[(0, 0)] <= 1e-8 * sol.sigma2 {
+            if tiny
+                || (step.transpose() * h * step)[(0, 0)] <= NEGLIGIBLE_STEP_SE.powi(2) * sol.sigma2
+            {
                 converged = true;
                 break;
             }
@@ -916,9 +934,21 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         dof: w_sum * (n - P) as f64 / n as f64,
     };
     let mut p0 = SVector::<f64, P>::zeros();
-    p0.fixed_rows_mut::<3>(0).copy_from(&c0);
-    for k in 0..3 {
-        p0[3 + k] = gain;
+    match opts.start {
+        // The start's matrix maps its centre's readings onto its own magnitude: scaled to this one's.
+        Some(s) => {
+            p0.fixed_rows_mut::<3>(0)
+                .copy_from(&Vector3::from(s.centre_ut));
+            for (idx, (r, c)) in SYM.iter().enumerate() {
+                p0[3 + idx] = s.a[*r][*c] * target / s.field_ut;
+            }
+        }
+        None => {
+            p0.fixed_rows_mut::<3>(0).copy_from(&c0);
+            for k in 0..3 {
+                p0[3 + k] = gain;
+            }
+        }
     }
     let mut sol = problem.settle(p0, if opts.quick { 1 } else { MAX_ROUNDS });
     let (cov, shape_prior_share) = if opts.quick {

@@ -120,11 +120,12 @@ impl RobustProblem for VectorProblem<'_> {
         }
     }
 
-    fn quick_fit(&self, weights: &[f64]) -> Result<VectorFit, FitError> {
+    /// Linear: solved directly, from no start.
+    fn quick_fit(&self, weights: &[f64], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
         self.fit_with(weights, true)
     }
 
-    fn final_fit(&self, weights: &[f64]) -> Result<VectorFit, FitError> {
+    fn final_fit(&self, weights: &[f64], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
         self.fit_with(weights, false)
     }
 
