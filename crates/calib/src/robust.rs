@@ -244,9 +244,9 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     })
 }
 
-/// The final fit without the samples not `kept`, from `start`. Excluding a span must never leave the recording undetermined (its
-/// coverage is what a calibration stands on): if the fit without them is refused, the spans are taken again at
-/// twice the scale, and so on, down to excluding nothing.
+/// The final fit without the samples not `kept`, from `start`. Excluding a span must never leave the recording
+/// undetermined (its coverage is what a calibration stands on): if the fit without them is refused, the spans are
+/// taken again at twice the scale, and so on, down to excluding nothing.
 fn fit_outside<P: RobustProblem>(
     problem: &P,
     residual_ut: &[f64],

@@ -87,8 +87,8 @@ pub struct ScalarOptions<'a> {
     /// Estimates only, quickly: no noise correction, no uncertainties (zero), no refusal of an undetermined centre
     /// (for the seeds of a robust fit).
     pub quick: bool,
-    /// Where the solver starts: a fit of nearly the same readings (fewer passes over them than from the sphere
-    /// through them, the start without it).
+    /// A fit of nearly the same readings for the solver to start from (fewer passes over them); without it, the
+    /// solver starts from the sphere through them.
     pub start: Option<&'a ScalarFit>,
 }
 
