@@ -79,7 +79,9 @@ fn temperature_and_time_drift_under_a_monotonic_warm_up() {
                 &format!("seed {seed}, {truth}, curved warm-up"),
             );
             // A warm-up ten times slower than the recording: temperature is a straight line in time. The two cannot
-            // be told apart, and the diagnosis must say so rather than pick one silently.
+            // be told apart, and the diagnosis must say so rather than pick one silently: one of them is modelled, or
+            // — when it would lower the held-out residual by too little to notice — neither, and the one chosen is
+            // reported as left out for being a guess.
             let linear = scenario(seed, truth, |s| {
                 s.temperature = Some(TemperatureProfile {
                     warmup_c: 10.0,
@@ -89,7 +91,16 @@ fn temperature_and_time_drift_under_a_monotonic_warm_up() {
                 });
             });
             let d = diagnose(&linear);
-            assert_eq!(d.effects.len(), 1, "seed {seed}, {truth}: {:?}", found(&d));
+            let guessed = d
+                .rejected
+                .iter()
+                .any(|r| [temp, drift].contains(&r.id) && r.why.contains("guess"));
+            assert!(
+                d.effects.len() == 1 || (d.effects.is_empty() && guessed),
+                "seed {seed}, {truth}: {:?}, rejected {:?}",
+                found(&d),
+                d.rejected
+            );
             assert!(
                 ambiguous_pair(&d, temp, drift),
                 "seed {seed}, {truth}, linear warm-up: {:?}",

@@ -3,7 +3,7 @@
 
 use std::fmt::Write;
 
-use magcal_calib::diagnosis::{Diagnosis, FoundEffect, Verdict as Finding};
+use magcal_calib::diagnosis::{Diagnosis, FoundEffect, NOTICEABLE_GAIN, Verdict as Finding};
 
 use crate::apply::{Against, Check};
 use crate::calibrate::{Calibration, Fit, Method};
@@ -14,9 +14,6 @@ use crate::verdict::{Assessment, GOOD_DEG, USABLE_DEG, Verdict, fmt_deg};
 
 /// A channel the residual follows is named only when it explains at least this share of the residual's variance.
 pub const CHANNEL_SHARE_SHOWN: f64 = 0.05;
-/// A modelled effect is announced as a finding only when it lowers the residual on data the fit did not see by at
-/// least this fraction; smaller ones are listed on one line as too small to notice.
-pub const NOTICEABLE_GAIN: f64 = 0.02;
 
 /// `value ±se` with the standard error in two significant digits and the value to the same decimal place.
 pub fn fmt_se(value: f64, se: f64) -> String {
@@ -274,6 +271,8 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
 }
 
 /// Whether an effect lowers the residual on data the fit did not see enough to notice.
+/// A modelled effect is announced as a finding only when it lowers the residual on data the fit did not see by at
+/// least [`NOTICEABLE_GAIN`]; smaller ones are listed on one line as too small to notice.
 fn noticeable(e: &FoundEffect) -> bool {
     e.holdout_rms_before_ut - e.holdout_rms_after_ut >= NOTICEABLE_GAIN * e.holdout_rms_before_ut
 }

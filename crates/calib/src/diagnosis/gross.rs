@@ -189,9 +189,18 @@ fn classify(
             let (body, rss_body) = constant(&e[a..b], None);
             let world = rot.map(|r| constant(&e[a..b], Some(r.range(a, b))));
             match world {
+                // Told apart as the sensor frame is (below): the sensor frame leaves at least FRAME_MARGIN times
+                // more; otherwise either frame could hold it, and it is left out.
                 Some((field, rss_world)) if rss_world < rss_body && explained(rss_world) => {
-                    SpanKind::RoomFixed {
-                        field_ned_ut: field,
+                    if rss_body >= FRAME_MARGIN * rss_world {
+                        SpanKind::RoomFixed {
+                            field_ned_ut: field,
+                        }
+                    } else {
+                        SpanKind::SensorFixed {
+                            offset_ut: body,
+                            told_apart: false,
+                        }
                     }
                 }
                 _ if explained(rss_body) => SpanKind::SensorFixed {

@@ -16,8 +16,9 @@
 //!    with ambiguity. The catalogue effects then come out of the residual and the spans are looked for again (a
 //!    timing lag's residual is not a disturbance), at most [`ROUNDS`] times.
 //! 6. **Plausibility and no harm** ([`guard`]): an effect stays only if the model stays physical (a non-linearity of
-//!    a few per cent at most, `apply` invertible over the measured range, gains near the base fit's), and the model
-//!    must fit the clean held-out samples no worse than the base fit.
+//!    a few per cent at most, `apply` invertible over the measured range, gains near the base fit's) and it is not an
+//!    unnoticeable guess between two ambiguous effects, and the model must fit the clean held-out samples no worse
+//!    than the base fit.
 //! 7. **Report**: parameters with standard errors ([`fitted`]), findings in words ([`explain`]), where the mismatch is
 //!    ([`locate`]), the reference's own error as a figure of its own.
 //!
@@ -42,6 +43,7 @@ use nalgebra::DVector;
 
 pub use candidates::Untestable;
 pub use gross::SpanKind;
+pub use guard::NOTICEABLE_GAIN;
 pub use locate::{Components, Located, Orientation, Segment};
 
 use crate::FitError;
@@ -838,6 +840,18 @@ impl<'a> Setup<'a> {
                 let effect = round.fitted_effect(c, &round.sel.last);
                 guard::implausible(&effect, self.samples, self.field_ut).map(|why| (c, why))
             });
+            if drop.is_none() {
+                drop = chosen.iter().find_map(|&c| {
+                    let &(_, other) = round.sel.ambiguous.iter().find(|(a, _)| *a == c)?;
+                    let step = round.sel.steps.iter().find(|s| s.cand == c)?;
+                    let rows = round.problem.clean_total.rows.max(1) as f64;
+                    let (before, after) = ((step.cv.0 / rows).sqrt(), (step.cv.1 / rows).sqrt());
+                    (before - after < NOTICEABLE_GAIN * before).then(|| {
+                        let ids = (round.cands[c].id(), round.cands[other].id());
+                        (c, guard::guess_why(ids.0, ids.1, before, after))
+                    })
+                });
+            }
             if drop.is_none()
                 && let Some(&last) = chosen.last()
             {
