@@ -75,6 +75,28 @@ const _: () = assert!(
 /// Passes of looking for gross spans (again after the catalogue's effects are out of the residual).
 pub const ROUNDS: usize = 3;
 
+/// A span the scalar method leaves out takes this share of its length on each side with it (at most
+/// [`GUARD_MAX_S`]): a magnet's field fades below the gross threshold before and after it, and in |B| what is left
+/// of it biases the ellipsoid. (On the simulated disturbed benches: scalar runs worse than the base fit 1 → 0, the
+/// other figures unchanged; the vector method lost more with the samples than it gained, 95.5 → 91.5 % good.)
+const GUARD_SHARE: f64 = 0.5;
+/// The guard band's largest width on each side, s.
+const GUARD_MAX_S: f64 = 5.0;
+
+/// The samples `[a, b)` widened by the guard band (by time when known).
+fn guard_band(s: &Samples, a: usize, b: usize) -> (usize, usize) {
+    let n = s.len();
+    if !s.has_time {
+        let w = ((b - a) as f64 * GUARD_SHARE) as usize;
+        return (a.saturating_sub(w), (b + w).min(n));
+    }
+    let t = &s.t;
+    let w = (GUARD_SHARE * (t[b - 1] - t[a])).min(GUARD_MAX_S);
+    let lo = t[..a].partition_point(|x| *x < t[a] - w);
+    let hi = b + t[b..].partition_point(|x| *x <= t[b - 1] + w);
+    (lo, hi)
+}
+
 /// The reference a recording offers.
 #[derive(Clone, Copy, Debug)]
 pub enum Reference<'a> {
@@ -545,6 +567,11 @@ impl<'a> Setup<'a> {
         for span in &mut spans {
             clean[span.start..span.end].fill(false);
             included[span.start..span.end].fill(false);
+            if !self.vector && !span.modelled() {
+                let (a, b) = guard_band(s, span.start, span.end);
+                clean[a..b].fill(false);
+                included[a..b].fill(false);
+            }
             if left_out
                 .iter()
                 .any(|&(a, b)| a < span.end && span.start < b)
