@@ -507,6 +507,28 @@ fn check(t: &Tally, f: &Floor) {
     );
 }
 
+/// Seed 15 without the attitude: fields on the board for 30 s show in |B| only where they point along the field, so
+/// the robust fit keeps the lulls between (perturbed by up to 11 µT); the diagnosis locates each whole window, and
+/// the final model is fitted without it (measured: offset error 0.320 → 0.009 µT, A 0.0071 → 0.0002).
+#[test]
+fn the_rows_a_located_window_leaves_out_are_left_out_of_the_final_fit() {
+    let seed = 15;
+    let mut s = random_scenario(seed);
+    s.attitude = AttitudeOutput::None;
+    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
+    let rec = simulate(&s).unwrap().recording;
+    let cal = calibrate(&rec, Method::Auto, field(&s, false), true).unwrap();
+    let truth_a = observable_a(&s.sensor.a, false);
+    let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
+    let (base_a, base_o) = errors(&cal.base_model(), &truth_a, truth_offset);
+    let (final_a, final_o) = errors(&cal.model(), &truth_a, truth_offset);
+    assert!(base_o > 0.2 && base_a > 0.005, "base {base_a} {base_o}");
+    assert!(
+        final_o < 0.05 && final_a < 0.001,
+        "final {final_a} {final_o}"
+    );
+}
+
 #[test]
 #[ignore = "statistics over 200 seeds: run in release (CI does)"]
 fn vector_method_calibrates_around_gross_disturbances() {
@@ -534,14 +556,15 @@ fn vector_method_calibrates_around_gross_disturbances() {
 fn scalar_method_calibrates_around_gross_disturbances() {
     let t = study(false);
     report("scalar method", &t);
-    // Measured 2026-11-24: 92.0 % good (84.8 % before the robust fit's sixth seeds, concentration steps and shifted
+    // Measured 2026-11-24: 92.5 % good (92.0 % before the final fit left out the disturbed rows the diagnosis located
+    // beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration steps and shifted
     // windows), 98.9 % located, none worse (1 before the guard bands around spans left out), 0 of 50 false alarms,
     // 1 refused (a 230 µT field on the board for a fifth of the recording leaves a direction undetermined). Short of
     // the 95 %: see docs/diagnosis.md.
     check(
         &t,
         &Floor {
-            good_pct: 91.5,
+            good_pct: 92.0,
             located_pct: 98.0,
             worse: 0,
             false_alarm_pct: 1.0,

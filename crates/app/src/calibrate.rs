@@ -7,7 +7,7 @@ use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
 use rayon::prelude::*;
 use std::borrow::Cow;
 
-use magcal_calib::robust;
+use magcal_calib::robust::{self, RobustProblem};
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Inputs, Model};
@@ -440,8 +440,9 @@ pub fn calibrate(
                 diagnosis::MIN_SAMPLES
             ));
         } else {
-            let input = diagnosis_input(rec, &cal)?;
-            cal.diagnosis = Some(diagnosis::diagnose(&input, &model)?);
+            let first =
+                diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model)?;
+            cal.diagnosis = Some(around_spans(rec, &cal, first)?);
         }
     }
     Ok(cal)
@@ -477,10 +478,123 @@ pub fn noise_source(noise: &NoiseFloor) -> String {
     }
 }
 
-/// What the diagnosis needs from a recording and its base calibration.
+/// The diagnosis again when the first left out rows the base fit kept (spans it located around those the robust
+/// fit excluded, with their fading edges): on the base method's fit without them, so that what the report says is left
+/// out of the calibration is. The base fit itself stays what it was, for the comparison.
+fn around_spans(
+    rec: &Recording,
+    cal: &Calibration,
+    first: Diagnosis,
+) -> Result<Diagnosis, CalibrateError> {
+    let mut kept = cal.robust.kept.clone();
+    let r = &first.residuals;
+    for (&row, _) in r.rows.iter().zip(&r.excluded).filter(|(_, x)| **x) {
+        kept[row] = false;
+    }
+    if kept == cal.robust.kept {
+        return Ok(first);
+    }
+    let noise_var = cal.noise.floor_ut.map(|f| f * f);
+    let refit = match &cal.fit {
+        Fit::Vector(v) => {
+            let problem = VectorProblem {
+                raw_ut: Cow::Borrowed(&rec.mag_ut),
+                expected_ut: Cow::Owned(expected_field(rec, &cal.field)?),
+                raw_noise_var_ut2: noise_var,
+            };
+            refit_if_better(&problem, &cal.robust.kept, &kept, v)
+        }
+        Fit::Scalar(s) => {
+            let problem = ScalarProblem {
+                raw_ut: Cow::Borrowed(&rec.mag_ut),
+                field_ut: cal.field.magnitude(),
+                raw_noise_var_ut2: noise_var,
+            };
+            refit_if_better(&problem, &cal.robust.kept, &kept, s)
+        }
+    };
+    // Without the rows, the fit is not determined or predicts the clean rows worse: the first diagnosis stands.
+    let Some((model, kept)) = refit else {
+        return Ok(first);
+    };
+    Ok(diagnosis::diagnose(
+        &diagnosis_input(rec, cal, &kept)?,
+        &model,
+    )?)
+}
+
+/// A stretch whose residual RMS is within this factor of the clean rows' is as clean, not disturbed.
+const NOISE_LIKE: f64 = 2.0;
+/// Time blocks of the held-out comparison: fits on every other block predict the rest.
+const HELD_OUT_BLOCKS: usize = 10;
+
+/// The fit on the rows `kept` (from `start`), if it predicts the rows both masks keep better, held out, than the
+/// fit on the rows `before`: each fitted on every other time block of [`HELD_OUT_BLOCKS`] and evaluated on the
+/// others, both ways.
+fn refit_if_better<P: RobustProblem>(
+    problem: &P,
+    before: &[bool],
+    kept: &[bool],
+    start: &P::Fit,
+) -> Option<(Model, Vec<bool>)> {
+    let n = kept.len();
+    // Only stretches the base fit leaves well above its residual on the rows both keep go: a stretch at that level
+    // is as clean, and the directions it covers would be missed.
+    let e0 = problem.residuals(start);
+    let mean_square = |rows: &mut dyn Iterator<Item = f64>| {
+        let (ss, m) = rows
+            .filter(|e| e.is_finite())
+            .fold((0.0, 0usize), |(s, m), e| (s + e * e, m + 1));
+        ss / m.max(1) as f64
+    };
+    let clean = mean_square(&mut e0.iter().zip(kept).filter(|(_, k)| **k).map(|(e, _)| *e));
+    let mut kept = kept.to_vec();
+    let mut i = 0;
+    while i < n {
+        if before[i] == kept[i] {
+            i += 1;
+            continue;
+        }
+        let end = (i..n).find(|&j| before[j] == kept[j]).unwrap_or(n);
+        if mean_square(&mut e0[i..end].iter().copied()) <= NOISE_LIKE.powi(2) * clean {
+            kept[i..end].fill(true);
+        }
+        i = end;
+    }
+    if kept == before {
+        return None;
+    }
+    let block = |i: usize| i * HELD_OUT_BLOCKS / n.max(1) % 2;
+    let held_out_rss = |rows: &[bool]| -> Option<f64> {
+        let mut rss = 0.0;
+        for fold in 0..2 {
+            let weights: Vec<f64> = (0..n)
+                .map(|i| f64::from(u8::from(rows[i] && block(i) == fold)))
+                .collect();
+            let fit = problem.quick_fit(&weights, Some(start)).ok()?;
+            let e = problem.residuals(&fit);
+            rss += (0..n)
+                .filter(|&i| kept[i] && block(i) != fold && e[i].is_finite())
+                .map(|i| e[i] * e[i])
+                .sum::<f64>();
+        }
+        Some(rss)
+    };
+    // As for an effect: a gain nobody would notice is not worth the rows.
+    let (old, new) = (held_out_rss(before)?, held_out_rss(&kept)?);
+    if new.sqrt() > (1.0 - diagnosis::NOTICEABLE_GAIN) * old.sqrt() {
+        return None;
+    }
+    let weights: Vec<f64> = kept.iter().map(|k| f64::from(u8::from(*k))).collect();
+    let fit = problem.final_fit(&weights, Some(start)).ok()?;
+    Some((P::model(&fit), kept))
+}
+
+/// What the diagnosis needs from a recording and its base calibration, with the rows the base fit `kept`.
 fn diagnosis_input<'a>(
     rec: &'a Recording,
     cal: &'a Calibration,
+    kept: &'a [bool],
 ) -> Result<DiagnosisInput<'a>, CalibrateError> {
     let reference = match (&cal.fit, &rec.ref_ut, &rec.quat, cal.field.vector()) {
         (Fit::Vector(_), Some(r), _, _) => Reference::Field { expected_ut: r },
@@ -506,7 +620,7 @@ fn diagnosis_input<'a>(
             .collect(),
         reference,
         noise: cal.noise,
-        kept: Some(&cal.robust.kept),
+        kept: Some(kept),
         scale_ut: cal.robust.scale_ut,
     })
 }
