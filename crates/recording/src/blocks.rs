@@ -128,15 +128,21 @@ impl Rows<'_> {
                 .map(|(k, rows)| self.parse_piece(&block[bounds[k]..bounds[k + 1]], rows))
                 .collect()
         };
+        // The pieces are checked in file order; those before the first problem are appended, column by column on
+        // the threads (the copy is most of a join's time).
         let mut line = first_line;
         let mut problem = None;
-        for (mut piece, rows) in pieces.into_iter().zip(buffers.iter_mut()) {
-            if problem.is_none() {
-                problem = self.join(&mut piece, rows, line, out, time).err();
-                line += piece.lines;
+        let mut accepted = 0;
+        for mut piece in pieces {
+            if let Err(p) = self.link(&mut piece, line, time) {
+                problem = Some(p);
+                break;
             }
-            clear(rows);
+            line += piece.lines;
+            accepted += 1;
         }
+        append(out, &buffers[..accepted]);
+        buffers.iter_mut().for_each(clear);
         match problem {
             Some(p) => Err(Ok(p)),
             None => Ok(line),
@@ -185,16 +191,9 @@ impl Rows<'_> {
         }
     }
 
-    /// Appends a piece to `out` as a sequential reader would have: its first row checked against the last row
-    /// before it, then its own first problem, if any.
-    fn join(
-        &self,
-        piece: &mut Piece,
-        rows: &Recording,
-        line: u64,
-        out: &mut Recording,
-        time: &mut TimeLink,
-    ) -> Result<(), LineProblem> {
+    /// Checks a piece as a sequential reader would have, before its rows are appended: its first row against the
+    /// last row before it, then its own first problem, if any; carries the time on.
+    fn link(&self, piece: &mut Piece, line: u64, time: &mut TimeLink) -> Result<(), LineProblem> {
         if let (Some(previous_s), Some(t_s)) = (time.previous_s, piece.time.first_unchecked_s)
             && t_s < previous_s
         {
@@ -204,7 +203,6 @@ impl Rows<'_> {
         if let Some((at, (column, kind))) = piece.problem.take() {
             return Err((line + at, column, kind));
         }
-        append(out, rows);
         if piece.time.previous_s.is_some() {
             time.previous_s = piece.time.previous_s;
         }
@@ -281,25 +279,60 @@ fn piece_bounds(block: &[u8], piece_bytes: usize, threads: usize) -> Vec<usize> 
     bounds
 }
 
-/// Appends the rows of `piece` (same layout) to `out`.
-fn append(out: &mut Recording, piece: &Recording) {
-    fn extend<T: Clone>(out: &mut Option<Vec<T>>, piece: &Option<Vec<T>>) {
-        if let (Some(o), Some(p)) = (out, piece) {
-            o.extend_from_slice(p);
+/// Appends the rows of `pieces` (same layout), in order, to `out`: the columns on the threads, the largest apart.
+fn append(out: &mut Recording, pieces: &[Recording]) {
+    fn extend<T: Clone>(
+        out: &mut Vec<T>,
+        pieces: &[Recording],
+        column: impl Fn(&Recording) -> &Vec<T>,
+    ) {
+        out.reserve(pieces.iter().map(|p| column(p).len()).sum());
+        for p in pieces {
+            out.extend_from_slice(column(p));
         }
     }
-    out.mag_ut.extend_from_slice(&piece.mag_ut);
-    extend(&mut out.t_s, &piece.t_s);
-    extend(&mut out.temp_c, &piece.temp_c);
-    extend(&mut out.quat, &piece.quat);
-    extend(&mut out.ref_ut, &piece.ref_ut);
-    extend(&mut out.gyro_rad_s, &piece.gyro_rad_s);
-    for (o, p) in out.currents.iter_mut().zip(&piece.currents) {
-        o.values.extend_from_slice(&p.values);
+    fn extend_some<T: Clone>(
+        out: &mut Option<Vec<T>>,
+        pieces: &[Recording],
+        column: impl Fn(&Recording) -> &Option<Vec<T>>,
+    ) {
+        if let Some(out) = out {
+            extend(out, pieces, |p| {
+                column(p).as_ref().expect("the same layout")
+            });
+        }
     }
-    for (o, p) in out.extra.iter_mut().zip(&piece.extra) {
-        o.values.extend_from_slice(&p.values);
-    }
+    let Recording {
+        mag_ut,
+        t_s,
+        temp_c,
+        quat,
+        ref_ut,
+        gyro_rad_s,
+        currents,
+        extra,
+        ..
+    } = out;
+    rayon::join(
+        || extend(mag_ut, pieces, |p| &p.mag_ut),
+        || {
+            rayon::join(
+                || extend_some(quat, pieces, |p| &p.quat),
+                || {
+                    extend_some(t_s, pieces, |p| &p.t_s);
+                    extend_some(temp_c, pieces, |p| &p.temp_c);
+                    extend_some(ref_ut, pieces, |p| &p.ref_ut);
+                    extend_some(gyro_rad_s, pieces, |p| &p.gyro_rad_s);
+                    for (j, o) in currents.iter_mut().enumerate() {
+                        extend(&mut o.values, pieces, |p| &p.currents[j].values);
+                    }
+                    for (j, o) in extra.iter_mut().enumerate() {
+                        extend(&mut o.values, pieces, |p| &p.extra[j].values);
+                    }
+                },
+            )
+        },
+    );
 }
 
 /// Empties every column, keeping its memory.

@@ -228,13 +228,10 @@ impl RowParser<'_> {
     }
 }
 
-/// Columns a row may have for [`RowParser::push_plain`].
-const PLAIN_COLUMNS: usize = 32;
-
 impl RowParser<'_> {
     /// The fast path for a plain row: every numeric field a decimal number or empty, nothing to trim, exactly as
     /// many fields as the header, every value within its limits, `t` not going backwards, a unit quaternion. Appends
-    /// it and returns true; returns false without touching `out` or `time` for anything else, which
+    /// it and returns true; returns false, with `out` and `time` as they were, for anything else, which
     /// [`RowParser::push`] then reads (and refuses or accepts alike).
     pub(crate) fn push_plain(
         &self,
@@ -243,17 +240,21 @@ impl RowParser<'_> {
         out: &mut Recording,
         time: &mut TimeLink,
     ) -> bool {
-        if self.roles.len() > PLAIN_COLUMNS {
-            return false;
-        }
         let mut t_s = f64::NAN;
         let mut mag_ut = [f64::NAN; 3];
         let mut temp_c = f64::NAN;
         let mut quat = [f64::NAN; 4];
         let mut ref_ut = [f64::NAN; 3];
         let mut gyro_rad_s = [f64::NAN; 3];
-        let mut currents = [f64::NAN; PLAIN_COLUMNS];
-        let mut extra: [(usize, usize); PLAIN_COLUMNS] = [(0, 0); PLAIN_COLUMNS];
+        // Current and text columns are appended as they are read, and cut back if the row is not plain after all.
+        let rows = out.mag_ut.len();
+        let give_up = |out: &mut Recording| {
+            out.currents
+                .iter_mut()
+                .for_each(|c| c.values.truncate(rows));
+            out.extra.iter_mut().for_each(|c| c.values.truncate(rows));
+            false
+        };
         let last = self.roles.len() - 1;
         let mut pos = 0;
         for (k, role) in self.roles.iter().enumerate() {
@@ -267,10 +268,13 @@ impl RowParser<'_> {
             };
             let value = if let Role::Extra(j) = role {
                 let end = memchr::memchr(separator, &line[pos..]).map_or(line.len(), |i| pos + i);
+                let Ok(text) = std::str::from_utf8(&line[pos..end]) else {
+                    return give_up(out);
+                };
                 if !at_end(end) {
-                    return false;
+                    return give_up(out);
                 }
-                extra[*j] = (pos, end);
+                out.extra[*j].values.push(text.to_owned());
                 pos = end;
                 f64::NAN
             } else if at_end(pos) {
@@ -285,14 +289,14 @@ impl RowParser<'_> {
                     .first()
                     .is_some_and(|b| b.is_ascii_digit() || *b == b'.')
                 {
-                    return false;
+                    return give_up(out);
                 }
                 let Ok((value, used)) = fast_float2::parse_partial::<f64, _>(rest) else {
-                    return false;
+                    return give_up(out);
                 };
                 pos += used;
                 if !at_end(pos) || !value.is_finite() {
-                    return false;
+                    return give_up(out);
                 }
                 value
             };
@@ -322,25 +326,25 @@ impl RowParser<'_> {
                     limits::GYRO
                 }
                 Role::Current(j) => {
-                    currents[j] = value;
+                    out.currents[j].values.push(value);
                     limits::CURRENT
                 }
                 Role::Extra(_) => limits::UNBOUNDED,
             };
             if limit.exceeded_by(value) {
-                return false;
+                return give_up(out);
             }
             pos += 1;
         }
         // Required values present, t in order, a quaternion of unit length.
         if mag_ut.iter().any(|v| v.is_nan()) || (out.t_s.is_some() && t_s.is_nan()) {
-            return false;
+            return give_up(out);
         }
         if let Some(previous_s) = time.previous_s
             && out.t_s.is_some()
             && t_s < previous_s
         {
-            return false;
+            return give_up(out);
         }
         let quat = group_or_nan(quat);
         let quat = if quat[0].is_nan() {
@@ -348,16 +352,9 @@ impl RowParser<'_> {
         } else {
             match normalise_quat(quat) {
                 Ok(q) => q,
-                Err(_) => return false,
+                Err(_) => return give_up(out),
             }
         };
-        let mut extra_text = [""; PLAIN_COLUMNS];
-        for (text, (start, end)) in extra_text.iter_mut().zip(&extra).take(out.extra.len()) {
-            match std::str::from_utf8(&line[*start..*end]) {
-                Ok(t) => *text = t,
-                Err(_) => return false,
-            }
-        }
 
         if let Some(t) = &mut out.t_s {
             if time.previous_s.is_none() {
@@ -378,12 +375,6 @@ impl RowParser<'_> {
         }
         if let Some(g) = &mut out.gyro_rad_s {
             g.push(group_or_nan(gyro_rad_s));
-        }
-        for (channel, value) in out.currents.iter_mut().zip(currents) {
-            channel.values.push(value);
-        }
-        for (column, text) in out.extra.iter_mut().zip(extra_text) {
-            column.values.push(text.to_owned());
         }
         true
     }

@@ -174,6 +174,17 @@ fn a_quote_after_many_blocks_hands_the_rest_to_the_csv_reader() {
     assert_same(text.as_bytes());
 }
 
+#[test]
+fn a_row_the_fast_path_gives_up_late_is_read_once() {
+    // The fast path has appended `i_coil` and `note` when it meets the space before 20 and hands the row over.
+    let text = "mx,my,mz,i_coil,note,temp\n1,2,3,0.5,hi, 20\n4,5,6,0.7,ho,21\n";
+    let rec = read_split("rec.csv", text.as_bytes(), Split::DEFAULT).expect("valid");
+    assert_eq!(rec.currents[0].values, [0.5, 0.7]);
+    assert_eq!(rec.extra[0].values, ["hi", "ho"]);
+    assert_eq!(rec.temp_c, Some(vec![20.0, 21.0]));
+    assert_same(text.as_bytes());
+}
+
 /// Bytes that steer a mutation into the interesting parts of the grammar.
 const INTERESTING: &[u8] = b",\n\r#.-+e0123456789nNaAiIfF\" \t\xff";
 
