@@ -100,11 +100,10 @@ const POSES_MIN_DOF: usize = 20;
 /// per-sample reference) in sample order: runs of identical references are poses, and their spread is the noise.
 pub fn estimate(raw_ut: &[[f64; 3]], reference: Option<&[[f64; 3]]>) -> NoiseFloor {
     let mut best = (f64::INFINITY, 1, [f64::NAN; 3]);
-    for order in 1..=4 {
-        let s = difference_sigma(raw_ut, order);
+    for (o, s) in difference_sigmas(raw_ut).into_iter().enumerate() {
         let total = s.iter().map(|x| x * x).sum::<f64>();
         if total < best.0 {
-            best = (total, order, s);
+            best = (total, o + 1, s);
         }
     }
     let (_, order, diff_sigma) = best;
@@ -149,85 +148,124 @@ fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// The noise σ per axis from `order`-th differences, robust to jumps: the median absolute difference sets a scale,
-/// and the RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its variance there, corrected)
-/// is the estimate. Where most differences are exactly zero (readings on a coarse grid) the scale falls back to five
-/// times the plain RMS. One pass over the readings (two on a coarse grid), on all threads, for the three axes at once.
-fn difference_sigma(raw_ut: &[[f64; 3]], order: usize) -> [f64; 3] {
-    if raw_ut.len() <= order + 2 {
-        return [f64::NAN; 3];
+/// Orders of the differences tried.
+const ORDERS: usize = 4;
+
+/// The noise σ per axis from the 1st to 4th differences, robust to jumps: per order, the median absolute
+/// difference sets a scale, and the RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its
+/// variance there, corrected) is the estimate. Where most differences are exactly zero (readings on a coarse grid)
+/// the scale falls back to five times the plain RMS. One pass over the readings for every order and axis at once (two
+/// on a coarse grid), on all threads; NaN for an order the readings are too few for.
+fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
+    let n = raw_ut.len();
+    let usable = |o: usize| n > o + 3;
+    let count = |o: usize| n.saturating_sub(o + 1);
+    // Order o + 1's differences at i: Σ_j (−1)^j·C(o + 1, j)·x[i + j], j = 0..=o + 1, from the five readings there.
+    fn taps<const T: usize>(c: [f64; T], w: &[[f64; 3]; 5]) -> [f64; 3] {
+        std::array::from_fn(|k| c.iter().zip(w).map(|(c, v)| c * v[k]).sum())
     }
-    let coef: Vec<f64> = (0..=order)
-        .map(|j| binomial(order, j) * if j % 2 == 0 { 1.0 } else { -1.0 })
-        .collect();
-    let count = raw_ut.len() - order;
-    let diff = |i: usize| -> [f64; 3] {
-        std::array::from_fn(|k| coef.iter().zip(&raw_ut[i..]).map(|(c, v)| c * v[k]).sum())
+    let window = |i: usize| -> [[f64; 3]; 5] {
+        std::array::from_fn(|j| raw_ut.get(i + j).copied().unwrap_or([f64::NAN; 3]))
     };
-    let rms_within = |limit: [f64; 3]| -> [f64; 3] {
-        let (sum, n) = chunks::fold(
-            count,
+    let diffs = |w: &[[f64; 3]; 5]| -> [[f64; 3]; ORDERS] {
+        [
+            taps([1.0, -1.0], w),
+            taps([1.0, -2.0, 1.0], w),
+            taps([1.0, -3.0, 3.0, -1.0], w),
+            taps([1.0, -4.0, 6.0, -4.0, 1.0], w),
+        ]
+    };
+    let diff = |o: usize, i: usize| diffs(&window(i))[o];
+    type Sums = [([f64; 3], [usize; 3]); ORDERS];
+    let rms_within = |limit: &[[f64; 3]; ORDERS]| -> [[f64; 3]; ORDERS] {
+        let sums: Sums = chunks::fold(
+            count(0),
             |range| {
-                let (mut sum, mut n) = ([0.0; 3], [0usize; 3]);
+                let mut sums: Sums = [([0.0; 3], [0usize; 3]); ORDERS];
                 for i in range {
-                    let d = diff(i);
-                    for k in 0..3 {
-                        if d[k].abs() <= limit[k] {
-                            sum[k] += d[k] * d[k];
-                            n[k] += 1;
+                    let all = diffs(&window(i));
+                    for (o, ((sum, m), d)) in sums.iter_mut().zip(all).enumerate() {
+                        if i >= count(o) {
+                            continue;
+                        }
+                        for k in 0..3 {
+                            if d[k].abs() <= limit[o][k] {
+                                sum[k] += d[k] * d[k];
+                                m[k] += 1;
+                            }
                         }
                     }
                 }
-                (sum, n)
+                sums
             },
-            |(s, n), (t, m)| {
-                (
-                    std::array::from_fn(|k| s[k] + t[k]),
-                    std::array::from_fn(|k| n[k] + m[k]),
-                )
+            |a, b| {
+                std::array::from_fn(|o| {
+                    (
+                        std::array::from_fn(|k| a[o].0[k] + b[o].0[k]),
+                        std::array::from_fn(|k| a[o].1[k] + b[o].1[k]),
+                    )
+                })
             },
         )
-        .unwrap_or_default();
-        std::array::from_fn(|k| {
-            if n[k] == 0 {
-                0.0
-            } else {
-                (sum[k] / n[k] as f64).sqrt()
-            }
+        .unwrap_or([([0.0; 3], [0usize; 3]); ORDERS]);
+        sums.map(|(sum, m)| {
+            std::array::from_fn(|k| {
+                if m[k] == 0 {
+                    0.0
+                } else {
+                    (sum[k] / m[k] as f64).sqrt()
+                }
+            })
         })
     };
-    let stride = count.div_ceil(MEDIAN_PROBE).max(1);
-    let probe: Vec<[f64; 3]> = (0..count).step_by(stride).map(diff).collect();
-    let mad: [f64; 3] = std::array::from_fn(|k| {
-        let mut abs: Vec<f64> = probe
-            .iter()
-            .map(|d| d[k].abs())
-            .filter(|d| d.is_finite())
-            .collect();
-        median(&mut abs)
+    let mad = chunks::parts(ORDERS, |o| {
+        if !usable(o) {
+            return [f64::NAN; 3];
+        }
+        let stride = count(o).div_ceil(MEDIAN_PROBE).max(1);
+        let probe: Vec<[f64; 3]> = (0..count(o)).step_by(stride).map(|i| diff(o, i)).collect();
+        std::array::from_fn(|k| {
+            let mut abs: Vec<f64> = probe
+                .iter()
+                .map(|d| d[k].abs())
+                .filter(|d| d.is_finite())
+                .collect();
+            median(&mut abs)
+        })
     });
-    let norm = binomial(2 * order, order).sqrt();
+    let mad: [[f64; 3]; ORDERS] = std::array::from_fn(|o| mad[o]);
     // Truncating a Gaussian at ±4σ keeps 99.893 % of its variance.
     const KEPT_AT_4_SIGMA: f64 = 0.998_93;
     let limit = mad.map(|m| {
-        if m > 0.0 {
-            4.0 * m / 0.674_489_75
-        } else {
-            f64::INFINITY
-        }
+        m.map(|m| {
+            if m > 0.0 {
+                4.0 * m / 0.674_489_75
+            } else {
+                f64::INFINITY
+            }
+        })
     });
-    let within = rms_within(limit);
-    let coarse = if mad.iter().all(|m| *m > 0.0) {
-        [0.0; 3]
+    let within = rms_within(&limit);
+    let coarse = if (0..ORDERS)
+        .filter(|&o| usable(o))
+        .any(|o| mad[o].iter().any(|m| m.is_nan() || *m <= 0.0))
+    {
+        rms_within(&within.map(|w| w.map(|r| 5.0 * r)))
     } else {
-        rms_within(within.map(|r| 5.0 * r))
+        [[0.0; 3]; ORDERS]
     };
-    std::array::from_fn(|k| {
-        if mad[k] > 0.0 {
-            within[k] / KEPT_AT_4_SIGMA.sqrt() / norm
-        } else {
-            coarse[k] / norm
+    std::array::from_fn(|o| {
+        if !usable(o) {
+            return [f64::NAN; 3];
         }
+        let norm = binomial(2 * (o + 1), o + 1).sqrt();
+        std::array::from_fn(|k| {
+            if mad[o][k] > 0.0 {
+                within[o][k] / KEPT_AT_4_SIGMA.sqrt() / norm
+            } else {
+                coarse[o][k] / norm
+            }
+        })
     })
 }
 
@@ -274,9 +312,10 @@ fn still_segment(raw_ut: &[[f64; 3]], diff_sigma: [f64; 3]) -> Option<(usize, us
             spread[k] <= 1.3 * diff_sigma[k].max(1e-9) && spread[k] <= STILL_OF_ROTATION * rotation
         })
     };
+    let still = chunks::map(windows, still);
     let (mut best, mut run_start) = ((0, 0), None);
     for w in 0..=windows {
-        match (w < windows && still(w), run_start) {
+        match (w < windows && still[w], run_start) {
             (true, None) => run_start = Some(w),
             (false, Some(s)) => {
                 if w - s > best.1 - best.0 {
