@@ -517,10 +517,8 @@ fn around_spans(
     let Some((model, kept)) = refit else {
         return Ok(first);
     };
-    Ok(diagnosis::diagnose(
-        &diagnosis_input(rec, cal, &kept)?,
-        &model,
-    )?)
+    // The first diagnosis ran on these rows and more: if the second cannot, the first stands.
+    Ok(diagnosis::diagnose(&diagnosis_input(rec, cal, &kept)?, &model).unwrap_or(first))
 }
 
 /// A stretch whose residual RMS is within this factor of the clean rows' is as clean, not disturbed.
