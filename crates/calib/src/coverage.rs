@@ -172,7 +172,18 @@ fn advice(d: [f64; 3]) -> String {
 pub struct SphereGrid {
     bands: usize,
     per_band: usize,
+    /// The pseudo-angle ([`pseudo_angle`]) of each longitude boundary but the first, in order.
+    boundaries: Vec<f64>,
 }
+
+/// A function of the direction `(x, y)` that increases with `atan2(y, x)` from −2 at −π to 2 at π, without a
+/// transcendental function.
+fn pseudo_angle(x: f64, y: f64) -> f64 {
+    (1.0 - x / (x.abs() + y.abs())).copysign(y)
+}
+
+/// A pseudo-angle this close to a boundary's is decided by `atan2`, exactly as the grid is defined.
+const BOUNDARY_MARGIN: f64 = 1e-9;
 
 impl SphereGrid {
     /// A grid of about `cells` cells (`bands = round(√(cells/2))`, as many cells per band as keeps the total near
@@ -180,7 +191,17 @@ impl SphereGrid {
     pub fn new(cells: usize) -> SphereGrid {
         let bands = ((cells as f64 / 2.0).sqrt().round() as usize).max(1);
         let per_band = ((cells as f64 / bands as f64).round() as usize).max(1);
-        SphereGrid { bands, per_band }
+        let boundaries = (1..per_band)
+            .map(|k| {
+                let lon = k as f64 * std::f64::consts::TAU / per_band as f64 - std::f64::consts::PI;
+                pseudo_angle(lon.cos(), lon.sin())
+            })
+            .collect();
+        SphereGrid {
+            bands,
+            per_band,
+            boundaries,
+        }
     }
 
     /// Number of cells.
@@ -201,10 +222,20 @@ impl SphereGrid {
         }
         let z = (d[2] / n).clamp(-1.0, 1.0);
         let band = (((z + 1.0) / 2.0 * self.bands as f64) as usize).min(self.bands - 1);
-        let lon = d[1].atan2(d[0]) + std::f64::consts::PI;
-        let cell =
-            ((lon / std::f64::consts::TAU * self.per_band as f64) as usize).min(self.per_band - 1);
-        Some(band * self.per_band + cell)
+        Some(band * self.per_band + self.longitude_cell(d[0], d[1]))
+    }
+
+    /// The longitude cell of `(x, y)`: `⌊(atan2(y, x) + π)/2π · per_band⌋`, found by comparing pseudo-angles with the
+    /// boundaries', and by `atan2` itself near one of them (or near ±π, or without a horizontal part).
+    fn longitude_cell(&self, x: f64, y: f64) -> usize {
+        let p = pseudo_angle(x, y);
+        let near = |b: f64| (p - b).abs() < BOUNDARY_MARGIN;
+        if !p.is_finite() || near(-2.0) || near(2.0) || self.boundaries.iter().any(|b| near(*b)) {
+            let lon = y.atan2(x) + std::f64::consts::PI;
+            return ((lon / std::f64::consts::TAU * self.per_band as f64) as usize)
+                .min(self.per_band - 1);
+        }
+        self.boundaries.partition_point(|b| *b <= p)
     }
 
     /// The centre of cell `cell` (a unit vector): the middle of its band in z, of its longitudes in azimuth.
@@ -308,6 +339,41 @@ mod tests {
             Coverage::of(&line).check(),
             Err(CoverageError::OneDirection { .. })
         ));
+    }
+
+    #[test]
+    fn longitude_cells_are_those_of_atan2() {
+        let grid = SphereGrid::new(100);
+        let by_atan2 = |x: f64, y: f64| {
+            let lon = y.atan2(x) + std::f64::consts::PI;
+            ((lon / std::f64::consts::TAU * grid.per_band as f64) as usize).min(grid.per_band - 1)
+        };
+        let mut cases = vec![
+            (1.0, 0.0),
+            (1.0, -0.0),
+            (-1.0, 0.0),
+            (-1.0, -0.0),
+            (0.0, 1.0),
+            (0.0, -1.0),
+        ];
+        // Every boundary, and just either side of it.
+        for k in 0..=grid.per_band {
+            let lon =
+                k as f64 * std::f64::consts::TAU / grid.per_band as f64 - std::f64::consts::PI;
+            for step in [-1e-7, -1e-12, 0.0, 1e-12, 1e-7] {
+                cases.push(((lon + step).cos(), (lon + step).sin()));
+            }
+        }
+        cases.extend((0..10_000).map(|i| {
+            let a = i as f64 * 2.399963;
+            (
+                a.cos() * (1.0 + (i % 7) as f64),
+                a.sin() * (1.0 + (i % 7) as f64),
+            )
+        }));
+        for (x, y) in cases {
+            assert_eq!(grid.longitude_cell(x, y), by_atan2(x, y), "({x}, {y})");
+        }
     }
 
     #[test]
