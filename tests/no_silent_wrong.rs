@@ -245,6 +245,46 @@ fn interrupted_free_recordings_are_refused_or_right() {
     );
 }
 
+/// An effect scaled to a size on a bench where it changes nothing (no temperature, no current) is an error that
+/// says what the bench lacks, not a recording with NaN parameters.
+#[test]
+fn an_effect_the_bench_cannot_show_is_refused_by_the_simulator() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("t.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
+        .args([
+            "--duration",
+            "20",
+            "--effect-rms",
+            "temperature_bias:0.5",
+            "--out",
+        ])
+        .arg(&rec)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("temperature_bias") && stderr.contains("--temperature"),
+        "{stderr}"
+    );
+    assert!(!rec.exists());
+    let ok = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
+        .args([
+            "--duration",
+            "20",
+            "--temperature",
+            "20,10,30,0,60",
+            "--effect-rms",
+            "temperature_bias:0.5",
+            "--out",
+        ])
+        .arg(&rec)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
 /// Defect 5: quaternions without a world field fall back to the scalar method with a warning that says how to give it.
 #[test]
 fn quaternions_without_a_field_say_how_to_give_it() {

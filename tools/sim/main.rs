@@ -187,7 +187,15 @@ fn main() -> anyhow::Result<()> {
             .parse()
             .with_context(|| format!("--effect-rms {spec:?}: {size:?} is not a size in µT"))?;
         let shape = study::random_effect(id, &s, args.seed);
-        s.effects.push(study::scale_to_rms(&s, &shape, size));
+        let effect = study::scale_to_rms(&s, &shape, size);
+        if !effect.params().0.iter().all(|v| v.is_finite()) {
+            anyhow::bail!(
+                "--effect-rms {spec:?}: {} does not change the readings of this bench, so it cannot be scaled to \
+                 {size} µT (temperature effects need --temperature, current effects --current)",
+                id.as_str()
+            );
+        }
+        s.effects.push(effect);
     }
     let run = simulate(&s)?;
     run.recording
