@@ -229,13 +229,17 @@ impl SphereGrid {
     /// boundaries', and by `atan2` itself near one of them (or near ±π, or without a horizontal part).
     fn longitude_cell(&self, x: f64, y: f64) -> usize {
         let p = pseudo_angle(x, y);
+        let cell = self.boundaries.partition_point(|b| *b <= p);
+        // The boundaries either side (±2 at the ends, where the longitude wraps).
+        let below = cell.checked_sub(1).map_or(-2.0, |k| self.boundaries[k]);
+        let above = self.boundaries.get(cell).copied().unwrap_or(2.0);
         let near = |b: f64| (p - b).abs() < BOUNDARY_MARGIN;
-        if !p.is_finite() || near(-2.0) || near(2.0) || self.boundaries.iter().any(|b| near(*b)) {
+        if !p.is_finite() || near(below) || near(above) {
             let lon = y.atan2(x) + std::f64::consts::PI;
             return ((lon / std::f64::consts::TAU * self.per_band as f64) as usize)
                 .min(self.per_band - 1);
         }
-        self.boundaries.partition_point(|b| *b <= p)
+        cell
     }
 
     /// The centre of cell `cell` (a unit vector): the middle of its band in z, of its longitudes in azimuth.
