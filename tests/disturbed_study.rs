@@ -236,6 +236,22 @@ fn held_out_rms(model: &Model, rec: &Recording, s: &Scenario, vector: bool) -> f
     (ss / rec.mag_ut.len() as f64).sqrt()
 }
 
+/// The base and the final model's RMS residual on a clean held-out recording of the same bench: another trajectory
+/// and noise (the held-out always has the attitude, to compute the truth).
+fn held_out(cal: &Calibration, s: &Scenario, vector: bool) -> (f64, f64) {
+    let held = Scenario {
+        seed: s.seed + 1_000_000,
+        effects: Vec::new(),
+        attitude: AttitudeOutput::Quaternion,
+        ..s.clone()
+    };
+    let rec = simulate(&held).unwrap().recording;
+    (
+        held_out_rms(&cal.base_model(), &rec, s, vector),
+        held_out_rms(&cal.model(), &rec, s, vector),
+    )
+}
+
 /// Intersection over union of `truth` with the spans that meet it.
 fn iou(truth: &[bool], t: &[f64], spans: &[(f64, f64)]) -> f64 {
     let meets: Vec<&(f64, f64)> = spans
@@ -328,19 +344,7 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
     };
     let (z, z_at) = worst_z(&cal, &truth_a, truth_offset);
     let spans: Vec<(f64, f64)> = d.spans.iter().map(|sp| (sp.t0_s, sp.t1_s)).collect();
-    // A clean held-out recording of the same bench: another trajectory and noise (the held-out always has the
-    // attitude, to compute the truth).
-    let held = Scenario {
-        seed: seed + 1_000_000,
-        effects: Vec::new(),
-        attitude: AttitudeOutput::Quaternion,
-        ..s.clone()
-    };
-    let held_rec = simulate(&held).unwrap().recording;
-    let (base_ho, final_ho) = (
-        held_out_rms(&cal.base_model(), &held_rec, &s, vector),
-        held_out_rms(&cal.model(), &held_rec, &s, vector),
-    );
+    let (base_ho, final_ho) = held_out(&cal, &s, vector);
     let found: Vec<String> = d
         .effects
         .iter()
@@ -529,6 +533,39 @@ fn the_rows_a_located_window_leaves_out_are_left_out_of_the_final_fit() {
     );
 }
 
+/// Seed 94 with the attitude: a 12 µT field on the board for 22 s while a magnet is near the path. A constant
+/// explains the span, but its samples kept in the fit (modelled as a `bias_window`) fitted a clean recording of the
+/// same bench 0.7 % worse than the base fit (0.2056 → 0.2070 µT); they stay out unless they improve the clean
+/// held-out fit noticeably.
+#[test]
+fn a_modelled_window_whose_rows_gain_nothing_stays_out() {
+    let seed = 94;
+    let mut s = random_scenario(seed);
+    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
+    let window = s
+        .effects
+        .iter()
+        .find_map(|e| match e {
+            Effect::BiasWindow { t0_s, t1_s, .. } => Some((*t0_s, *t1_s)),
+            _ => None,
+        })
+        .expect("seed 94 has a field on the board");
+    let rec = simulate(&s).unwrap().recording;
+    let cal = calibrate(&rec, Method::Auto, field(&s, true), true).unwrap();
+    let d = cal.diagnosis.as_ref().unwrap();
+    let span = d
+        .spans
+        .iter()
+        .find(|sp| sp.t0_s < window.1 && window.0 < sp.t1_s)
+        .expect("the window located");
+    assert!(!span.modelled, "{span:?}");
+    let (base_ho, final_ho) = held_out(&cal, &s, true);
+    assert!(
+        final_ho <= base_ho * (1.0 + HELD_OUT_SLACK),
+        "held-out {base_ho} → {final_ho}"
+    );
+}
+
 #[test]
 #[ignore = "statistics over 200 seeds: run in release (CI does)"]
 fn vector_method_calibrates_around_gross_disturbances() {
@@ -536,15 +573,15 @@ fn vector_method_calibrates_around_gross_disturbances() {
     report("vector method", &t);
     // Measured 2026-11-24: 95.5 % good (91.0 % before the cluster-robust standard errors and leaving out the
     // constants that could be fixed to either frame, 95.0 % before the robust fit's sixth seeds and concentration
-    // steps), 98.2 % located, 1 worse (2 before ambiguous guesses were left out and room-fixed constants needed the
-    // frame told apart), 0 of 50 false alarms, none refused. The issue asks 95 % good and none worse: the second is
-    // not reached (docs/diagnosis.md says where it falls short); these floors keep what is, less one run of good.
+    // steps), 98.2 % located, none worse (2 before ambiguous guesses were left out and room-fixed constants needed
+    // the frame told apart, 1 before a modelled span's rows had to improve the clean held-out fit by 2 %), 0 of 50
+    // false alarms, none refused: the issue's targets. These floors keep them, less one run of good.
     check(
         &t,
         &Floor {
             good_pct: 95.0,
             located_pct: 97.5,
-            worse: 1,
+            worse: 0,
             false_alarm_pct: 1.0,
             refused_pct: 0.0,
         },

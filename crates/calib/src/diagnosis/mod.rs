@@ -907,7 +907,7 @@ impl<'a> Setup<'a> {
                 }
             }
             let Some((c, why)) = drop else {
-                return false;
+                return !round.spans_worth_their_rows();
             };
             rejected.push(Rejected {
                 id: round.cands[c].id(),
@@ -919,6 +919,39 @@ impl<'a> Setup<'a> {
 }
 
 impl Round {
+    /// Whether the modelled spans' rows are worth keeping: with them, the clean rows' held-out residual is
+    /// noticeably ([`NOTICEABLE_GAIN`]) lower than with the same model fitted on the clean rows alone. A gain nobody
+    /// would notice does not pay for a constant fitted to a disturbance whose edges and shape are only estimated
+    /// (true when no span is modelled).
+    fn spans_worth_their_rows(&self) -> bool {
+        if !self.spans.iter().any(|s| s.modelled()) {
+            return true;
+        }
+        let forced: Vec<usize> = self
+            .cands
+            .iter()
+            .filter(|c| c.forced)
+            .flat_map(|c| c.columns())
+            .collect();
+        let without: Vec<usize> = self
+            .sel
+            .last
+            .columns
+            .iter()
+            .copied()
+            .filter(|c| !forced.contains(c))
+            .collect();
+        match (
+            self.problem.cv_rss(&self.sel.last.columns),
+            self.problem.cv_rss_on(Rows::Clean, &without),
+        ) {
+            (Some(with), Some(alone)) => with.sqrt() <= (1.0 - NOTICEABLE_GAIN) * alone.sqrt(),
+            // Without the spans' rows the model cannot be fitted: they are needed.
+            (Some(_), None) => true,
+            _ => false,
+        }
+    }
+
     /// The selected catalogue candidates still in the model, in the order they were chosen.
     fn chosen_steps(&self) -> Vec<usize> {
         self.sel
@@ -1446,7 +1479,7 @@ impl Setup<'_> {
                     "a glitch of a few samples"
                 } else {
                     "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
-                     it), or its model would make the clean part fit worse"
+                     it), or a model of it would not make the clean part fit noticeably better"
                 }
             ),
         };
