@@ -74,17 +74,22 @@ pub(crate) struct Span {
     pub kind: SpanKind,
     /// Whether the sensor turned during it.
     pub turned: bool,
+    /// Whether modelling it was declined: with its samples kept, the clean held-out samples fitted worse, or not
+    /// noticeably better (the no-harm guard).
+    pub declined: bool,
 }
 
 impl Span {
     /// Whether its samples are modelled (kept, with an effect) rather than excluded: a constant explains it, the
-    /// sensor turned, and a field fixed to the sensor is told apart from one fixed in the room. A still sensor's
+    /// sensor turned, a field fixed to the sensor is told apart from one fixed in the room, and the guard did not
+    /// decline it. A still sensor's
     /// span adds one direction to the fit, and its constant may be the still part of something that moved (a
     /// magnet's field while the sensor rests near it); a constant that could be either frame's biases the fit if
     /// modelled in the wrong one; the magnitude alone never tells them apart (and sees a large offset only through
     /// a linearisation that no longer holds): such spans are left out.
     pub fn modelled(&self) -> bool {
         self.turned
+            && !self.declined
             && matches!(
                 self.kind,
                 SpanKind::SensorFixed {
@@ -234,6 +239,7 @@ fn classify(
         rms_ut,
         kind,
         turned,
+        declined: false,
     }
 }
 

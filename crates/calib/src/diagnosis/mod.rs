@@ -576,7 +576,7 @@ impl<'a> Setup<'a> {
                 .iter()
                 .any(|&(a, b)| a < span.end && span.start < b)
             {
-                span.kind = SpanKind::Unexplained;
+                span.declined = true;
             }
             if !span.modelled() || !s.has_time {
                 continue;
@@ -1443,6 +1443,22 @@ impl Setup<'_> {
             SpanKind::SensorFixed {
                 offset_ut,
                 told_apart: true,
+            }
+            | SpanKind::RoomFixed {
+                field_ned_ut: offset_ut,
+            } if sp.declined => format!(
+                "{when}: a field of {:.1} µT fixed to the {} — left out of the calibration: with its samples kept and \
+                 modelled, the clean part fitted no better on held-out data",
+                frames::norm(offset_ut),
+                if matches!(sp.kind, SpanKind::RoomFixed { .. }) {
+                    "room"
+                } else {
+                    "sensor"
+                }
+            ),
+            SpanKind::SensorFixed {
+                offset_ut,
+                told_apart: true,
             } => format!(
                 "{when}: a field of {:.1} µT fixed to the sensor — modelled (bias_window), the samples it explains kept",
                 frames::norm(offset_ut)
@@ -1479,7 +1495,7 @@ impl Setup<'_> {
                     "a glitch of a few samples"
                 } else {
                     "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
-                     it), or a model of it would not make the clean part fit noticeably better"
+                     it)"
                 }
             ),
         };
