@@ -82,9 +82,9 @@ pub(crate) struct Span {
 impl Span {
     /// Whether its samples are modelled (kept, with an effect) rather than excluded: a constant explains it, the
     /// sensor turned, a field fixed to the sensor is told apart from one fixed in the room, and the guard did not
-    /// decline it. A still sensor's
-    /// span adds one direction to the fit, and its constant may be the still part of something that moved (a
-    /// magnet's field while the sensor rests near it); a constant that could be either frame's biases the fit if
+    /// decline it. A still sensor's span adds one direction to the fit, and its constant may be the still part of
+    /// something that moved (a magnet's field while the sensor rests near it); a constant that could be either
+    /// frame's biases the fit if
     /// modelled in the wrong one; the magnitude alone never tells them apart (and sees a large offset only through
     /// a linearisation that no longer holds): such spans are left out.
     pub fn modelled(&self) -> bool {
