@@ -84,9 +84,8 @@ impl Span {
     /// sensor turned, a field fixed to the sensor is told apart from one fixed in the room, and the guard did not
     /// decline it. A still sensor's span adds one direction to the fit, and its constant may be the still part of
     /// something that moved (a magnet's field while the sensor rests near it); a constant that could be either
-    /// frame's biases the fit if
-    /// modelled in the wrong one; the magnitude alone never tells them apart (and sees a large offset only through
-    /// a linearisation that no longer holds): such spans are left out.
+    /// frame's biases the fit if modelled in the wrong one; the magnitude alone never tells them apart (and sees a
+    /// large offset only through a linearisation that no longer holds): such spans are left out.
     pub fn modelled(&self) -> bool {
         self.turned
             && !self.declined
