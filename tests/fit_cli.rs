@@ -3,21 +3,7 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::{fit_report, floats, magcal_fit};
-
-fn simulate(dir: &Path, name: &str, args: &[&str]) -> std::path::PathBuf {
-    let path = dir.join(name);
-    let status = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args(args)
-        .arg("--out")
-        .arg(&path)
-        .status()
-        .unwrap();
-    assert!(status.success());
-    path
-}
+use common::{fit_report, floats, magcal_fit, simulate};
 
 #[test]
 fn broken_recordings_exit_non_zero_naming_file_line_and_column() {

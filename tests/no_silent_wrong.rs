@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{floats, magcal_fit};
+use common::{floats, magcal_fit, magcal_sim, simulate};
 use magcal_app::record::sim::TruthFile;
 use magcal_calib::frames;
 use rand::{RngExt, SeedableRng};
@@ -251,17 +251,10 @@ fn interrupted_free_recordings_are_refused_or_right() {
 fn an_effect_the_bench_cannot_show_is_refused_by_the_simulator() {
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("t.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args([
-            "--duration",
-            "20",
-            "--effect-rms",
-            "temperature_bias:0.5",
-            "--out",
-        ])
-        .arg(&rec)
-        .output()
-        .unwrap();
+    let out = magcal_sim(
+        &["--duration", "20", "--effect-rms", "temperature_bias:0.5"],
+        &rec,
+    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert!(
@@ -269,33 +262,25 @@ fn an_effect_the_bench_cannot_show_is_refused_by_the_simulator() {
         "{stderr}"
     );
     assert!(!rec.exists());
-    let ok = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args([
+    let ok = magcal_sim(
+        &[
             "--duration",
             "20",
             "--temperature",
             "20,10,30,0,60",
             "--effect-rms",
             "temperature_bias:0.5",
-            "--out",
-        ])
-        .arg(&rec)
-        .status()
-        .unwrap();
-    assert!(ok.success());
+        ],
+        &rec,
+    );
+    assert!(ok.status.success());
 }
 
 /// Defect 5: quaternions without a world field fall back to the scalar method with a warning that says how to give it.
 #[test]
 fn quaternions_without_a_field_say_how_to_give_it() {
     let dir = tempfile::tempdir().unwrap();
-    let rec = dir.path().join("q.csv");
-    let ok = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args(["--duration", "60", "--out"])
-        .arg(&rec)
-        .status()
-        .unwrap();
-    assert!(ok.success());
+    let rec = simulate(dir.path(), "q.csv", &["--duration", "60"]);
     let text = std::fs::read_to_string(&rec).unwrap();
     let without: String = text
         .lines()
@@ -324,21 +309,18 @@ fn quaternions_without_a_field_say_how_to_give_it() {
 #[test]
 fn raw_counts_get_a_units_warning_with_the_scale() {
     let dir = tempfile::tempdir().unwrap();
-    let rec = dir.path().join("ut.csv");
-    let ok = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args([
+    let rec = simulate(
+        dir.path(),
+        "ut.csv",
+        &[
             "--chip",
             "hmc5883l",
             "--duration",
             "60",
             "--reference",
             "none",
-            "--out",
-        ])
-        .arg(&rec)
-        .status()
-        .unwrap();
-    assert!(ok.success());
+        ],
+    );
     // µT → HMC5883L counts at 1090 LSB/G.
     let text = std::fs::read_to_string(&rec).unwrap();
     let mut counts = String::new();

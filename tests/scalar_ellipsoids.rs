@@ -66,10 +66,10 @@ fn the_magnitude_residual_sits_at_the_noise_for_strong_distortions() {
 #[test]
 fn a_planar_rotation_is_refused_naming_the_axis_and_how_to_rotate() {
     let dir = tempfile::tempdir().unwrap();
-    let rec = dir.path().join("turntable.csv");
-    let params = dir.path().join("params.toml");
-    let ok = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args([
+    let rec = common::simulate(
+        dir.path(),
+        "turntable.csv",
+        &[
             "--routine",
             "turntable",
             "--duration",
@@ -78,12 +78,9 @@ fn a_planar_rotation_is_refused_naming_the_axis_and_how_to_rotate() {
             "0.05,20,1",
             "--reference",
             "none",
-            "--out",
-        ])
-        .arg(&rec)
-        .status()
-        .unwrap();
-    assert!(ok.success());
+        ],
+    );
+    let params = dir.path().join("params.toml");
     for method in ["scalar", "auto"] {
         let out = common::magcal_fit(&[
             rec.to_str().unwrap(),

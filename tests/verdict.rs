@@ -4,26 +4,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
-use common::{fit_report, floats, magcal_fit, matrix};
-
-fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
-    let path = dir.join(name);
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
-        .args(args)
-        .arg("--out")
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    path
-}
+use common::{fit_report, floats, magcal_fit, matrix, simulate};
 
 fn stdout(out: &Output) -> String {
     assert!(

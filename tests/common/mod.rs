@@ -27,6 +27,28 @@ pub fn sim_recording(dir: &Path, device: &str, routine: &str) -> PathBuf {
     path
 }
 
+/// Runs `magcal-sim` with these arguments, writing to `out`.
+pub fn magcal_sim(args: &[&str], out: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_magcal-sim"))
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("magcal-sim runs")
+}
+
+/// Simulates `dir/name` with `magcal-sim` and these arguments (panics with stderr if it fails).
+pub fn simulate(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
+    let path = dir.join(name);
+    let out = magcal_sim(args, &path);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    path
+}
+
 /// Runs `magcal-fit` with these arguments.
 pub fn magcal_fit(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
