@@ -854,7 +854,7 @@ impl<'a> Setup<'a> {
 
     /// Stage 6: drops the chosen effects that make the model unphysical, then, while the clean held-out samples fit
     /// worse than with the base fit alone, the catalogue's effects last first. Returns whether the modelled spans
-    /// themselves still do harm (then they are to be left out).
+    /// themselves are not worth their rows (then they are to be left out): see [`Round::spans_worth_their_rows`].
     fn guard(&self, round: &mut Round, rejected: &mut Vec<Rejected>) -> bool {
         let linear: Vec<usize> = (0..self.n_base).collect();
         let Some(base12) = round.problem.solve_on(Rows::Clean, &linear, None, true) else {
@@ -888,7 +888,12 @@ impl<'a> Setup<'a> {
                     drop = Some((last, guard::gains_why(change)));
                 }
             }
-            if drop.is_none() {
+            // The catalogue's effects last first while the clean held-out samples fit worse than with the base fit
+            // alone; without one, the modelled spans answer for it (below: a span worse than the base is not worth
+            // its rows either).
+            if drop.is_none()
+                && let Some(&last) = chosen.last()
+            {
                 let problem = &round.problem;
                 let cv_base = problem.cv_rss_on(Rows::Clean, &linear);
                 let cv_final = problem.cv_rss(&round.sel.last.columns);
@@ -897,13 +902,8 @@ impl<'a> Setup<'a> {
                 {
                     let rows = problem.clean_total.rows.max(1) as f64;
                     let rms = |x: f64| (x / rows).sqrt();
-                    match chosen.last() {
-                        Some(&last) => {
-                            let id = round.cands[last].id();
-                            drop = Some((last, guard::harm_why(id, rms(cv_final), rms(cv_base))));
-                        }
-                        None => return round.spans.iter().any(|s| s.modelled()),
-                    }
+                    let id = round.cands[last].id();
+                    drop = Some((last, guard::harm_why(id, rms(cv_final), rms(cv_base))));
                 }
             }
             let Some((c, why)) = drop else {
