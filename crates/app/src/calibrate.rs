@@ -583,7 +583,7 @@ fn refit_if_better<P: RobustProblem>(
     if new.sqrt() > (1.0 - diagnosis::NOTICEABLE_GAIN) * old.sqrt() {
         return None;
     }
-    let weights: Vec<f64> = kept.iter().map(|k| f64::from(u8::from(*k))).collect();
+    let weights = robust::weights_of(&kept);
     let fit = problem.final_fit(&weights, Some(start)).ok()?;
     Some((P::model(&fit), kept))
 }

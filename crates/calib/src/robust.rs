@@ -222,7 +222,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             for (a, b) in windows {
                 k[a..b].fill(false);
             }
-            let weights: Vec<f64> = k.iter().map(|k| f64::from(u8::from(*k))).collect();
+            let weights = weights_of(&k);
             let Ok(f) = problem.final_fit(&weights, Some(fit)) else {
                 break;
             };
@@ -257,7 +257,7 @@ fn fit_outside<P: RobustProblem>(
 ) -> Result<(P::Fit, Vec<bool>), FitError> {
     let mut factor = 1.0;
     loop {
-        let weights: Vec<f64> = kept.iter().map(|k| if *k { 1.0 } else { 0.0 }).collect();
+        let weights = weights_of(&kept);
         match problem.final_fit(&weights, Some(start)) {
             Ok(f) => return Ok((f, kept)),
             Err(e) if kept.iter().all(|k| *k) => return Err(e),
@@ -270,6 +270,11 @@ fn fit_outside<P: RobustProblem>(
             }
         }
     }
+}
+
+/// The 0/1 weights of the samples `kept`.
+pub fn weights_of(kept: &[bool]) -> Vec<f64> {
+    kept.iter().map(|k| f64::from(u8::from(*k))).collect()
 }
 
 /// Per sample of `n`, whether it lies outside every span.
@@ -359,7 +364,7 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
         if !kept_prev.is_empty() && moved * TRIM_SETTLED <= kept.len() {
             break;
         }
-        let w: Vec<f64> = kept.iter().map(|k| f64::from(u8::from(*k))).collect();
+        let w = weights_of(&kept);
         let Ok(next) = p.quick_fit(&w, None) else {
             break;
         };
