@@ -570,6 +570,24 @@ fn a_modelled_window_whose_rows_gain_nothing_stays_out() {
     );
 }
 
+/// Seed 42 without the attitude: a magnet 53 µT at its peak, passed near the end, whose tail (a few tenths of a µT,
+/// below anything that could be called gross) lingers for a while as the sensor moves; it biases A's diagonal by
+/// 0.0009, against standard errors from the direction cells of 0.00026 (3.5 of them). Residuals alike for a while
+/// are what the cluster-robust covariance over blocks of time sees: the error stays within 3 standard errors.
+#[test]
+fn a_magnets_tail_widens_the_standard_errors_to_cover_its_bias() {
+    let seed = 42;
+    let mut s = random_scenario(seed);
+    s.attitude = AttitudeOutput::None;
+    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
+    let rec = simulate(&s).unwrap().recording;
+    let cal = calibrate(&rec, Method::Auto, field(&s, false), true).unwrap();
+    let truth_a = observable_a(&s.sensor.a, false);
+    let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
+    let (z, at) = worst_z(&cal, &truth_a, truth_offset);
+    assert!(z <= 3.0, "{z} standard errors off at {at}");
+}
+
 #[test]
 #[ignore = "statistics over 200 seeds: run in release (CI does)"]
 fn vector_method_calibrates_around_gross_disturbances() {
@@ -597,7 +615,8 @@ fn vector_method_calibrates_around_gross_disturbances() {
 fn scalar_method_calibrates_around_gross_disturbances() {
     let t = study(false);
     report("scalar method", &t);
-    // Measured 2026-11-24: 92.5 % good (92.0 % before the final fit left out the disturbed rows the diagnosis located
+    // Measured 2026-11-24: 93.5 % good (92.5 % before the standard errors saw residuals alike over blocks of time, 92.0 %
+    // before the final fit left out the disturbed rows the diagnosis located
     // beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration steps and shifted
     // windows), 98.9 % located, none worse (1 before the guard bands around spans left out), 0 of 50 false alarms,
     // 1 refused (a 230 µT field on the board for a fifth of the recording leaves a direction undetermined). Short of
@@ -605,7 +624,7 @@ fn scalar_method_calibrates_around_gross_disturbances() {
     check(
         &t,
         &Floor {
-            good_pct: 92.0,
+            good_pct: 93.0,
             located_pct: 98.0,
             worse: 0,
             false_alarm_pct: 1.0,

@@ -14,9 +14,10 @@
 //! - **Samples weighted by the directions they add.** Samples are counted per equal-area cell of direction and a
 //!   cell holding more than twice the median cell's count is weighted down to it, so a still start or a slow stretch
 //!   does not outweigh the rotation (MotionCal and ArduPilot thin by such cells).
-//! - **Honest uncertainties.** The larger, direction by direction, of the model-based covariance and the
+//! - **Honest uncertainties.** The largest, direction by direction, of the model-based covariance, the
 //!   cluster-robust one over the same cells, which sees residuals that depend on direction (model errors) or are
-//!   alike within an orientation.
+//!   alike within an orientation, and the cluster-robust one over blocks of time, which sees residuals alike for a
+//!   while (the tail of a magnet the sensor passed, a slow drift).
 //!
 //! The fit itself is Levenberg–Marquardt on the magnitude residual `|A·(B̂ − c)| − F`, started from a linear sphere
 //! fit. Only the magnitude is constrained, so a rotation of the calibrated field is invisible: see
@@ -66,6 +67,8 @@ const NEGLIGIBLE_STEP_SE: f64 = 0.01;
 const MAX_ROUNDS: usize = 8;
 /// Cells of direction for the weights and the cluster-robust standard errors.
 const DIRECTION_CELLS: usize = 100;
+/// Blocks of consecutive samples (of time, in a recording) for the cluster-robust covariance over time.
+const TIME_BLOCKS: usize = 32;
 /// Fewest samples the fit takes.
 pub const MIN_SAMPLES: usize = 12;
 
@@ -732,9 +735,10 @@ impl Problem<'_> {
         converged
     }
 
-    /// The parameters' covariance: the larger, in every direction, of the model-based one and the delete-one-cell
-    /// jackknife over the cells of direction (each cell's score through the information without that cell). Also
-    /// returns how much of the shape the prior informs, and the accumulation at `sol.p` (the cells' sums).
+    /// The parameters' covariance: the largest, in every direction, of the model-based one, the delete-one-cell
+    /// jackknife over the cells of direction (each cell's score through the information without that cell) and the
+    /// sandwich over [`TIME_BLOCKS`] blocks of time. Also returns how much of the shape the prior informs, and the
+    /// accumulation at `sol.p` (the cells' sums).
     fn covariance(
         &self,
         sol: &Solution,
@@ -744,8 +748,12 @@ impl Problem<'_> {
         let a2 = a * a;
         // Per cell of direction: the score and the upper triangle of the information, summed over the chunks of
         // samples; and the sum of squares.
+        let n = self.raw.len();
+        let blocks = TIME_BLOCKS.min(n.max(1));
+        // Per cell of direction: the score and the upper triangle of the information; per block of time (after the
+        // cells): the score; summed over the chunks of samples; and the sum of squares.
         let cells_of = |range: std::ops::Range<usize>| {
-            let mut scores = vec![[0.0; P]; self.grid.len()];
+            let mut scores = vec![[0.0; P]; self.grid.len() + blocks];
             let mut info = vec![[0.0; TRIANGLE]; self.grid.len()];
             let mut rss = 0.0;
             for k in range {
@@ -754,15 +762,18 @@ impl Problem<'_> {
                     continue;
                 }
                 let (r, j, local) = residual(&m, &a, &c, self.target);
-                let (score, cell) = (&mut scores[self.cell[k]], &mut info[self.cell[k]]);
+                let mut s = [0.0; P];
                 match noise {
-                    None => (0..P).for_each(|x| score[x] += wk * (j[x] * r)),
+                    None => (0..P).for_each(|x| s[x] = wk * (j[x] * r)),
                     Some(s2) => {
                         let n = noise_score(&local, &a, &a2, s2, &j);
-                        (0..P).for_each(|x| score[x] += wk * (j[x] * r - n[x]));
+                        (0..P).for_each(|x| s[x] = wk * (j[x] * r - n[x]));
                     }
                 }
-                add_upper(cell, &j.map(|v| wk * v), &j);
+                for g in [self.cell[k], self.grid.len() + k * blocks / n] {
+                    scores[g].iter_mut().zip(&s).for_each(|(a, b)| *a += b);
+                }
+                add_upper(&mut info[self.cell[k]], &j.map(|v| wk * v), &j);
                 rss += wk * r * r;
             }
             (scores, info, rss)
@@ -780,35 +791,55 @@ impl Problem<'_> {
         .unwrap_or_else(|| cells_of(0..0));
         let scores: Vec<SVector<f64, P>> = scores.into_iter().map(SVector::from).collect();
         let info: Vec<SMatrix<f64, P, P>> = info.iter().map(mirror).collect();
+        let ncell = self.grid.len();
         let at = Pass {
             jtj: info.iter().sum(),
-            jtr: scores.iter().sum(),
+            jtr: scores[..ncell].iter().sum(),
             rss,
         };
         let h = at.jtj + self.q * sol.sigma2;
         let h_inv = h.try_inverse()?;
         let model_based = h_inv * sol.sigma2;
-        let cells: Vec<usize> = (0..self.grid.len())
-            .filter(|&k| scores[k].iter().any(|v| *v != 0.0))
-            .collect();
-        let g = cells.len() as f64;
-        let cov = if cells.len() > P {
-            // The prior as pseudo-observations adds its own share; each cell's score moves the fit by its score
-            // through the information of the other cells.
+        let used = |groups: std::ops::Range<usize>| -> Vec<usize> {
+            groups
+                .filter(|&k| scores[k].iter().any(|v| *v != 0.0))
+                .collect()
+        };
+        let mut larger = DMatrix::from_column_slice(P, P, model_based.as_slice());
+        // The delete-one-cell jackknife over the cells of direction: the prior as pseudo-observations adds its own
+        // share; each cell's score moves the fit by its score through the information of the other cells.
+        let cells = used(0..ncell);
+        if cells.len() > P {
+            let g = cells.len() as f64;
             let mut jack = h_inv * (self.q * (sol.sigma2 * sol.sigma2)) * h_inv;
             for &k in &cells {
                 let without = (h - info[k]).try_inverse().unwrap_or(h_inv);
                 let shift = without * scores[k];
                 jack += shift * shift.transpose() * ((g - 1.0) / g);
             }
-            let larger = crate::vector::loewner_max(
-                &DMatrix::from_column_slice(P, P, model_based.as_slice()),
+            larger = crate::vector::loewner_max(
+                &larger,
                 &DMatrix::from_column_slice(P, P, jack.as_slice()),
             );
-            SMatrix::<f64, P, P>::from_column_slice(larger.as_slice())
-        } else {
-            model_based
-        };
+        }
+        // The cluster-robust sandwich over blocks of time: residuals alike for a while (a field that drifts, a magnet's
+        // tail as the sensor moves) share a block. Not the jackknife: a block can hold directions no other block
+        // has, and the fit without it is then barely determined.
+        let blocks_used = used(ncell..ncell + blocks);
+        if blocks_used.len() > P {
+            let g = blocks_used.len() as f64;
+            let meat: SMatrix<f64, P, P> = blocks_used
+                .iter()
+                .map(|&k| scores[k] * scores[k].transpose())
+                .sum();
+            let sandwich =
+                h_inv * (meat * (g / (g - 1.0)) + self.q * (sol.sigma2 * sol.sigma2)) * h_inv;
+            larger = crate::vector::loewner_max(
+                &larger,
+                &DMatrix::from_column_slice(P, P, sandwich.as_slice()),
+            );
+        }
+        let cov = SMatrix::<f64, P, P>::from_column_slice(larger.as_slice());
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
         Some((cov, share, at))
