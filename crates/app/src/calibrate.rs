@@ -513,12 +513,20 @@ fn around_spans(
             refit_if_better(&problem, &cal.robust.kept, &kept, s)
         }
     };
-    // Without the rows, the fit is not determined or predicts the clean rows worse: the first diagnosis stands.
-    let Some((model, kept)) = refit else {
-        return Ok(first);
+    // Without the rows, the fit is not determined or predicts the clean rows worse: the first diagnosis stands, and
+    // the rows it located that the base fit kept stay in the calibration. The first diagnosis ran on these rows and
+    // more: if the second cannot, the first stands.
+    let (mut d, kept) = match refit {
+        Some((model, kept)) => {
+            match diagnosis::diagnose(&diagnosis_input(rec, cal, &kept)?, &model) {
+                Ok(d) => (d, kept),
+                Err(_) => (first, cal.robust.kept.clone()),
+            }
+        }
+        None => (first, cal.robust.kept.clone()),
     };
-    // The first diagnosis ran on these rows and more: if the second cannot, the first stands.
-    Ok(diagnosis::diagnose(&diagnosis_input(rec, cal, &kept)?, &model).unwrap_or(first))
+    d.kept_after_all(&kept);
+    Ok(d)
 }
 
 /// A stretch whose residual RMS is within this factor of the clean rows' is as clean, not disturbed.

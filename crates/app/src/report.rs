@@ -166,6 +166,10 @@ pub struct SpanReport {
     pub shift_ut: Option<f64>,
     /// Modelled (the samples its constant explains kept, with an effect) or left out of the calibration.
     pub modelled: bool,
+    /// Of a span left out, the samples the calibration kept all the same: its fading edges and lulls, which fit as
+    /// well as the clean part.
+    #[serde(default)]
+    pub kept_samples: usize,
     /// In words.
     pub explanation: String,
 }
@@ -349,6 +353,7 @@ impl DiagnosisReport {
                         field_ut,
                         shift_ut,
                         modelled: sp.modelled,
+                        kept_samples: sp.kept_samples,
                         explanation: sp.explanation.clone(),
                     }
                 })

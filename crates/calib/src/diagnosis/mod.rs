@@ -217,6 +217,8 @@ pub struct GrossSpan {
     pub modelled: bool,
     /// In words, with the reason it was left out when it was.
     pub explanation: String,
+    /// Of its samples, those the calibration kept all the same (see [`Diagnosis::kept_after_all`]).
+    pub kept_samples: usize,
 }
 
 /// An effect the data suggested but the model may not hold, and why.
@@ -320,6 +322,47 @@ pub struct Diagnosis {
     pub samples_left_out: usize,
     /// Per-sample residuals before and after.
     pub residuals: Residuals,
+}
+
+impl Diagnosis {
+    /// Records that the calibration kept the recording rows `kept` (per row) after all, though the diagnosis left
+    /// some of them out — its spans' fading edges and lulls, which fit as well as the clean part, or whose leaving
+    /// out fitted held-out data no better — so that the spans, the counts and the per-sample flags say what the
+    /// calibration did.
+    pub fn kept_after_all(&mut self, kept: &[bool]) {
+        let r = &mut self.residuals;
+        let has_time = r.t_s.iter().any(|t| *t != 0.0);
+        for (i, &row) in r.rows.iter().enumerate() {
+            if !r.excluded[i] || !kept.get(row).copied().unwrap_or(false) {
+                continue;
+            }
+            r.excluded[i] = false;
+            self.samples_left_out = self.samples_left_out.saturating_sub(1);
+            let at = if has_time { r.t_s[i] } else { i as f64 };
+            if let Some(sp) = self
+                .spans
+                .iter_mut()
+                .find(|sp| !sp.modelled && (sp.t0_s..=sp.t1_s).contains(&at))
+            {
+                sp.kept_samples += 1;
+            }
+        }
+        const LEFT_OUT: &str = "left out of the calibration";
+        for sp in self.spans.iter_mut().filter(|sp| sp.kept_samples > 0) {
+            sp.explanation = if sp.kept_samples >= sp.samples {
+                sp.explanation.replacen(
+                    LEFT_OUT,
+                    "kept in the calibration (leaving its samples out fitted the rest no better)",
+                    1,
+                )
+            } else {
+                format!(
+                    "{} (but for {} of its {} samples, kept: leaving them out fitted the rest no better)",
+                    sp.explanation, sp.kept_samples, sp.samples
+                )
+            };
+        }
+    }
 }
 
 /// Diagnoses a recording against its base fit `base` (the linear model of the robust fit, [`crate::robust`]).
@@ -1508,6 +1551,7 @@ impl Setup<'_> {
             kind: sp.kind,
             modelled: sp.modelled(),
             explanation,
+            kept_samples: 0,
         }
     }
 }
