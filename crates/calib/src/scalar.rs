@@ -746,8 +746,6 @@ impl Problem<'_> {
     ) -> Option<(SMatrix<f64, P, P>, f64, Pass)> {
         let (c, a) = unpack(&sol.p);
         let a2 = a * a;
-        // Per cell of direction: the score and the upper triangle of the information, summed over the chunks of
-        // samples; and the sum of squares.
         let n = self.raw.len();
         let blocks = TIME_BLOCKS.min(n.max(1));
         // Per cell of direction: the score and the upper triangle of the information; per block of time (after the
