@@ -511,17 +511,26 @@ fn check(t: &Tally, f: &Floor) {
     );
 }
 
+/// Seed `seed`'s bench with its disturbances, and its calibration with the diagnosis: by the vector method
+/// (`vector`), or by the scalar one without the attitude.
+fn calibrated(seed: u64, vector: bool) -> (Scenario, Calibration) {
+    let mut s = random_scenario(seed);
+    if !vector {
+        s.attitude = AttitudeOutput::None;
+    }
+    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
+    let rec = simulate(&s).unwrap().recording;
+    let cal = calibrate(&rec, Method::Auto, field(&s, vector), true).unwrap();
+    (s, cal)
+}
+
 /// Seed 15 without the attitude: fields on the board for 30 s show in |B| only where they point along the field, so
 /// the robust fit keeps the lulls between (perturbed by up to 11 µT); the diagnosis locates each whole window, and
 /// the final model is fitted without it (measured: offset error 0.320 → 0.009 µT, A 0.0071 → 0.0002).
 #[test]
 fn the_rows_a_located_window_leaves_out_are_left_out_of_the_final_fit() {
     let seed = 15;
-    let mut s = random_scenario(seed);
-    s.attitude = AttitudeOutput::None;
-    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
-    let rec = simulate(&s).unwrap().recording;
-    let cal = calibrate(&rec, Method::Auto, field(&s, false), true).unwrap();
+    let (s, cal) = calibrated(seed, false);
     let truth_a = observable_a(&s.sensor.a, false);
     let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
     let (base_a, base_o) = errors(&cal.base_model(), &truth_a, truth_offset);
@@ -540,8 +549,7 @@ fn the_rows_a_located_window_leaves_out_are_left_out_of_the_final_fit() {
 #[test]
 fn a_modelled_window_whose_rows_gain_nothing_stays_out() {
     let seed = 94;
-    let mut s = random_scenario(seed);
-    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
+    let (s, cal) = calibrated(seed, true);
     let window = s
         .effects
         .iter()
@@ -550,8 +558,6 @@ fn a_modelled_window_whose_rows_gain_nothing_stays_out() {
             _ => None,
         })
         .expect("seed 94 has a field on the board");
-    let rec = simulate(&s).unwrap().recording;
-    let cal = calibrate(&rec, Method::Auto, field(&s, true), true).unwrap();
     let d = cal.diagnosis.as_ref().unwrap();
     let span = d
         .spans
@@ -577,11 +583,7 @@ fn a_modelled_window_whose_rows_gain_nothing_stays_out() {
 #[test]
 fn a_magnets_tail_widens_the_standard_errors_to_cover_its_bias() {
     let seed = 42;
-    let mut s = random_scenario(seed);
-    s.attitude = AttitudeOutput::None;
-    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
-    let rec = simulate(&s).unwrap().recording;
-    let cal = calibrate(&rec, Method::Auto, field(&s, false), true).unwrap();
+    let (s, cal) = calibrated(seed, false);
     let truth_a = observable_a(&s.sensor.a, false);
     let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
     let (z, at) = worst_z(&cal, &truth_a, truth_offset);
@@ -595,11 +597,7 @@ fn a_magnets_tail_widens_the_standard_errors_to_cover_its_bias() {
 #[test]
 fn what_the_report_says_is_left_out_is_left_out() {
     let seed = 179;
-    let mut s = random_scenario(seed);
-    s.attitude = AttitudeOutput::None;
-    s.effects = disturbances(&s, seed).iter().map(|(e, _)| *e).collect();
-    let rec = simulate(&s).unwrap().recording;
-    let cal = calibrate(&rec, Method::Auto, field(&s, false), true).unwrap();
+    let (_, cal) = calibrated(seed, false);
     let d = cal.diagnosis.as_ref().unwrap();
     let r = &d.residuals;
     let wrong = r
