@@ -3,7 +3,9 @@
 
 use std::fmt::Write;
 
-use magcal_calib::diagnosis::{Diagnosis, FoundEffect, NOTICEABLE_GAIN, Verdict as Finding};
+use magcal_calib::diagnosis::{
+    Diagnosis, FoundEffect, GrossSpan, NOTICEABLE_GAIN, Verdict as Finding,
+};
 
 use crate::apply::{Against, Check};
 use crate::calibrate::{Calibration, Fit, Method};
@@ -277,6 +279,25 @@ fn noticeable(e: &FoundEffect) -> bool {
     e.holdout_rms_before_ut - e.holdout_rms_after_ut >= NOTICEABLE_GAIN * e.holdout_rms_before_ut
 }
 
+/// What became of the spans located: left out of the calibration, or kept (some or all) because leaving them out
+/// fitted the rest no better ([`magcal_calib::diagnosis::Diagnosis::kept_after_all`]).
+fn spans_fate(spans: &[GrossSpan]) -> String {
+    let kept = spans
+        .iter()
+        .filter(|sp| !sp.modelled && sp.kept_samples >= sp.samples)
+        .count();
+    const NO_BETTER: &str = "leaving them out fitted the rest no better";
+    match kept {
+        0 => "left out of the calibration".to_owned(),
+        k if k == spans.len() => format!("kept in the calibration ({NO_BETTER})"),
+        k => format!(
+            "{} of {} left out of the calibration ({k} kept: {NO_BETTER})",
+            spans.len() - k,
+            spans.len()
+        ),
+    }
+}
+
 /// The diagnosis in a few lines (`scalar`: the scalar method, which has no attitude reference whose error the residual
 /// could be).
 fn diagnosis(d: &Diagnosis, scalar: bool) -> String {
@@ -300,7 +321,7 @@ fn diagnosis(d: &Diagnosis, scalar: bool) -> String {
             format!("consistent: nothing this recording can show is left out{reference}")
         }
         Finding::Mismatch if d.effects.is_empty() => {
-            "mismatch: disturbances located, left out of the calibration".to_owned()
+            format!("mismatch: disturbances located, {}", spans_fate(&d.spans))
         }
         Finding::Mismatch => "mismatch".to_owned(),
     };
@@ -421,5 +442,32 @@ mod tests {
         assert_eq!(fmt_se(0.002_016, 0.000_099_97), "0.00202 ±0.00010");
         assert_eq!(fmt_se(1.0, 0.0), "1.00000 (no standard error)");
         assert!(!fmt_se(0.97, 1e-9).contains("±0.0000 "));
+    }
+
+    #[test]
+    fn the_verdict_says_which_spans_were_kept() {
+        let span = |samples, kept_samples| GrossSpan {
+            t0_s: 1.0,
+            t1_s: 2.0,
+            samples,
+            peak_ut: 40.0,
+            rms_ut: 10.0,
+            kind: magcal_calib::diagnosis::SpanKind::Moving,
+            modelled: false,
+            explanation: String::new(),
+            kept_samples,
+        };
+        assert_eq!(
+            spans_fate(&[span(100, 0), span(50, 10)]),
+            "left out of the calibration"
+        );
+        assert_eq!(
+            spans_fate(&[span(100, 0), span(50, 50)]),
+            "1 of 2 left out of the calibration (1 kept: leaving them out fitted the rest no better)"
+        );
+        assert_eq!(
+            spans_fate(&[span(50, 50)]),
+            "kept in the calibration (leaving them out fitted the rest no better)"
+        );
     }
 }
