@@ -296,11 +296,21 @@ fn rotate_advice(d: [f64; 3]) -> String {
 }
 
 /// One accumulation over the samples: `JᵀWJ`, `JᵀWr` (less the noise's share when corrected), `Σwr²` at
-/// parameters `p`.
+/// parameters `p`, and in a full fit the same sums by group for the covariance.
 struct Pass {
     jtj: SMatrix<f64, P, P>,
     jtr: SVector<f64, P>,
     rss: f64,
+    groups: Option<Groups>,
+}
+
+/// The sums [`Problem::covariance`] needs, made in the same pass: per cell of direction the score (`JᵀWr` less the
+/// noise's share) and the upper triangle of the information `JᵀWJ`, per block of time (after the cells) the score;
+/// and per axis `Σw·(A·u)ₖ²`, which says how much of the raw noise reaches the magnitude ([`Problem::bounded_noise`]).
+struct Groups {
+    scores: Vec<[f64; P]>,
+    info: Vec<[f64; TRIANGLE]>,
+    radial: [f64; 3],
 }
 
 /// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
@@ -418,6 +428,7 @@ fn pass(
         jtj: mirror(&jtj),
         jtr: SVector::<f64, P>::from(jtr),
         rss,
+        groups: None,
     }
 }
 
@@ -573,6 +584,8 @@ struct Problem<'a> {
     q: SMatrix<f64, P, P>,
     /// Degrees of freedom of the residual.
     dof: f64,
+    /// Whether every pass also sums by group ([`Groups`]): a full fit's, whose covariance comes from its last pass.
+    grouped: bool,
 }
 
 /// A solution and the accumulation at it.
@@ -586,7 +599,72 @@ struct Solution {
 
 impl Problem<'_> {
     fn pass(&self, p: &SVector<f64, P>, noise: Option<&Vector3<f64>>) -> Pass {
-        pass(&self.raw, &self.w, p, self.target, noise)
+        if self.grouped {
+            self.grouped_pass(p, noise)
+        } else {
+            pass(&self.raw, &self.w, p, self.target, noise)
+        }
+    }
+
+    /// A pass that also sums by cell of direction and by block of time ([`Groups`]).
+    fn grouped_pass(&self, p: &SVector<f64, P>, noise: Option<&Vector3<f64>>) -> Pass {
+        let (c, a) = unpack(p);
+        let a2 = a * a;
+        let n = self.raw.len();
+        let ncell = self.grid.len();
+        let blocks = TIME_BLOCKS.min(n.max(1));
+        let chunk = |range: std::ops::Range<usize>| {
+            let mut g = Groups {
+                scores: vec![[0.0; P]; ncell + blocks],
+                info: vec![[0.0; TRIANGLE]; ncell],
+                radial: [0.0; 3],
+            };
+            let mut rss = 0.0;
+            for k in range {
+                let (m, wk) = (Vector3::from(self.raw[k]), self.w[k]);
+                if wk == 0.0 {
+                    continue;
+                }
+                let (r, j, local) = residual(&m, &a, &c, self.target);
+                let mut s = [0.0; P];
+                match noise {
+                    None => (0..P).for_each(|x| s[x] = wk * (j[x] * r)),
+                    Some(s2) => {
+                        let n = noise_score(&local, &a, &a2, s2, &j);
+                        (0..P).for_each(|x| s[x] = wk * (j[x] * r - n[x]));
+                    }
+                }
+                for group in [self.cell[k], ncell + k * blocks / n] {
+                    g.scores[group]
+                        .iter_mut()
+                        .zip(&s)
+                        .for_each(|(a, b)| *a += b);
+                }
+                add_upper(&mut g.info[self.cell[k]], &j.map(|v| wk * v), &j);
+                // The gradient in the centre is −A·u.
+                (0..3).for_each(|x| g.radial[x] += wk * j[x] * j[x]);
+                rss += wk * r * r;
+            }
+            (g, rss)
+        };
+        let (g, rss) = chunks::fold(n, chunk, |mut x, y| {
+            for (a, b) in x.0.scores.iter_mut().zip(&y.0.scores) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            for (a, b) in x.0.info.iter_mut().zip(&y.0.info) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            (0..3).for_each(|k| x.0.radial[k] += y.0.radial[k]);
+            x.1 += y.1;
+            x
+        })
+        .unwrap_or_else(|| chunk(0..0));
+        Pass {
+            jtj: g.info.iter().map(mirror).sum(),
+            jtr: g.scores[..ncell].iter().copied().map(SVector::from).sum(),
+            rss,
+            groups: Some(g),
+        }
     }
 
     /// The objective: the weighted sum of squares plus the prior weighted by `sigma2`.
@@ -678,26 +756,10 @@ impl Problem<'_> {
     }
 
     /// The raw noise variance the residual can hold: `raw_var` scaled down (never up) so that the radial noise it
-    /// makes through `A` is at most the residual variance.
+    /// makes through `A` is at most the residual variance (from the groups of `sol`'s pass).
     fn bounded_noise(&self, sol: &Solution, raw_var: Vector3<f64>) -> Vector3<f64> {
-        let (c, a) = unpack(&sol.p);
-        let (raw, w) = (&self.raw, &self.w);
-        let radial = chunks::fold(
-            raw.len(),
-            |range| {
-                raw[range.clone()]
-                    .iter()
-                    .zip(&w[range])
-                    .map(|(m, wi)| {
-                        let au = a * (a * (Vector3::from(*m) - c)).normalize();
-                        wi * (0..3).map(|k| au[k] * au[k] * raw_var[k]).sum::<f64>()
-                    })
-                    .sum::<f64>()
-            },
-            |x, y| x + y,
-        )
-        .unwrap_or_default()
-            / self.w_sum;
+        let g = sol.at.groups.as_ref().expect("a full fit's pass");
+        let radial = (0..3).map(|k| g.radial[k] * raw_var[k]).sum::<f64>() / self.w_sum;
         if radial > 0.0 {
             raw_var * (sol.sigma2 / radial).min(1.0)
         } else {
@@ -711,9 +773,9 @@ impl Problem<'_> {
         let mut converged = false;
         for _ in 0..MAX_CORRECTION_STEPS {
             sol.iterations += 1;
-            let at = self.pass(&sol.p, Some(noise));
-            let h = at.jtj + q * sol.sigma2;
-            let g = at.jtr + q * sol.p * sol.sigma2;
+            sol.at = self.pass(&sol.p, Some(noise));
+            let h = sol.at.jtj + q * sol.sigma2;
+            let g = sol.at.jtr + q * sol.p * sol.sigma2;
             let Some(step) = h.cholesky().map(|ch| ch.solve(&(-g))) else {
                 break;
             };
@@ -731,70 +793,22 @@ impl Problem<'_> {
                 break;
             }
         }
-        // The accumulation at the last step's end comes with the covariance ([`Problem::covariance`]).
+        // The last pass stands for the covariance: the step after it moved the estimates by a negligible fraction
+        // of their uncertainty.
         converged
     }
 
-    /// The parameters' covariance: the largest, in every direction, of the model-based one, the delete-one-cell
-    /// jackknife over the cells of direction (each cell's score through the information without that cell) and the
-    /// sandwich over [`TIME_BLOCKS`] blocks of time. Also returns how much of the shape the prior informs, and the
-    /// accumulation at `sol.p` (the cells' sums).
-    fn covariance(
-        &self,
-        sol: &Solution,
-        noise: Option<&Vector3<f64>>,
-    ) -> Option<(SMatrix<f64, P, P>, f64, Pass)> {
-        let (c, a) = unpack(&sol.p);
-        let a2 = a * a;
-        let n = self.raw.len();
-        let blocks = TIME_BLOCKS.min(n.max(1));
-        // Per cell of direction: the score and the upper triangle of the information; per block of time (after the
-        // cells): the score; summed over the chunks of samples; and the sum of squares.
-        let cells_of = |range: std::ops::Range<usize>| {
-            let mut scores = vec![[0.0; P]; self.grid.len() + blocks];
-            let mut info = vec![[0.0; TRIANGLE]; self.grid.len()];
-            let mut rss = 0.0;
-            for k in range {
-                let (m, wk) = (Vector3::from(self.raw[k]), self.w[k]);
-                if wk == 0.0 {
-                    continue;
-                }
-                let (r, j, local) = residual(&m, &a, &c, self.target);
-                let mut s = [0.0; P];
-                match noise {
-                    None => (0..P).for_each(|x| s[x] = wk * (j[x] * r)),
-                    Some(s2) => {
-                        let n = noise_score(&local, &a, &a2, s2, &j);
-                        (0..P).for_each(|x| s[x] = wk * (j[x] * r - n[x]));
-                    }
-                }
-                for g in [self.cell[k], self.grid.len() + k * blocks / n] {
-                    scores[g].iter_mut().zip(&s).for_each(|(a, b)| *a += b);
-                }
-                add_upper(&mut info[self.cell[k]], &j.map(|v| wk * v), &j);
-                rss += wk * r * r;
-            }
-            (scores, info, rss)
-        };
-        let (scores, info, rss) = chunks::fold(self.raw.len(), cells_of, |mut x, y| {
-            for (a, b) in x.0.iter_mut().zip(&y.0) {
-                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-            }
-            for (a, b) in x.1.iter_mut().zip(&y.1) {
-                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-            }
-            x.2 += y.2;
-            x
-        })
-        .unwrap_or_else(|| cells_of(0..0));
-        let scores: Vec<SVector<f64, P>> = scores.into_iter().map(SVector::from).collect();
-        let info: Vec<SMatrix<f64, P, P>> = info.iter().map(mirror).collect();
+    /// The parameters' covariance from the groups of `sol`'s last pass: the largest, in every direction, of the
+    /// model-based one, the delete-one-cell jackknife over the cells of direction (each cell's score through the
+    /// information without that cell) and the sandwich over [`TIME_BLOCKS`] blocks of time. Also returns how much of
+    /// the shape the prior informs.
+    fn covariance(&self, sol: &Solution) -> Option<(SMatrix<f64, P, P>, f64)> {
+        let at = &sol.at;
+        let g = at.groups.as_ref().expect("a full fit's pass");
+        let scores: Vec<SVector<f64, P>> = g.scores.iter().copied().map(SVector::from).collect();
+        let info: Vec<SMatrix<f64, P, P>> = g.info.iter().map(mirror).collect();
         let ncell = self.grid.len();
-        let at = Pass {
-            jtj: info.iter().sum(),
-            jtr: scores[..ncell].iter().sum(),
-            rss,
-        };
+        let blocks = scores.len() - ncell;
         let h = at.jtj + self.q * sol.sigma2;
         let h_inv = h.try_inverse()?;
         let model_based = h_inv * sol.sigma2;
@@ -840,7 +854,7 @@ impl Problem<'_> {
         let cov = SMatrix::<f64, P, P>::from_column_slice(larger.as_slice());
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
-        Some((cov, share, at))
+        Some((cov, share))
     }
 
     /// From the plain fit: refuse what the coverage cannot determine, remove the noise's share of the score, and
@@ -855,13 +869,12 @@ impl Problem<'_> {
             || FitError::Singular("the magnitude residual's normal matrix has no inverse");
         // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful
         // where the fit is.
-        let (plain_cov, plain_share, plain_at) = self.covariance(sol, None).ok_or_else(singular)?;
+        let (plain_cov, plain_share) = self.covariance(sol).ok_or_else(singular)?;
         check_determined(
             weakest(&plain_cov),
             sol.p.fixed_rows::<3>(3).sum() / 3.0,
             target,
         )?;
-        sol.at = plain_at;
         let noise = Vector3::from(opts.raw_noise_var_ut2);
         let Some(s2) = noise
             .iter()
@@ -885,8 +898,7 @@ impl Problem<'_> {
                 advice: rotate_advice(direction),
             });
         }
-        let (cov, share, at) = self.covariance(sol, Some(&s2)).ok_or_else(singular)?;
-        sol.at = at;
+        let (cov, share) = self.covariance(sol).ok_or_else(singular)?;
         Ok((cov, share))
     }
 }
@@ -961,6 +973,7 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         target,
         q: shape_precision(gain),
         dof: w_sum * (n - P) as f64 / n as f64,
+        grouped: !opts.quick,
     };
     let mut p0 = SVector::<f64, P>::zeros();
     match opts.start {
