@@ -167,16 +167,19 @@ fn field(s: &Scenario, vector: bool) -> ReferenceField {
     }
 }
 
-/// What the method can observe of the true A: all of it (vector), its symmetric part `√(AᵀA)` (scalar).
-fn observable_a(a: &[[f64; 3]; 3], vector: bool) -> Matrix3<f64> {
-    let m = Matrix3::from_fn(|j, k| a[j][k]);
+/// The truth a bench's fit is judged against: what the method can observe of the sensor's A — all of it (vector),
+/// its symmetric part `√(AᵀA)` (scalar) — and the offset `−A⁻¹·b`.
+fn truth(s: &Scenario, vector: bool) -> (Matrix3<f64>, [f64; 3]) {
+    let m = Matrix3::from_fn(|j, k| s.sensor.a[j][k]);
+    let offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
     if vector {
-        return m;
+        return (m, offset);
     }
     let e = (m.transpose() * m).symmetric_eigen();
-    e.eigenvectors
+    let a = e.eigenvectors
         * Matrix3::from_diagonal(&e.eigenvalues.map(f64::sqrt))
-        * e.eigenvectors.transpose()
+        * e.eigenvectors.transpose();
+    (a, offset)
 }
 
 /// Largest |A error| element and the offset error's norm (µT) of a model against the truth.
@@ -331,8 +334,7 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
     let clean: Vec<bool> = (0..t.len())
         .map(|i| perturbed.iter().all(|p| p[i] < 0.5 * noise))
         .collect();
-    let truth_a = observable_a(&s.sensor.a, vector);
-    let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
+    let (truth_a, truth_offset) = truth(&s, vector);
     let (a_err, o_err) = errors(&cal.model(), &truth_a, truth_offset);
     let clean_fit = calibrate(&rows(rec, &clean), Method::Auto, field(&s, vector), false);
     let (a_bound, o_bound) = match &clean_fit {
@@ -531,8 +533,7 @@ fn calibrated(seed: u64, vector: bool) -> (Scenario, Calibration) {
 fn the_rows_a_located_window_leaves_out_are_left_out_of_the_final_fit() {
     let seed = 15;
     let (s, cal) = calibrated(seed, false);
-    let truth_a = observable_a(&s.sensor.a, false);
-    let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
+    let (truth_a, truth_offset) = truth(&s, false);
     let (base_a, base_o) = errors(&cal.base_model(), &truth_a, truth_offset);
     let (final_a, final_o) = errors(&cal.model(), &truth_a, truth_offset);
     assert!(base_o > 0.2 && base_a > 0.005, "base {base_a} {base_o}");
@@ -584,8 +585,7 @@ fn a_modelled_window_whose_rows_gain_nothing_stays_out() {
 fn a_magnets_tail_widens_the_standard_errors_to_cover_its_bias() {
     let seed = 42;
     let (s, cal) = calibrated(seed, false);
-    let truth_a = observable_a(&s.sensor.a, false);
-    let truth_offset = scalar::centre(&s.sensor.a, s.sensor.b_ut);
+    let (truth_a, truth_offset) = truth(&s, false);
     let (z, at) = worst_z(&cal, &truth_a, truth_offset);
     assert!(z <= 3.0, "{z} standard errors off at {at}");
 }

@@ -282,10 +282,7 @@ fn noticeable(e: &FoundEffect) -> bool {
 /// What became of the spans located: left out of the calibration, or kept (some or all) because leaving them out
 /// fitted the rest no better ([`magcal_calib::diagnosis::Diagnosis::kept_after_all`]).
 fn spans_fate(spans: &[GrossSpan]) -> String {
-    let kept = spans
-        .iter()
-        .filter(|sp| !sp.modelled && sp.kept_samples >= sp.samples)
-        .count();
+    let kept = spans.iter().filter(|sp| sp.wholly_kept()).count();
     const NO_BETTER: &str = "leaving them out fitted the rest no better";
     match kept {
         0 => "left out of the calibration".to_owned(),

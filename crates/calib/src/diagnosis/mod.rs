@@ -324,6 +324,13 @@ pub struct Diagnosis {
     pub residuals: Residuals,
 }
 
+impl GrossSpan {
+    /// Whether the calibration kept every one of its samples after all ([`Diagnosis::kept_after_all`]).
+    pub fn wholly_kept(&self) -> bool {
+        self.kept_samples > 0 && self.kept_samples >= self.samples
+    }
+}
+
 impl Diagnosis {
     /// Records that the calibration kept the recording rows `kept` (per row) after all, though the diagnosis left
     /// some of them out — its spans' fading edges and lulls, which fit as well as the clean part, or whose leaving
@@ -349,7 +356,7 @@ impl Diagnosis {
         }
         const LEFT_OUT: &str = "left out of the calibration";
         for sp in self.spans.iter_mut().filter(|sp| sp.kept_samples > 0) {
-            sp.explanation = if sp.kept_samples >= sp.samples {
+            sp.explanation = if sp.wholly_kept() {
                 sp.explanation.replacen(
                     LEFT_OUT,
                     "kept in the calibration (leaving its samples out fitted the rest no better)",
