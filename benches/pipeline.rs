@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
 use magcal_app::field::ReferenceField;
 use magcal_recording::Recording;
 use magcal_sim::{ChipModel, Scenario, Trajectory, simulate};
@@ -124,11 +124,14 @@ fn main() {
 
 /// Reads and calibrates; returns the effects the diagnosis found, in words.
 fn run(path: &Path, method: Method, diagnose: bool) -> String {
-    let rec = Recording::read(path).expect("the bench recording parses");
-    let field = ReferenceField::Vector {
-        field_ned_ut: rec.meta.field_ned_ut.expect("simulated with a field"),
-        source: "metadata".into(),
-    };
+    // Read as `magcal-fit` reads it for the job.
+    let (rec, field) = read_to_calibrate(path, method, diagnose, |meta| {
+        Ok(ReferenceField::Vector {
+            field_ned_ut: meta.field_ned_ut.expect("simulated with a field"),
+            source: "metadata".into(),
+        })
+    })
+    .expect("the bench recording parses");
     let cal = calibrate(&rec, method, field, diagnose).expect("fits");
     match &cal.diagnosis {
         Some(d) if d.effects.is_empty() => "none".into(),

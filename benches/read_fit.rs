@@ -5,8 +5,9 @@
 //! kept for other tools, e.g. `docs/bench/polars_numpy.py`), recordings of `t,mx,my,mz,temp,qw,qx,qy,qz` in which
 //! every row has its own random attitude, with raw readings `A⁻¹·(R(q)ᵀ·F − b)` plus 0.1 µT of noise. For each size
 //! it times, alternating, in this process:
-//! - **magcal**: `Recording::read` + `calibrate` with the vector method and no diagnosis (noise floor, robust base
-//!   fit, checks, coverage: what `magcal-fit --method vector --no-diagnose` computes), and checks the fit: every
+//! - **magcal**: `read_to_calibrate` (the attitude turned into the expected field as the rows are read) + `calibrate`
+//!   with the vector method and no diagnosis (noise floor, robust base fit, checks, coverage: what `magcal-fit
+//!   --method vector --no-diagnose` reads and computes), and checks the fit: every
 //!   entry of `A` within 1e-3 and of `b` within 0.05 µT of the truth, or the bench fails;
 //! - **minimal parse**: the file read whole, cut at line ends into one piece per thread, every float parsed with
 //!   `fast-float2` and summed, nothing kept.
@@ -18,10 +19,9 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use magcal_app::calibrate::{Fit, Method, calibrate};
+use magcal_app::calibrate::{Fit, Method, calibrate, read_to_calibrate};
 use magcal_app::field::ReferenceField;
 use magcal_calib::frames;
-use magcal_recording::Recording;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -123,13 +123,16 @@ fn main() {
     }
 }
 
-/// magcal's read + vector fit without diagnosis; returns the fitted `A` and `b`.
+/// magcal's read + vector fit without diagnosis, as `magcal-fit --method vector --no-diagnose` does them; returns
+/// the fitted `A` and `b`.
 fn read_and_fit(path: &Path) -> ([[f64; 3]; 3], [f64; 3]) {
-    let rec = Recording::read(path).expect("the bench recording parses");
-    let field = ReferenceField::Vector {
-        field_ned_ut: rec.meta.field_ned_ut.expect("written with a field"),
-        source: "metadata".into(),
-    };
+    let (rec, field) = read_to_calibrate(path, Method::Vector, false, |meta| {
+        Ok(ReferenceField::Vector {
+            field_ned_ut: meta.field_ned_ut.expect("written with a field"),
+            source: "metadata".into(),
+        })
+    })
+    .expect("the bench recording parses");
     let cal = calibrate(&rec, Method::Vector, field, false).expect("fits");
     match cal.fit {
         Fit::Vector(v) => (v.a, v.b_ut),

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export};
@@ -19,7 +19,6 @@ use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::verdict::{Grade, assess, target_model};
 use magcal_app::writeback::write_back_calibration;
-use magcal_recording::Recording;
 
 /// Fit a magnetometer calibration to a recording, say how far off a compass would be before and after, and write it out.
 ///
@@ -118,14 +117,17 @@ fn check_paths(args: &Args) -> anyhow::Result<()> {
 
 fn run(args: Args) -> anyhow::Result<()> {
     check_paths(&args)?;
-    let rec = Recording::read(&args.recording)?;
     let name = args.recording.display().to_string();
     if let Some(f) = args.field_ut
         && !(f > 0.0 && f.is_finite())
     {
         bail!("--field-ut must be a positive number of µT, got {f}");
     }
-    let field = resolve(&args.field.field_args(args.field_ut), &rec.meta)?;
+    let field_args = args.field.field_args(args.field_ut);
+    let (rec, field) =
+        read_to_calibrate(&args.recording, args.method, !args.no_diagnose, |meta| {
+            Ok(resolve(&field_args, meta)?)
+        })?;
     let cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
         Ok(cal) => cal,
         Err(e) => {

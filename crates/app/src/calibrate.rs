@@ -11,7 +11,8 @@ use magcal_calib::robust::{self, RobustProblem};
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Inputs, Model};
-use magcal_recording::Recording;
+use magcal_recording::{Metadata, ReadOptions, Recording};
+use std::path::Path;
 
 use crate::checks;
 use crate::field::ReferenceField;
@@ -277,13 +278,14 @@ pub enum CalibrateError {
     Fit(#[from] FitError),
 }
 
-/// The expected field in sensor axes per sample (NaN where the reference is missing), if the recording has one.
-pub fn expected_field(
-    rec: &Recording,
+/// The expected field in sensor axes per sample (NaN where the reference is missing), if the recording has one:
+/// its `rx,ry,rz` columns borrowed, or its attitude turned.
+pub fn expected_field<'a>(
+    rec: &'a Recording,
     field: &ReferenceField,
-) -> Result<Vec<[f64; 3]>, CalibrateError> {
+) -> Result<Cow<'a, [[f64; 3]]>, CalibrateError> {
     if let Some(r) = &rec.ref_ut {
-        return Ok(r.clone());
+        return Ok(Cow::Borrowed(r));
     }
     let Some(q) = &rec.quat else {
         return Err(CalibrateError::NoReference("this recording has neither"));
@@ -293,10 +295,42 @@ pub fn expected_field(
             "this recording has the attitude but no world field vector",
         ));
     };
-    Ok(q.par_iter()
-        .with_min_len(1 << 12)
-        .map(|q| frames::expected_sensor_field(*q, f))
-        .collect())
+    Ok(Cow::Owned(
+        q.par_iter()
+            .with_min_len(1 << 12)
+            .map(|q| frames::expected_sensor_field(*q, f))
+            .collect(),
+    ))
+}
+
+/// Reads a recording to calibrate it with `method` against the field `resolve` finds for its metadata. Without the
+/// diagnosis, a vector fit sees the attitude only through the expected field, so the quaternions are turned into it
+/// as the rows are read (the recording then has `ref_ut` and no `quat`): 24 bytes a row kept instead of 32, and no
+/// column made from them for the fit; and the temperature, which only the diagnosis uses, is not kept.
+pub fn read_to_calibrate(
+    path: &Path,
+    method: Method,
+    diagnose: bool,
+    resolve: impl FnOnce(&Metadata) -> anyhow::Result<ReferenceField>,
+) -> anyhow::Result<(Recording, ReferenceField)> {
+    if diagnose || method == Method::Scalar {
+        let rec = Recording::read(path)?;
+        let field = resolve(&rec.meta)?;
+        return Ok((rec, field));
+    }
+    let field = resolve(&Recording::read_metadata(path)?)?;
+    let rec = match field.vector() {
+        Some(f) => {
+            let turn = move |q: [f64; 4]| frames::expected_sensor_field(q, f);
+            let options = ReadOptions {
+                attitude_to_reference: Some(&turn),
+                skip_temperature: true,
+            };
+            Recording::read_with(path, options)?
+        }
+        None => Recording::read(path)?,
+    };
+    Ok((rec, field))
 }
 
 /// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out.
@@ -332,7 +366,7 @@ pub fn calibrate(
             let r = robust::fit(
                 &VectorProblem {
                     raw_ut: Cow::Borrowed(&rec.mag_ut),
-                    expected_ut: Cow::Owned(expected),
+                    expected_ut: expected,
                     raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
                 },
                 rec.t_s.as_deref(),
@@ -499,7 +533,7 @@ fn around_spans(
         Fit::Vector(v) => {
             let problem = VectorProblem {
                 raw_ut: Cow::Borrowed(&rec.mag_ut),
-                expected_ut: Cow::Owned(expected_field(rec, &cal.field)?),
+                expected_ut: expected_field(rec, &cal.field)?,
                 raw_noise_var_ut2: noise_var,
             };
             refit_if_better(&problem, &cal.robust.kept, &kept, v)
@@ -591,8 +625,7 @@ fn refit_if_better<P: RobustProblem>(
     if new.sqrt() > (1.0 - diagnosis::NOTICEABLE_GAIN) * old.sqrt() {
         return None;
     }
-    let weights = robust::weights_of(&kept);
-    let fit = problem.final_fit(&weights, Some(start)).ok()?;
+    let fit = problem.final_fit(&kept, Some(start)).ok()?;
     Some((P::model(&fit), kept))
 }
 
@@ -653,6 +686,36 @@ mod tests {
         );
         s.attitude = attitude;
         s
+    }
+
+    #[test]
+    fn the_attitude_turned_while_reading_gives_the_fit_of_the_whole_recording() {
+        let s = scenario(AttitudeOutput::Quaternion);
+        let run = simulate(&s).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rec.csv");
+        run.recording.write(&path).unwrap();
+        let field = ReferenceField::Vector {
+            field_ned_ut: s.field_ned_ut,
+            source: "test".into(),
+        };
+        let whole = Recording::read(&path).unwrap();
+        let want = calibrate(&whole, Method::Vector, field.clone(), false).unwrap();
+        for method in [Method::Vector, Method::Auto] {
+            let (rec, f) = read_to_calibrate(&path, method, false, |_| Ok(field.clone())).unwrap();
+            // Read as the fit needs it: the expected field instead of the attitude, no temperature.
+            assert!(rec.quat.is_none() && rec.temp_c.is_none() && rec.ref_ut.is_some());
+            let got = calibrate(&rec, method, f, false).unwrap();
+            assert_eq!(got.model(), want.model());
+            assert_eq!(got.residual_rms_ut, want.residual_rms_ut);
+        }
+        // With the diagnosis, or for the scalar method, the recording is read whole.
+        let (rec, _) =
+            read_to_calibrate(&path, Method::Vector, true, |_| Ok(field.clone())).unwrap();
+        assert_eq!(rec, whole);
+        let (rec, _) =
+            read_to_calibrate(&path, Method::Scalar, false, |_| Ok(field.clone())).unwrap();
+        assert_eq!(rec, whole);
     }
 
     #[test]

@@ -222,12 +222,12 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
         if !usable(o) {
             return [f64::NAN; 3];
         }
+        // One axis at a time, so that the probe is one column of values.
         let stride = count(o).div_ceil(MEDIAN_PROBE).max(1);
-        let probe: Vec<[f64; 3]> = (0..count(o)).step_by(stride).map(|i| diff(o, i)).collect();
         std::array::from_fn(|k| {
-            let mut abs: Vec<f64> = probe
-                .iter()
-                .map(|d| d[k].abs())
+            let mut abs: Vec<f64> = (0..count(o))
+                .step_by(stride)
+                .map(|i| diff(o, i)[k].abs())
                 .filter(|d| d.is_finite())
                 .collect();
             median(&mut abs)

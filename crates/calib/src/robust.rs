@@ -31,6 +31,7 @@ use crate::FitError;
 use crate::chunks;
 use crate::frames::Mat3;
 use crate::model::Model;
+use rayon::prelude::*;
 
 /// Gross samples closer than this in time are one span, s.
 pub const SPAN_GAP_S: f64 = 0.5;
@@ -84,8 +85,8 @@ pub trait RobustProblem: Sized + Sync {
     /// A quick fit (estimates only) with per-sample weights in `[0, 1]`; an iterative solver may `start` from a fit
     /// of nearly the same samples.
     fn quick_fit(&self, weights: &[f64], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
-    /// The full fit (uncertainties and checks) with 0/1 weights, maybe from `start` as [`Self::quick_fit`].
-    fn final_fit(&self, weights: &[f64], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
+    /// The full fit (uncertainties and checks) of the samples `kept`, maybe from `start` as [`Self::quick_fit`].
+    fn final_fit(&self, kept: &[bool], start: Option<&Self::Fit>) -> Result<Self::Fit, FitError>;
     /// Each sample's residual size under a fit (NaN where the sample is unusable).
     fn residuals(&self, fit: &Self::Fit) -> Vec<f64>;
     /// The linear model of a fit.
@@ -149,7 +150,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     }
     // No seed could be fitted: the full data decides (and its error says why).
     let Some((_, _, seed)) = best else {
-        let fit = problem.final_fit(&vec![1.0; n], None)?;
+        let fit = problem.final_fit(&vec![true; n], None)?;
         let residual_ut = problem.residuals(&fit);
         let sigma_ut = scale::<P>(&residual_ut);
         return Ok(Robust {
@@ -186,7 +187,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     }
     drop(thin);
     if stride > 1 {
-        residual_ut = problem.residuals(&fit);
+        refresh(problem, &fit, &mut residual_ut);
     }
     let mut sigma_ut = scale::<P>(&residual_ut);
     let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
@@ -194,16 +195,16 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     for pass in 0..SPAN_PASSES {
         let start = final_fit.as_ref().unwrap_or(&fit);
         let (f, k) = fit_outside(problem, &residual_ut, sigma_ut, t_s, kept, start)?;
-        residual_ut = problem.residuals(&f);
+        refresh(problem, &f, &mut residual_ut);
         sigma_ut = scale::<P>(&residual_ut);
         final_fit = Some(f);
-        let again = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
+        let again = gross_spans(&residual_ut, sigma_ut, t_s);
         // The spans returned are those the final fit left out.
-        let settled = again == k;
+        let settled = is_outside(&k, &again);
         kept = if settled || pass + 1 == SPAN_PASSES {
             k
         } else {
-            again
+            outside(&again, n)
         };
         if settled {
             break;
@@ -222,11 +223,10 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             for (a, b) in windows {
                 k[a..b].fill(false);
             }
-            let weights = weights_of(&k);
-            let Ok(f) = problem.final_fit(&weights, Some(fit)) else {
+            let Ok(f) = problem.final_fit(&k, Some(fit)) else {
                 break;
             };
-            residual_ut = problem.residuals(&f);
+            refresh(problem, &f, &mut residual_ut);
             sigma_ut = scale::<P>(&residual_ut);
             final_fit = Some(f);
             kept = k;
@@ -244,6 +244,12 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     })
 }
 
+/// `problem`'s residuals under `fit` in place of `e`, whose memory goes first (one per-sample vector at a time).
+fn refresh<P: RobustProblem>(problem: &P, fit: &P::Fit, e: &mut Vec<f64>) {
+    drop(std::mem::take(e));
+    *e = problem.residuals(fit);
+}
+
 /// The final fit without the samples not `kept`, from `start`. Excluding a span must never leave the recording
 /// undetermined (its coverage is what a calibration stands on): if the fit without them is refused, the spans are
 /// taken again at twice the scale, and so on, down to excluding nothing.
@@ -257,8 +263,7 @@ fn fit_outside<P: RobustProblem>(
 ) -> Result<(P::Fit, Vec<bool>), FitError> {
     let mut factor = 1.0;
     loop {
-        let weights = weights_of(&kept);
-        match problem.final_fit(&weights, Some(start)) {
+        match problem.final_fit(&kept, Some(start)) {
             Ok(f) => return Ok((f, kept)),
             Err(e) if kept.iter().all(|k| *k) => return Err(e),
             Err(_) => {
@@ -275,6 +280,20 @@ fn fit_outside<P: RobustProblem>(
 /// The 0/1 weights of the samples `kept`.
 pub fn weights_of(kept: &[bool]) -> Vec<f64> {
     kept.iter().map(|k| f64::from(u8::from(*k))).collect()
+}
+
+/// Whether `kept` is what [`outside`] makes of `spans` (in order of start and end, as [`gross_spans`] gives them),
+/// without making it.
+fn is_outside(kept: &[bool], spans: &[(usize, usize)]) -> bool {
+    let mut at = 0;
+    for &(a, b) in spans {
+        debug_assert!(a <= b && at <= b, "spans in order");
+        if kept[at.min(a)..a].contains(&false) || kept[a.max(at)..b].contains(&true) {
+            return false;
+        }
+        at = b;
+    }
+    !kept[at..].contains(&false)
 }
 
 /// Per sample of `n`, whether it lies outside every span.
@@ -405,23 +424,84 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
 /// sample counts as much as the next, so the state the recording is in most of the time sets it — still stretches
 /// included, which is what tells a clean state from a magnet attached while the sensor was turned most.
 fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
-    // The median by the keys `f64::total_cmp` orders by, compared as integers (the same order, found faster).
-    let key = |x: f64| {
-        let bits = x.to_bits() as i64;
-        bits ^ (((bits >> 63) as u64) >> 1) as i64
-    };
-    let mut v: Vec<i64> = e
+    median(e) / P::MEDIAN_OF_UNIT
+}
+
+/// Values up to which the median is taken from a copy; above, by [`median_by_bins`].
+const MEDIAN_COPY_MAX: usize = 1 << 16;
+
+/// The median of the finite values of `e` (the `len / 2`-th smallest by `f64::total_cmp`; NaN if none).
+fn median(e: &[f64]) -> f64 {
+    if e.len() > MEDIAN_COPY_MAX {
+        return median_by_bins(e);
+    }
+    let mut v: Vec<u64> = e
         .iter()
         .filter(|x| x.is_finite())
-        .map(|x| key(*x))
+        .map(|x| order_key(*x))
         .collect();
     if v.is_empty() {
         return f64::NAN;
     }
     let mid = v.len() / 2;
-    let median = *v.select_nth_unstable(mid).1;
-    // The key is its own inverse.
-    f64::from_bits(key(f64::from_bits(median as u64)) as u64) / P::MEDIAN_OF_UNIT
+    from_order_key(*v.select_nth_unstable(mid).1)
+}
+
+/// [`median`] without a copy of `e`: the finite values are counted by the leading bits of their key (bins a
+/// sixteenth of an octave wide), and only those of the bin the median falls in are kept and ordered.
+fn median_by_bins(e: &[f64]) -> f64 {
+    const BITS: u32 = 16;
+    const SLICE: usize = 1 << 18;
+    let bin = |x: f64| (order_key(x) >> (64 - BITS)) as usize;
+    let counts = e
+        .par_chunks(SLICE)
+        .map(|part| {
+            let mut c = vec![0u32; 1 << BITS];
+            for x in part.iter().filter(|x| x.is_finite()) {
+                c[bin(*x)] += 1;
+            }
+            c
+        })
+        .reduce_with(|mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            a
+        })
+        .unwrap_or_default();
+    let finite: usize = counts.iter().map(|c| *c as usize).sum();
+    if finite == 0 {
+        return f64::NAN;
+    }
+    let mut rank = finite / 2;
+    let mut at = 0;
+    while rank >= counts[at] as usize {
+        rank -= counts[at] as usize;
+        at += 1;
+    }
+    let mut v: Vec<u64> = e
+        .par_iter()
+        .filter(|x| x.is_finite() && bin(**x) == at)
+        .map(|x| order_key(*x))
+        .collect();
+    from_order_key(*v.select_nth_unstable(rank).1)
+}
+
+/// A key whose order as an unsigned integer is the order of `f64::total_cmp`.
+fn order_key(x: f64) -> u64 {
+    let bits = x.to_bits();
+    if bits >> 63 == 1 {
+        !bits
+    } else {
+        bits | 1 << 63
+    }
+}
+
+/// The value of an [`order_key`].
+fn from_order_key(key: u64) -> f64 {
+    f64::from_bits(if key >> 63 == 1 {
+        key & !(1 << 63)
+    } else {
+        !key
+    })
 }
 
 /// The `q` quantile of the finite values of `e` (NaN if none).
@@ -595,8 +675,12 @@ mod tests {
             let a = (sw * sxy - sx * sy) / det;
             Ok((a, (sy - a * sx) / sw))
         }
-        fn final_fit(&self, w: &[f64], start: Option<&(f64, f64)>) -> Result<(f64, f64), FitError> {
-            self.quick_fit(w, start)
+        fn final_fit(
+            &self,
+            kept: &[bool],
+            start: Option<&(f64, f64)>,
+        ) -> Result<(f64, f64), FitError> {
+            self.quick_fit(&weights_of(kept), start)
         }
         fn residuals(&self, f: &(f64, f64)) -> Vec<f64> {
             (0..self.len())
@@ -660,6 +744,77 @@ mod tests {
     }
 
     /// White noise of unit variance, `n` samples.
+    #[test]
+    fn the_median_by_bins_is_the_median_of_a_copy() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for n in [1, 2, 3, 1000, MEDIAN_COPY_MAX + 1, 300_001] {
+            // Residual sizes, signed values, ties, non-finite values and values spread over many octaves.
+            let sizes: Vec<f64> = (0..n)
+                .map(|_| rng.random_range(0.0..3.0_f64).powi(2))
+                .collect();
+            let signed: Vec<f64> = (0..n).map(|_| rng.random_range(-1e3..1e3)).collect();
+            let ties: Vec<f64> = (0..n).map(|i| (i % 7) as f64).collect();
+            let holes: Vec<f64> = sizes
+                .iter()
+                .enumerate()
+                .map(|(i, x)| match i % 5 {
+                    0 => f64::NAN,
+                    1 => f64::INFINITY,
+                    _ => *x,
+                })
+                .collect();
+            let spread: Vec<f64> = (0..n)
+                .map(|_| 10f64.powf(rng.random_range(-30.0..30.0)))
+                .collect();
+            for e in [sizes, signed, ties, holes, spread] {
+                let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
+                let want = if v.is_empty() {
+                    f64::NAN
+                } else {
+                    let mid = v.len() / 2;
+                    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+                };
+                let got = median_by_bins(&e);
+                assert!(
+                    got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                    "n {n}: {got} {want}"
+                );
+                assert!(median(&e).to_bits() == want.to_bits() || want.is_nan());
+            }
+        }
+        assert!(median_by_bins(&[f64::NAN; 10]).is_nan());
+    }
+
+    #[test]
+    fn is_outside_says_whether_kept_is_outside_the_spans() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..2000 {
+            let n: usize = rng.random_range(0..40);
+            // Spans in order, some touching or overlapping the one before.
+            let mut spans: Vec<(usize, usize)> = Vec::new();
+            let mut at: usize = 0;
+            while n > 0 && rng.random_bool(0.6) {
+                let start = spans.last().map_or(0, |s| s.0);
+                let a = (at + rng.random_range(0..4))
+                    .saturating_sub(2)
+                    .clamp(start, n);
+                let b = (a + rng.random_range(0..6)).clamp(at, n);
+                spans.push((a, b));
+                at = b;
+            }
+            let exact = outside(&spans, n);
+            assert!(is_outside(&exact, &spans), "{spans:?}");
+            let mut other = exact.clone();
+            if n > 0 {
+                let i = rng.random_range(0..n);
+                other[i] = !other[i];
+                assert!(!is_outside(&other, &spans), "{spans:?} with {i} flipped");
+            }
+        }
+    }
+
     fn white(n: usize, seed: u64) -> Vec<f64> {
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};

@@ -32,7 +32,7 @@ use crate::chunks;
 use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe};
 use crate::frames::Mat3;
 use crate::model::Model;
-use crate::robust::RobustProblem;
+use crate::robust::{self, RobustProblem};
 
 /// What the scalar method cannot see, in words for reports.
 pub const ROTATION_NOTE: &str = "the scalar method constrains only |B|, and a rotation of the calibrated field leaves \
@@ -208,8 +208,8 @@ impl RobustProblem for ScalarProblem<'_> {
         self.fit_with(weights, true, start)
     }
 
-    fn final_fit(&self, weights: &[f64], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
-        self.fit_with(weights, false, start)
+    fn final_fit(&self, kept: &[bool], start: Option<&ScalarFit>) -> Result<ScalarFit, FitError> {
+        self.fit_with(&robust::weights_of(kept), false, start)
     }
 
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
@@ -251,7 +251,7 @@ impl RobustProblem for ScalarProblem<'_> {
             .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
         let noise = (sum / count.max(1) as f64).sqrt();
         if noise > 0.0 {
-            crate::robust::shifted_windows(&rho, kept, noise)
+            robust::shifted_windows(&rho, kept, noise)
         } else {
             Vec::new()
         }

@@ -37,6 +37,8 @@ pub struct VectorOptions<'a> {
     pub skip_coverage_check: bool,
     /// A weight per sample in `[0, 1]` (zero leaves a sample out), for robust refits; all ones when absent.
     pub weights: Option<&'a [f64]>,
+    /// Per sample, whether it is fitted (false leaves it out, whatever its weight); all when absent.
+    pub kept: Option<&'a [bool]>,
     /// `A`, `b` and the residual only, from one pass of sums (for the reweighting passes of a robust fit): no
     /// standard errors (zero), no cells of direction.
     pub estimates_only: bool,
@@ -122,11 +124,19 @@ impl RobustProblem for VectorProblem<'_> {
 
     /// Linear: solved directly, from no start.
     fn quick_fit(&self, weights: &[f64], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
-        self.fit_with(weights, true)
+        self.fit_with(&VectorOptions {
+            weights: Some(weights),
+            skip_coverage_check: true,
+            estimates_only: true,
+            ..Default::default()
+        })
     }
 
-    fn final_fit(&self, weights: &[f64], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
-        self.fit_with(weights, false)
+    fn final_fit(&self, kept: &[bool], _: Option<&VectorFit>) -> Result<VectorFit, FitError> {
+        self.fit_with(&VectorOptions {
+            kept: Some(kept),
+            ..Default::default()
+        })
     }
 
     fn residuals(&self, fit: &VectorFit) -> Vec<f64> {
@@ -143,17 +153,13 @@ impl RobustProblem for VectorProblem<'_> {
 }
 
 impl VectorProblem<'_> {
-    fn fit_with(&self, weights: &[f64], quick: bool) -> Result<VectorFit, FitError> {
-        fit(
-            &self.raw_ut,
-            &self.expected_ut,
-            &VectorOptions {
-                raw_noise_var_ut2: self.raw_noise_var_ut2,
-                skip_coverage_check: quick,
-                weights: Some(weights),
-                estimates_only: quick,
-            },
-        )
+    /// The fit with `opts` and the problem's noise.
+    fn fit_with(&self, opts: &VectorOptions) -> Result<VectorFit, FitError> {
+        let opts = VectorOptions {
+            raw_noise_var_ut2: self.raw_noise_var_ut2,
+            ..*opts
+        };
+        fit(&self.raw_ut, &self.expected_ut, &opts)
     }
 }
 
@@ -217,11 +223,15 @@ pub fn fit(
     if let Some(w) = opts.weights {
         assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
     }
+    if let Some(k) = opts.kept {
+        assert_eq!(k.len(), raw_ut.len(), "one kept flag per reading");
+    }
     let weight = |i: usize| {
-        let usable = expected_ut[i]
-            .iter()
-            .chain(&raw_ut[i])
-            .all(|v| v.is_finite());
+        let usable = opts.kept.is_none_or(|k| k[i])
+            && expected_ut[i]
+                .iter()
+                .chain(&raw_ut[i])
+                .all(|v| v.is_finite());
         let w = opts.weights.map_or(1.0, |w| w[i]);
         if usable && w > 0.0 { w } else { 0.0 }
     };

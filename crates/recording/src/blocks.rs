@@ -13,6 +13,7 @@ use rayon::prelude::*;
 use crate::error::ReadErrorKind;
 use crate::layout::Layout;
 use crate::metadata::Metadata;
+use crate::read::AttitudeToReference;
 use crate::recording::Recording;
 use crate::rows::{RowParser, RowProblem, SplitLine, TimeLink};
 
@@ -28,9 +29,10 @@ pub(crate) struct Split {
 }
 
 impl Split {
-    /// 8 MiB blocks (memory stays at the columns plus a few blocks), pieces of at least 256 KiB.
+    /// 4 MiB blocks (memory stays at the columns plus about two blocks: the text and its parsed rows), pieces of at
+    /// least 256 KiB.
     pub(crate) const DEFAULT: Split = Split {
-        block_bytes: 8 << 20,
+        block_bytes: 4 << 20,
         piece_bytes: 256 << 10,
         sequential: false,
     };
@@ -40,13 +42,16 @@ impl Split {
 pub(crate) type LineProblem = (u64, Option<usize>, ReadErrorKind);
 
 /// Everything the rows need to know of the header.
-#[derive(Debug, Clone, Copy)]
+#[derive(Clone, Copy)]
 pub(crate) struct Rows<'h> {
     pub parser: RowParser<'h>,
     pub separator: u8,
     pub layout: &'h Layout,
     /// The 0-based column of `t`, if any (where a `t` going backwards across pieces is reported).
     pub time_column: Option<usize>,
+    /// Turns the quaternions into the expected field as the rows are appended (`out` then has `ref_ut` and no
+    /// `quat`; the rows are parsed with the file's layout).
+    pub to_reference: Option<AttitudeToReference<'h>>,
 }
 
 /// What the join needs to know of a piece (its rows are in a buffer of their own).
@@ -141,7 +146,7 @@ impl Rows<'_> {
             line += piece.lines;
             accepted += 1;
         }
-        append(out, &buffers[..accepted]);
+        append(out, &buffers[..accepted], self.to_reference);
         buffers.iter_mut().for_each(clear);
         match problem {
             Some(p) => Err(Ok(p)),
@@ -220,11 +225,16 @@ impl Rows<'_> {
         mut time: TimeLink,
     ) -> Result<(), Result<LineProblem, io::Error>> {
         let mut record = ByteRecord::new();
+        // Rows whose quaternions become the expected field are parsed with the file's layout and appended in batches.
+        let mut batch = self
+            .to_reference
+            .map(|_| Recording::empty(Metadata::default(), self.layout));
         while csv
             .read_byte_record(&mut record)
             .map_err(|e| Err(e.into()))?
         {
-            if let Err((column, kind)) = self.parser.push(&record, out, &mut time) {
+            let rows = batch.as_mut().unwrap_or(&mut *out);
+            if let Err((column, kind)) = self.parser.push(&record, rows, &mut time) {
                 // The row's first line: the csv reader has counted the row's own '\n' and any inside quotes.
                 let breaks_inside =
                     record.as_slice().iter().filter(|b| **b == b'\n').count() as u64;
@@ -232,10 +242,22 @@ impl Rows<'_> {
                 let line = header_line + position.saturating_sub(2 + breaks_inside);
                 return Err(Ok((line, column, kind)));
             }
+            if let Some(rows) = &mut batch
+                && rows.mag_ut.len() >= QUOTED_BATCH_ROWS
+            {
+                append(out, std::slice::from_ref(rows), self.to_reference);
+                clear(rows);
+            }
+        }
+        if let Some(rows) = &batch {
+            append(out, std::slice::from_ref(rows), self.to_reference);
         }
         Ok(())
     }
 }
+
+/// Rows of a file with quotes parsed before they are appended, when they are turned as they are appended.
+const QUOTED_BATCH_ROWS: usize = 1 << 14;
 
 /// A csv reader of rows separated by `separator` and ended by '\n' only (every line end is one by now). Give it input
 /// that ends with a '\n', so that every row does: its line count after a row is then one past the row's last line.
@@ -279,8 +301,9 @@ fn piece_bounds(block: &[u8], piece_bytes: usize, threads: usize) -> Vec<usize> 
     bounds
 }
 
-/// Appends the rows of `pieces` (same layout), in order, to `out`: the columns on the threads, the largest apart.
-fn append(out: &mut Recording, pieces: &[Recording]) {
+/// Appends the rows of `pieces` (the file's layout), in order, to `out`: the columns on the threads, the largest
+/// apart; with `to_reference`, the pieces' quaternions as `out`'s expected field.
+fn append(out: &mut Recording, pieces: &[Recording], to_reference: Option<AttitudeToReference>) {
     fn extend<T: Clone>(
         out: &mut Vec<T>,
         pieces: &[Recording],
@@ -317,11 +340,25 @@ fn append(out: &mut Recording, pieces: &[Recording]) {
         || extend(mag_ut, pieces, |p| &p.mag_ut),
         || {
             rayon::join(
-                || extend_some(quat, pieces, |p| &p.quat),
+                || match to_reference {
+                    Some(turn) => {
+                        let out = ref_ut.as_mut().expect("made for the turned attitude");
+                        let quat =
+                            |p: &Recording| p.quat.as_ref().expect("the file's layout").len();
+                        out.reserve(pieces.iter().map(quat).sum());
+                        for p in pieces {
+                            let q = p.quat.as_ref().expect("the file's layout");
+                            out.extend(q.iter().map(|q| turn(*q)));
+                        }
+                    }
+                    None => {
+                        extend_some(quat, pieces, |p| &p.quat);
+                        extend_some(ref_ut, pieces, |p| &p.ref_ut);
+                    }
+                },
                 || {
                     extend_some(t_s, pieces, |p| &p.t_s);
                     extend_some(temp_c, pieces, |p| &p.temp_c);
-                    extend_some(ref_ut, pieces, |p| &p.ref_ut);
                     extend_some(gyro_rad_s, pieces, |p| &p.gyro_rad_s);
                     for (j, o) in currents.iter_mut().enumerate() {
                         extend(&mut o.values, pieces, |p| &p.currents[j].values);

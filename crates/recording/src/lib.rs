@@ -65,6 +65,7 @@ mod write;
 pub use error::{ColumnRef, HeaderError, ReadError, ReadErrorKind};
 pub use layout::Layout;
 pub use metadata::{Date, DateError, Location, Metadata};
+pub use read::{AttitudeToReference, ReadOptions};
 pub use recording::{Channel, MissingCounts, Recording, Row, TextColumn};
 pub use sample::{Sample, SampleError};
 pub use write::{

@@ -24,28 +24,75 @@ const BUFFER_BYTES: usize = 256 * 1024;
 /// The UTF-8 byte order mark some editors put at the start of a file.
 const BOM: &[u8] = b"\xef\xbb\xbf";
 
+/// The attitude turned into the expected field in sensor axes, `[w, x, y, z]` (normalised) → µT.
+pub type AttitudeToReference<'a> = &'a (dyn Fn([f64; 4]) -> [f64; 3] + Sync);
+
+/// What the reader keeps of what it reads.
+#[derive(Clone, Copy, Default)]
+pub struct ReadOptions<'a> {
+    /// When the file has attitude quaternions and no `rx,ry,rz` columns, each quaternion is turned into the expected
+    /// field by this function as its block is read and only that is kept (`ref_ut`; `quat` is `None`): 24 bytes a
+    /// row instead of the quaternion's 32, and no second column made from them afterwards. For a caller that needs
+    /// the attitude only through the expected field of a known world field.
+    pub attitude_to_reference: Option<AttitudeToReference<'a>>,
+    /// The temperature column is checked as always but not kept (`temp_c` is `None`): for a caller that does not
+    /// use it.
+    pub skip_temperature: bool,
+}
+
+impl std::fmt::Debug for ReadOptions<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReadOptions")
+            .field(
+                "attitude_to_reference",
+                &self.attitude_to_reference.map(|_| "fn"),
+            )
+            .field("skip_temperature", &self.skip_temperature)
+            .finish()
+    }
+}
+
 impl Recording {
     /// Reads a recording from a file; errors name the file as given.
     pub fn read(path: &Path) -> Result<Recording, ReadError> {
+        Recording::read_with(path, ReadOptions::default())
+    }
+
+    /// [`Recording::read`], keeping what `options` say.
+    pub fn read_with(path: &Path, options: ReadOptions) -> Result<Recording, ReadError> {
         let name = path.display().to_string();
         match File::open(path) {
-            Ok(file) => Recording::from_reader(&name, file),
+            Ok(file) => read_split(&name, file, Split::DEFAULT, options),
             Err(e) => Err(ReadError::new(&name, None, None, ReadErrorKind::Io(e))),
         }
     }
 
     /// Reads a recording from any byte source; `name` stands for the file in errors.
     pub fn from_reader<R: Read>(name: &str, reader: R) -> Result<Recording, ReadError> {
-        read_split(name, reader, Split::DEFAULT)
+        read_split(name, reader, Split::DEFAULT, ReadOptions::default())
+    }
+
+    /// The metadata of a recording file alone (what a caller may need to decide how to read the rows), with the
+    /// errors [`Recording::read`] would give for it.
+    pub fn read_metadata(path: &Path) -> Result<Metadata, ReadError> {
+        let name = path.display().to_string();
+        let file = File::open(path)
+            .map_err(|e| ReadError::new(&name, None, None, ReadErrorKind::Io(e)))?;
+        Ok(read_start(&name, file)?.meta)
     }
 }
 
-/// [`Recording::from_reader`] with the data cut for the threads as `split` says.
-pub(crate) fn read_split<R: Read>(
-    name: &str,
-    reader: R,
-    split: Split,
-) -> Result<Recording, ReadError> {
+/// The start of a file, read up to and including the header line.
+struct Start<R> {
+    meta: Metadata,
+    /// The header line (without a byte order mark) and its 1-based line number.
+    header: (Vec<u8>, u64),
+    /// The rest of the file, line ends made one.
+    input: BufReader<LineEnds<BufReader<R>>>,
+}
+
+/// The start of a file: checked to be text, then its metadata block and header line (see [`read_metadata`]).
+fn read_start<R: Read>(name: &str, reader: R) -> Result<Start<R>, ReadError> {
     let mut raw = BufReader::with_capacity(BUFFER_BYTES, reader);
     let start = raw
         .fill_buf()
@@ -55,6 +102,25 @@ pub(crate) fn read_split<R: Read>(
     }
     let mut input = BufReader::with_capacity(BUFFER_BYTES, LineEnds::new(raw));
     let (meta, header_text, header_line) = read_metadata(name, &mut input)?;
+    Ok(Start {
+        meta,
+        header: (header_text, header_line),
+        input,
+    })
+}
+
+/// [`Recording::from_reader`] with the data cut for the threads as `split` says, keeping what `options` say.
+pub(crate) fn read_split<R: Read>(
+    name: &str,
+    reader: R,
+    split: Split,
+    options: ReadOptions,
+) -> Result<Recording, ReadError> {
+    let Start {
+        meta,
+        header: (header_text, header_line),
+        input,
+    } = read_start(name, reader)?;
     let separator = separator(&header_text)
         .map_err(|kind| ReadError::new(name, Some(header_line), None, kind))?;
     // Counted before the csv reader splits the row, which would take memory for every name.
@@ -113,6 +179,18 @@ pub(crate) fn read_split<R: Read>(
         )
     })?;
 
+    let mut out = Recording::empty(meta, &header.layout);
+    // The attitude is turned into the expected field only where the file has no expected field of its own.
+    let to_reference = options
+        .attitude_to_reference
+        .filter(|_| header.layout.quat && !header.layout.reference);
+    if to_reference.is_some() {
+        out.quat = None;
+        out.ref_ut = Some(Vec::new());
+    }
+    if options.skip_temperature {
+        out.temp_c = None;
+    }
     let rows = Rows {
         parser: RowParser {
             roles: &header.roles,
@@ -122,8 +200,8 @@ pub(crate) fn read_split<R: Read>(
         separator,
         layout: &header.layout,
         time_column: header.roles.iter().position(|r| *r == Role::Time),
+        to_reference,
     };
-    let mut out = Recording::empty(meta, &header.layout);
     let read = match input.take() {
         Some(rest) => rows.read(rest, header_line + 1, &mut out, split),
         None => rows.quoted(&mut csv, (header_line, true), &mut out, Default::default()),

@@ -7,7 +7,7 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::Split;
-use crate::read::read_split;
+use crate::read::{ReadOptions, read_split};
 
 /// The sequential reader.
 const SEQUENTIAL: Split = Split {
@@ -43,7 +43,7 @@ const SPLITS: [Split; 5] = [
 
 /// What a read gives, as text: every column's values (`{:?}` of a float is exact) or the error with its place.
 fn outcome(text: &[u8], split: Split) -> String {
-    match read_split("rec.csv", text, split) {
+    match read_split("rec.csv", text, split, ReadOptions::default()) {
         Ok(rec) => format!("{rec:?}"),
         Err(e) => format!("error {} at {:?} {:?}", e, e.line(), e.column()),
     }
@@ -178,11 +178,81 @@ fn a_quote_after_many_blocks_hands_the_rest_to_the_csv_reader() {
 fn a_row_the_fast_path_gives_up_late_is_read_once() {
     // The fast path has appended `i_coil` and `note` when it meets the space before 20 and hands the row over.
     let text = "mx,my,mz,i_coil,note,temp\n1,2,3,0.5,hi, 20\n4,5,6,0.7,ho,21\n";
-    let rec = read_split("rec.csv", text.as_bytes(), Split::DEFAULT).expect("valid");
+    let rec = read_split(
+        "rec.csv",
+        text.as_bytes(),
+        Split::DEFAULT,
+        ReadOptions::default(),
+    )
+    .expect("valid");
     assert_eq!(rec.currents[0].values, [0.5, 0.7]);
     assert_eq!(rec.extra[0].values, ["hi", "ho"]);
     assert_eq!(rec.temp_c, Some(vec![20.0, 21.0]));
     assert_same(text.as_bytes());
+}
+
+/// A stand-in for the attitude turned into an expected field: any function of all four components.
+fn turn(q: [f64; 4]) -> [f64; 3] {
+    [q[0] * q[1] + q[2], q[3] - q[0], q[1] * q[2] * q[3]]
+}
+
+/// The plain read with the quaternions turned afterwards (and the temperature dropped, if `skip_temperature`), or
+/// its error, as text.
+fn turned_after(text: &[u8], skip_temperature: bool) -> String {
+    match read_split("rec.csv", text, SEQUENTIAL, ReadOptions::default()) {
+        Ok(mut rec) => {
+            if rec.ref_ut.is_none()
+                && let Some(q) = rec.quat.take()
+            {
+                rec.ref_ut = Some(q.into_iter().map(turn).collect());
+            }
+            if skip_temperature {
+                rec.temp_c = None;
+            }
+            format!("{rec:?}")
+        }
+        Err(e) => format!("error {} at {:?} {:?}", e, e.line(), e.column()),
+    }
+}
+
+#[test]
+fn quaternions_turned_while_reading_are_those_turned_after_it() {
+    let mut texts: Vec<Vec<u8>> = (0..20)
+        .map(|seed| file(seed, 150, seed as usize % 3, "\n"))
+        .collect();
+    // Rows without an attitude, a file with quotes (the csv reader's batches), and a file that has its own expected
+    // field, whose quaternions stay as they are.
+    texts.push(
+        b"t,mx,my,mz,temp,qw,qx,qy,qz\n0,1,2,3,20,1,0,0,0\n1,1,2,3,,,,,\n2,1,2,3,21,0,1,0,0\n"
+            .to_vec(),
+    );
+    let mut quoted = String::from("t,mx,my,mz,temp,qw,qx,qy,qz,note\n");
+    for i in 0..40_000 {
+        quoted.push_str(&format!("{i},1,2,3,20,0.6,0,0.8,0,\"n, {i}\"\n"));
+    }
+    texts.push(quoted.into_bytes());
+    texts.push(b"t,mx,my,mz,qw,qx,qy,qz,rx,ry,rz\n0,1,2,3,1,0,0,0,4,5,6\n".to_vec());
+    for skip_temperature in [false, true] {
+        let options = ReadOptions {
+            attitude_to_reference: Some(&turn),
+            skip_temperature,
+        };
+        for text in &texts {
+            let want = turned_after(text, skip_temperature);
+            for split in SPLITS.iter().copied().chain([SEQUENTIAL]) {
+                let got = match read_split("rec.csv", &text[..], split, options) {
+                    Ok(rec) => format!("{rec:?}"),
+                    Err(e) => format!("error {} at {:?} {:?}", e, e.line(), e.column()),
+                };
+                assert!(
+                    got == want,
+                    "{split:?}: {}\nwant {}",
+                    &got[..got.len().min(400)],
+                    &want[..want.len().min(400)]
+                );
+            }
+        }
+    }
 }
 
 /// Bytes that steer a mutation into the interesting parts of the grammar.
