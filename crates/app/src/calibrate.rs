@@ -306,15 +306,26 @@ pub fn expected_field<'a>(
 /// Reads a recording to calibrate it with `method` against the field `resolve` finds for its metadata. Without the
 /// diagnosis, a vector fit sees the attitude only through the expected field, so the quaternions are turned into it
 /// as the rows are read (the recording then has `ref_ut` and no `quat`): 24 bytes a row kept instead of 32, and no
-/// column made from them for the fit; and the temperature, which only the diagnosis uses, is not kept.
+/// column made from them for the fit; and the temperature, which only the diagnosis uses, is not kept. The scalar
+/// method without the diagnosis keeps neither the attitude nor the temperature.
 pub fn read_to_calibrate(
     path: &Path,
     method: Method,
     diagnose: bool,
     resolve: impl FnOnce(&Metadata) -> anyhow::Result<ReferenceField>,
 ) -> anyhow::Result<(Recording, ReferenceField)> {
-    if diagnose || method == Method::Scalar {
+    if diagnose {
         let rec = Recording::read(path)?;
+        let field = resolve(&rec.meta)?;
+        return Ok((rec, field));
+    }
+    if method == Method::Scalar {
+        let options = ReadOptions {
+            skip_temperature: true,
+            skip_attitude: true,
+            ..ReadOptions::default()
+        };
+        let rec = Recording::read_with(path, options)?;
         let field = resolve(&rec.meta)?;
         return Ok((rec, field));
     }
@@ -325,6 +336,7 @@ pub fn read_to_calibrate(
             let options = ReadOptions {
                 attitude_to_reference: Some(&turn),
                 skip_temperature: true,
+                ..ReadOptions::default()
             };
             Recording::read_with(path, options)?
         }
@@ -709,13 +721,18 @@ mod tests {
             assert_eq!(got.model(), want.model());
             assert_eq!(got.residual_rms_ut, want.residual_rms_ut);
         }
-        // With the diagnosis, or for the scalar method, the recording is read whole.
+        // With the diagnosis, the recording is read whole.
         let (rec, _) =
             read_to_calibrate(&path, Method::Vector, true, |_| Ok(field.clone())).unwrap();
         assert_eq!(rec, whole);
-        let (rec, _) =
+        // The scalar method keeps neither the attitude nor the temperature, and fits as on the whole recording.
+        let (rec, f) =
             read_to_calibrate(&path, Method::Scalar, false, |_| Ok(field.clone())).unwrap();
-        assert_eq!(rec, whole);
+        assert!(rec.quat.is_none() && rec.ref_ut.is_none() && rec.temp_c.is_none());
+        assert_eq!((&rec.mag_ut, &rec.t_s), (&whole.mag_ut, &whole.t_s));
+        let want = calibrate(&whole, Method::Scalar, field.clone(), false).unwrap();
+        let got = calibrate(&rec, Method::Scalar, f, false).unwrap();
+        assert_eq!(got.model(), want.model());
     }
 
     #[test]

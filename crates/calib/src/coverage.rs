@@ -174,6 +174,20 @@ pub struct SphereGrid {
     per_band: usize,
     /// The pseudo-angle ([`pseudo_angle`]) of each longitude boundary but the first, in order.
     boundaries: Vec<f64>,
+    /// The longitude cell of each of [`LONGITUDE_SLOTS`] equal slots of the pseudo-angle's range, or
+    /// [`NEAR_BOUNDARY`] for a slot a boundary comes near.
+    slots: Vec<u16>,
+}
+
+/// Slots of the pseudo-angle's range, −2 to 2, in [`SphereGrid`]'s table of longitude cells.
+const LONGITUDE_SLOTS: usize = 1024;
+
+/// A slot with a boundary in it or near it (the wrap at ±2 included): its longitudes are found the long way.
+const NEAR_BOUNDARY: u16 = u16::MAX;
+
+/// The slot of a finite pseudo-angle (`LONGITUDE_SLOTS` at 2).
+fn slot(p: f64) -> usize {
+    ((p + 2.0) * (LONGITUDE_SLOTS as f64 / 4.0)) as usize
 }
 
 /// A function of the direction `(x, y)` that increases with `atan2(y, x)` from −2 at −π to 2 at π, without a
@@ -191,16 +205,35 @@ impl SphereGrid {
     pub fn new(cells: usize) -> SphereGrid {
         let bands = ((cells as f64 / 2.0).sqrt().round() as usize).max(1);
         let per_band = ((cells as f64 / bands as f64).round() as usize).max(1);
-        let boundaries = (1..per_band)
+        let boundaries: Vec<f64> = (1..per_band)
             .map(|k| {
                 let lon = k as f64 * std::f64::consts::TAU / per_band as f64 - std::f64::consts::PI;
                 pseudo_angle(lon.cos(), lon.sin())
+            })
+            .collect();
+        // A slot is decided by the table only if every pseudo-angle in it, give or take twice the margin (far more
+        // than the rounding of `slot`), is clear of every boundary: the long way would find the same cell.
+        let width = 4.0 / LONGITUDE_SLOTS as f64;
+        let margin = 2.0 * BOUNDARY_MARGIN;
+        let slots = (0..LONGITUDE_SLOTS)
+            .map(|i| {
+                let (lo, hi) = (-2.0 + i as f64 * width, -2.0 + (i + 1) as f64 * width);
+                let near = [-2.0, 2.0]
+                    .iter()
+                    .chain(&boundaries)
+                    .any(|b| *b > lo - margin && *b < hi + margin);
+                let cell = boundaries.partition_point(|b| *b <= lo);
+                match u16::try_from(cell) {
+                    Ok(c) if !near && c != NEAR_BOUNDARY => c,
+                    _ => NEAR_BOUNDARY,
+                }
             })
             .collect();
         SphereGrid {
             bands,
             per_band,
             boundaries,
+            slots,
         }
     }
 
@@ -225,10 +258,22 @@ impl SphereGrid {
         Some(band * self.per_band + self.longitude_cell(d[0], d[1]))
     }
 
-    /// The longitude cell of `(x, y)`: `⌊(atan2(y, x) + π)/2π · per_band⌋`, found by comparing pseudo-angles with the
-    /// boundaries', and by `atan2` itself near one of them (or near ±π, or without a horizontal part).
+    /// The longitude cell of `(x, y)`: `⌊(atan2(y, x) + π)/2π · per_band⌋`, from the table of slots of the
+    /// pseudo-angle, or the long way ([`SphereGrid::longitude_cell_searched`]) in a slot a boundary comes near.
     fn longitude_cell(&self, x: f64, y: f64) -> usize {
         let p = pseudo_angle(x, y);
+        if p.is_finite()
+            && let Some(&cell) = self.slots.get(slot(p))
+            && cell != NEAR_BOUNDARY
+        {
+            return usize::from(cell);
+        }
+        self.longitude_cell_searched(x, y, p)
+    }
+
+    /// The longitude cell of `(x, y)` with pseudo-angle `p`, found by comparing `p` with the boundaries', and by
+    /// `atan2` itself near one of them (or near ±π, or without a horizontal part).
+    fn longitude_cell_searched(&self, x: f64, y: f64, p: f64) -> usize {
         let cell = self.boundaries.partition_point(|b| *b <= p);
         // The boundaries either side (±2 at the ends, where the longitude wraps).
         let below = cell.checked_sub(1).map_or(-2.0, |k| self.boundaries[k]);
@@ -343,6 +388,44 @@ mod tests {
             Coverage::of(&line).check(),
             Err(CoverageError::OneDirection { .. })
         ));
+    }
+
+    #[test]
+    fn the_table_of_longitudes_gives_the_cells_of_the_search() {
+        // Directions at every slot's edges and just either side (pseudo-angle p on the diamond |x| + |y| = 1), and
+        // around the sphere, on grids of several sizes.
+        let on_diamond = |p: f64| {
+            let x = 1.0 - p.abs();
+            (x, (1.0 - x.abs()).copysign(p))
+        };
+        for cells in [8, 100, 1000, 5000] {
+            let grid = SphereGrid::new(cells);
+            let mut cases = Vec::new();
+            for i in 0..=LONGITUDE_SLOTS {
+                let edge = -2.0 + 4.0 * i as f64 / LONGITUDE_SLOTS as f64;
+                for step in [-1e-9, -1e-15, 0.0, 1e-15, 1e-9, 1e-3] {
+                    cases.push(on_diamond((edge + step).clamp(-2.0, 2.0)));
+                }
+            }
+            cases.extend((0..20_000).map(|i| {
+                let a = i as f64 * 2.399963;
+                (a.cos() * (0.1 + (i % 5) as f64), a.sin())
+            }));
+            for (x, y) in cases {
+                let p = pseudo_angle(x, y);
+                assert_eq!(
+                    grid.longitude_cell(x, y),
+                    grid.longitude_cell_searched(x, y, p),
+                    "{cells} cells: ({x}, {y})"
+                );
+            }
+            // Most slots are decided by the table.
+            let table = grid.slots.iter().filter(|s| **s != NEAR_BOUNDARY).count();
+            assert!(
+                table > LONGITUDE_SLOTS / 2 || cells > 1000,
+                "{cells}: {table}"
+            );
+        }
     }
 
     #[test]

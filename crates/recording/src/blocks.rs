@@ -50,8 +50,11 @@ pub(crate) struct Rows<'h> {
     /// The 0-based column of `t`, if any (where a `t` going backwards across pieces is reported).
     pub time_column: Option<usize>,
     /// Turns the quaternions into the expected field as the rows are appended (`out` then has `ref_ut` and no
-    /// `quat`; the rows are parsed with the file's layout).
+    /// `quat`).
     pub to_reference: Option<AttitudeToReference<'h>>,
+    /// `out` keeps other columns than the file has ([`crate::ReadOptions`]): rows are then always parsed with the
+    /// file's layout, checked alike, and appended in batches.
+    pub reshaped: bool,
 }
 
 /// What the join needs to know of a piece (its rows are in a buffer of their own).
@@ -225,10 +228,9 @@ impl Rows<'_> {
         mut time: TimeLink,
     ) -> Result<(), Result<LineProblem, io::Error>> {
         let mut record = ByteRecord::new();
-        // Rows whose quaternions become the expected field are parsed with the file's layout and appended in batches.
         let mut batch = self
-            .to_reference
-            .map(|_| Recording::empty(Metadata::default(), self.layout));
+            .reshaped
+            .then(|| Recording::empty(Metadata::default(), self.layout));
         while csv
             .read_byte_record(&mut record)
             .map_err(|e| Err(e.into()))?
@@ -256,7 +258,7 @@ impl Rows<'_> {
     }
 }
 
-/// Rows of a file with quotes parsed before they are appended, when they are turned as they are appended.
+/// Rows of a file with quotes parsed before they are appended, when the recording keeps other columns than the file.
 const QUOTED_BATCH_ROWS: usize = 1 << 14;
 
 /// A csv reader of rows separated by `separator` and ended by '\n' only (every line end is one by now). Give it input

@@ -38,6 +38,9 @@ pub struct ReadOptions<'a> {
     /// The temperature column is checked as always but not kept (`temp_c` is `None`): for a caller that does not
     /// use it.
     pub skip_temperature: bool,
+    /// The attitude and expected field columns are checked as always but not kept (`quat` and `ref_ut` are `None`;
+    /// `attitude_to_reference` is then not used): for a caller that fits the magnitude only.
+    pub skip_attitude: bool,
 }
 
 impl std::fmt::Debug for ReadOptions<'_> {
@@ -48,6 +51,7 @@ impl std::fmt::Debug for ReadOptions<'_> {
                 &self.attitude_to_reference.map(|_| "fn"),
             )
             .field("skip_temperature", &self.skip_temperature)
+            .field("skip_attitude", &self.skip_attitude)
             .finish()
     }
 }
@@ -183,13 +187,17 @@ pub(crate) fn read_split<R: Read>(
     // The attitude is turned into the expected field only where the file has no expected field of its own.
     let to_reference = options
         .attitude_to_reference
-        .filter(|_| header.layout.quat && !header.layout.reference);
+        .filter(|_| header.layout.quat && !header.layout.reference && !options.skip_attitude);
     if to_reference.is_some() {
         out.quat = None;
         out.ref_ut = Some(Vec::new());
     }
     if options.skip_temperature {
         out.temp_c = None;
+    }
+    if options.skip_attitude {
+        out.quat = None;
+        out.ref_ut = None;
     }
     let rows = Rows {
         parser: RowParser {
@@ -201,6 +209,7 @@ pub(crate) fn read_split<R: Read>(
         layout: &header.layout,
         time_column: header.roles.iter().position(|r| *r == Role::Time),
         to_reference,
+        reshaped: to_reference.is_some() || options.skip_temperature || options.skip_attitude,
     };
     let read = match input.take() {
         Some(rest) => rows.read(rest, header_line + 1, &mut out, split),

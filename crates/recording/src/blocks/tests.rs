@@ -196,11 +196,15 @@ fn turn(q: [f64; 4]) -> [f64; 3] {
     [q[0] * q[1] + q[2], q[3] - q[0], q[1] * q[2] * q[3]]
 }
 
-/// The plain read with the quaternions turned afterwards (and the temperature dropped, if `skip_temperature`), or
-/// its error, as text.
-fn turned_after(text: &[u8], skip_temperature: bool) -> String {
+/// The plain read with the quaternions turned afterwards (and the temperature or the attitude dropped, if asked),
+/// or its error, as text.
+fn turned_after(text: &[u8], skip_temperature: bool, skip_attitude: bool) -> String {
     match read_split("rec.csv", text, SEQUENTIAL, ReadOptions::default()) {
         Ok(mut rec) => {
+            if skip_attitude {
+                rec.quat = None;
+                rec.ref_ut = None;
+            }
             if rec.ref_ut.is_none()
                 && let Some(q) = rec.quat.take()
             {
@@ -232,13 +236,14 @@ fn quaternions_turned_while_reading_are_those_turned_after_it() {
     }
     texts.push(quoted.into_bytes());
     texts.push(b"t,mx,my,mz,qw,qx,qy,qz,rx,ry,rz\n0,1,2,3,1,0,0,0,4,5,6\n".to_vec());
-    for skip_temperature in [false, true] {
+    for (skip_temperature, skip_attitude) in [(false, false), (true, false), (true, true)] {
         let options = ReadOptions {
             attitude_to_reference: Some(&turn),
             skip_temperature,
+            skip_attitude,
         };
         for text in &texts {
-            let want = turned_after(text, skip_temperature);
+            let want = turned_after(text, skip_temperature, skip_attitude);
             for split in SPLITS.iter().copied().chain([SEQUENTIAL]) {
                 let got = match read_split("rec.csv", &text[..], split, options) {
                     Ok(rec) => format!("{rec:?}"),
