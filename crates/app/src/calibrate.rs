@@ -11,7 +11,7 @@ use magcal_calib::robust::{self, RobustProblem};
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Inputs, Model};
-use magcal_recording::{Metadata, ReadOptions, Recording};
+use magcal_recording::{AttitudeToReference, Metadata, ReadOptions, Recording};
 use std::path::Path;
 
 use crate::checks;
@@ -314,15 +314,10 @@ pub fn read_to_calibrate(
     diagnose: bool,
     resolve: impl FnOnce(&Metadata) -> anyhow::Result<ReferenceField>,
 ) -> anyhow::Result<(Recording, ReferenceField)> {
-    if diagnose {
-        let rec = Recording::read(path)?;
-        let field = resolve(&rec.meta)?;
-        return Ok((rec, field));
-    }
-    if method == Method::Scalar {
+    if diagnose || method == Method::Scalar {
         let options = ReadOptions {
-            skip_temperature: true,
-            skip_attitude: true,
+            skip_temperature: !diagnose,
+            skip_attitude: !diagnose,
             ..ReadOptions::default()
         };
         let rec = Recording::read_with(path, options)?;
@@ -330,18 +325,15 @@ pub fn read_to_calibrate(
         return Ok((rec, field));
     }
     let field = resolve(&Recording::read_metadata(path)?)?;
-    let rec = match field.vector() {
-        Some(f) => {
-            let turn = move |q: [f64; 4]| frames::expected_sensor_field(q, f);
-            let options = ReadOptions {
-                attitude_to_reference: Some(&turn),
-                skip_temperature: true,
-                ..ReadOptions::default()
-            };
-            Recording::read_with(path, options)?
-        }
-        None => Recording::read(path)?,
+    let turn = field
+        .vector()
+        .map(|f| move |q: [f64; 4]| frames::expected_sensor_field(q, f));
+    let options = ReadOptions {
+        attitude_to_reference: turn.as_ref().map(|t| t as AttitudeToReference),
+        skip_temperature: true,
+        ..ReadOptions::default()
     };
+    let rec = Recording::read_with(path, options)?;
     Ok((rec, field))
 }
 
