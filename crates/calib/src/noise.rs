@@ -175,7 +175,16 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
             taps([1.0, -4.0, 6.0, -4.0, 1.0], w),
         ]
     };
-    let diff = |o: usize, i: usize| diffs(&window(i))[o];
+    // Order o + 1 alone, for the probes.
+    let diff = |o: usize, i: usize| {
+        let w = window(i);
+        match o {
+            0 => taps([1.0, -1.0], &w),
+            1 => taps([1.0, -2.0, 1.0], &w),
+            2 => taps([1.0, -3.0, 3.0, -1.0], &w),
+            _ => taps([1.0, -4.0, 6.0, -4.0, 1.0], &w),
+        }
+    };
     type Sums = [([f64; 3], [usize; 3]); ORDERS];
     let rms_within = |limit: &[[f64; 3]; ORDERS]| -> [[f64; 3]; ORDERS] {
         let sums: Sums = chunks::fold(
@@ -338,13 +347,16 @@ fn still_segment(raw_ut: &[[f64; 3]], diff_sigma: [f64; 3]) -> Option<(usize, us
 
 /// Sample standard deviation per axis, on all threads.
 fn plain_sigma(x: &[[f64; 3]]) -> [f64; 3] {
-    let add = |a: [f64; 3], b: [f64; 3]| std::array::from_fn(|k| a[k] + b[k]);
-    let sum = |f: &(dyn Fn(&[f64; 3]) -> [f64; 3] + Sync)| {
-        chunks::fold(x.len(), |r| x[r].iter().map(f).fold([0.0; 3], add), add).unwrap_or_default()
-    };
+    fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|k| a[k] + b[k])
+    }
+    // Generic rather than `dyn`: called once per still window too, where a call per sample would dominate.
+    fn sum(x: &[[f64; 3]], f: impl Fn(&[f64; 3]) -> [f64; 3] + Sync) -> [f64; 3] {
+        chunks::fold(x.len(), |r| x[r].iter().map(&f).fold([0.0; 3], add), add).unwrap_or_default()
+    }
     let n = x.len() as f64;
-    let mean = sum(&|v| *v).map(|s| s / n);
-    let ss = sum(&|v| std::array::from_fn(|k| (v[k] - mean[k]).powi(2)));
+    let mean = sum(x, |v| *v).map(|s| s / n);
+    let ss = sum(x, |v| std::array::from_fn(|k| (v[k] - mean[k]).powi(2)));
     ss.map(|s| (s / (n - 1.0)).sqrt())
 }
 
