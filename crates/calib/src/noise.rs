@@ -167,24 +167,15 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
     let window = |i: usize| -> [[f64; 3]; 5] {
         std::array::from_fn(|j| raw_ut.get(i + j).copied().unwrap_or([f64::NAN; 3]))
     };
-    let diffs = |w: &[[f64; 3]; 5]| -> [[f64; 3]; ORDERS] {
-        [
-            taps([1.0, -1.0], w),
-            taps([1.0, -2.0, 1.0], w),
-            taps([1.0, -3.0, 3.0, -1.0], w),
-            taps([1.0, -4.0, 6.0, -4.0, 1.0], w),
-        ]
+    // Order o + 1 alone (the probes), and every order at once (the pass).
+    let order = |o: usize, w: &[[f64; 3]; 5]| match o {
+        0 => taps([1.0, -1.0], w),
+        1 => taps([1.0, -2.0, 1.0], w),
+        2 => taps([1.0, -3.0, 3.0, -1.0], w),
+        _ => taps([1.0, -4.0, 6.0, -4.0, 1.0], w),
     };
-    // Order o + 1 alone, for the probes.
-    let diff = |o: usize, i: usize| {
-        let w = window(i);
-        match o {
-            0 => taps([1.0, -1.0], &w),
-            1 => taps([1.0, -2.0, 1.0], &w),
-            2 => taps([1.0, -3.0, 3.0, -1.0], &w),
-            _ => taps([1.0, -4.0, 6.0, -4.0, 1.0], &w),
-        }
-    };
+    let diffs = |w: &[[f64; 3]; 5]| -> [[f64; 3]; ORDERS] { std::array::from_fn(|o| order(o, w)) };
+    let diff = |o: usize, i: usize| order(o, &window(i));
     type Sums = [([f64; 3], [usize; 3]); ORDERS];
     let rms_within = |limit: &[[f64; 3]; ORDERS]| -> [[f64; 3]; ORDERS] {
         let sums: Sums = chunks::fold(
