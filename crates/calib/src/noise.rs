@@ -15,7 +15,7 @@
 //! residual allows (see [`crate::vector`]). Readings on a grid (the chip's LSB) are detected, and when the noise is
 //! below the LSB the quantisation floor `LSB/√12` is added.
 
-use crate::chunks;
+use crate::{chunks, robust};
 
 /// How the noise floor was obtained.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -139,15 +139,6 @@ fn binomial(n: usize, k: usize) -> f64 {
     (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
 }
 
-/// The median of some values (reordered in place); NaN when empty.
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
-}
-
 /// Orders of the differences tried.
 const ORDERS: usize = 4;
 
@@ -225,12 +216,11 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
         // One axis at a time, so that the probe is one column of values.
         let stride = count(o).div_ceil(MEDIAN_PROBE).max(1);
         std::array::from_fn(|k| {
-            let mut abs: Vec<f64> = (0..count(o))
+            let abs: Vec<f64> = (0..count(o))
                 .step_by(stride)
                 .map(|i| diff(o, i)[k].abs())
-                .filter(|d| d.is_finite())
                 .collect();
-            median(&mut abs)
+            robust::median(&abs)
         })
     });
     let mad: [[f64; 3]; ORDERS] = std::array::from_fn(|o| mad[o]);

@@ -431,7 +431,7 @@ fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
 const MEDIAN_COPY_MAX: usize = 1 << 16;
 
 /// The median of the finite values of `e` (the `len / 2`-th smallest by `f64::total_cmp`; NaN if none).
-fn median(e: &[f64]) -> f64 {
+pub(crate) fn median(e: &[f64]) -> f64 {
     if e.len() > MEDIAN_COPY_MAX {
         return median_by_bins(e);
     }
@@ -743,7 +743,6 @@ mod tests {
         assert_eq!(r.excluded(), 1450);
     }
 
-    /// White noise of unit variance, `n` samples.
     #[test]
     fn the_median_by_bins_is_the_median_of_a_copy() {
         use rand::{RngExt, SeedableRng};
@@ -815,6 +814,7 @@ mod tests {
         }
     }
 
+    /// White noise of unit variance, `n` samples.
     fn white(n: usize, seed: u64) -> Vec<f64> {
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};
