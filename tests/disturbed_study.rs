@@ -526,17 +526,19 @@ fn calibrated(seed: u64, vector: bool) -> (Scenario, Calibration) {
     (s, cal)
 }
 
-/// Seed 15 without the attitude: fields on the board for 30 s show in |B| only where they point along the field, so
-/// the robust fit keeps the lulls between (perturbed by up to 11 µT); the diagnosis locates each whole window, and
-/// the final model is fitted without it (measured: offset error 0.320 → 0.009 µT, A 0.0071 → 0.0002).
+/// Seed 15 without the attitude: fields on the board for 30 s show in |B| only where they point along the field
+/// (`d·u`), so a scan for a constant shift kept the lulls between (perturbed by up to 11 µT; the base offset was
+/// 0.320 µT off, A 0.0071, and only the refit around the diagnosis' spans recovered them). The base fit's window
+/// scan now fits `d·u` and leaves the whole windows out (measured: offset error 0.006 µT, A 0.0003), and the
+/// diagnosis, which takes the scalar base fit's exclusions as they are, keeps that.
 #[test]
-fn the_rows_a_located_window_leaves_out_are_left_out_of_the_final_fit() {
+fn fields_on_the_board_that_average_out_in_the_magnitude_are_left_out_of_the_base_fit() {
     let seed = 15;
     let (s, cal) = calibrated(seed, false);
     let (truth_a, truth_offset) = truth(&s, false);
     let (base_a, base_o) = errors(&cal.base_model(), &truth_a, truth_offset);
     let (final_a, final_o) = errors(&cal.model(), &truth_a, truth_offset);
-    assert!(base_o > 0.2 && base_a > 0.005, "base {base_a} {base_o}");
+    assert!(base_o < 0.05 && base_a < 0.001, "base {base_a} {base_o}");
     assert!(
         final_o < 0.05 && final_a < 0.001,
         "final {final_a} {final_o}"
@@ -590,14 +592,15 @@ fn a_magnets_tail_widens_the_standard_errors_to_cover_its_bias() {
     assert!(z <= 3.0, "{z} standard errors off at {at}");
 }
 
-/// Seed 179 without the attitude: the diagnosis locates spans a little wider than the robust fit left out, and
+/// Seed 159 with the attitude: the diagnosis locates spans a little wider than the robust fit left out, and
 /// fitting without those edges predicts held-out rows no better, so the base fit — which kept them — stands. The
 /// report used to call the whole spans "left out of the calibration" all the same; now every sample it says is left
-/// out is one the fit did not use, and a span whose edges stayed in says how many.
+/// out is one the fit did not use, and a span whose samples stayed in says how many, or that all did. (The scalar
+/// method's spans are the base fit's exclusions, so there it cannot happen.)
 #[test]
 fn what_the_report_says_is_left_out_is_left_out() {
-    let seed = 179;
-    let (_, cal) = calibrated(seed, false);
+    let seed = 159;
+    let (_, cal) = calibrated(seed, true);
     let d = cal.diagnosis.as_ref().unwrap();
     let r = &d.residuals;
     let wrong = r
@@ -610,13 +613,12 @@ fn what_the_report_says_is_left_out_is_left_out() {
     let partly: Vec<_> = d.spans.iter().filter(|sp| sp.kept_samples > 0).collect();
     assert!(!partly.is_empty(), "{:?}", d.spans);
     for sp in partly {
-        assert!(
-            !sp.modelled
-                && sp
-                    .explanation
-                    .contains(&format!("{} of its", sp.kept_samples)),
-            "{sp:?}"
-        );
+        let says = if sp.wholly_kept() {
+            "kept in the calibration".to_string()
+        } else {
+            format!("{} of its", sp.kept_samples)
+        };
+        assert!(!sp.modelled && sp.explanation.contains(&says), "{sp:?}");
     }
 }
 
@@ -647,16 +649,18 @@ fn vector_method_calibrates_around_gross_disturbances() {
 fn scalar_method_calibrates_around_gross_disturbances() {
     let t = study(false);
     report("scalar method", &t);
-    // Measured 2026-11-24: 93.5 % good (92.5 % before the standard errors saw residuals alike over blocks of time, 92.0 %
-    // before the final fit left out the disturbed rows the diagnosis located
-    // beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration steps and shifted
-    // windows), 98.9 % located, none worse (1 before the guard bands around spans left out), 0 of 50 false alarms,
-    // 1 refused (a 230 µT field on the board for a fifth of the recording leaves a direction undetermined). Short of
-    // the 95 %: see docs/diagnosis.md.
+    // Measured 2026-11-25: 95.0 % good (93.5 % before the base fit's window scan fitted a field fixed to the sensor
+    // as well as one fixed in the room, and the diagnosis took its exclusions as they were; 92.5 % before the
+    // standard errors saw residuals alike over blocks of time, 92.0 % before the final fit left out the disturbed
+    // rows the diagnosis located beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration
+    // steps and shifted windows), 98.9 % located, none worse (1 before a scalar finding had to explain a quarter of
+    // the residual's excess), 0 of 50 false alarms, 1 refused (a 230 µT field on the board for a fifth of the
+    // recording and a magnet leave a direction undetermined). The targets, just; these floors keep them, less
+    // one run of good.
     check(
         &t,
         &Floor {
-            good_pct: 93.0,
+            good_pct: 94.5,
             located_pct: 98.0,
             worse: 0,
             false_alarm_pct: 1.0,

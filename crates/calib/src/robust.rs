@@ -22,10 +22,11 @@
 //!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
 //!    samples in between are no cleaner. Without gross disturbances nothing is excluded and the fit *is* the
 //!    least-squares fit.
-//! 4. **Shifted windows** (a problem that has them, see [`RobustProblem::shifted`]): a field fixed in the room for a
-//!    while changes the scalar method's magnitude by a constant whatever the attitude, often too little to be gross;
-//!    windows where the signed residual is shifted by a constant are found by a scan ([`shifted_windows`]) and
-//!    excluded too, and the rest fitted again.
+//! 4. **Shifted windows** (a problem that has them, see [`RobustProblem::shifted`]): in the scalar method's
+//!    magnitude a field fixed in the room for a while shows as a constant, one fixed to the sensor as `d·u` along
+//!    the field's direction `u` (which averages out over a turning window), often too little to be gross; windows of
+//!    up to a quarter of the recording where the signed residual moves so are found by a scan ([`shifted_windows`])
+//!    and excluded too, and the rest fitted again.
 
 use crate::FitError;
 use crate::chunks;
@@ -562,20 +563,31 @@ pub fn excluded_runs(kept: &[bool]) -> Vec<(usize, usize)> {
 }
 
 /// A window of the residual is shifted when its scan statistic exceeds this (in units of the residual's long-run
-/// variance, see [`long_run_variance`]: the evidence the diagnosis demands of the vector method's scanned disturbance
-/// window)…
-const SHIFT_SCAN_PENALTY: f64 = 24.0;
-/// …and its shift is at least this many times the sensor's noise: smaller ones are within the field's own wander
-/// across a room as the sensor moves (up to 2.2 times in |B| on the physical recordings), not a disturbance.
+/// variance, see [`long_run_variance`]; the χ² quantile of four degrees of freedom at 1e-6, one per term the scan
+/// fits)…
+const SHIFT_SCAN_PENALTY: f64 = 30.7;
+/// …and the shift it fits is at least this many times the sensor's noise (RMS over the window): smaller ones are
+/// within the field's own wander across a room as the sensor moves (up to 2.2 times in |B| on the physical
+/// recordings), not a disturbance…
 const SHIFT_MIN_NOISE: f64 = 3.0;
+/// …and it holds at most this share of the samples scanned: a longer one is a drift of the offset or the room's
+/// gradients along the path (on an undisturbed phone recording, windows of a third and a half of it), not a field
+/// that came and went.
+const SHIFT_MAX_SHARE: f64 = 0.25;
 /// At most this many shifted windows are looked for.
 const MAX_SHIFTS: usize = 4;
 
-/// The windows where a signed residual `e` (in time order) is shifted by a constant among the `kept` samples, each
-/// found by the window scan on the samples the previous ones left, as sample ranges `[start, end)`: the scalar
-/// method's magnitude while a field is fixed in the room for a while, too small to be gross. A window holds at most
-/// half the samples scanned; `noise` is the noise of `e`.
-pub fn shifted_windows(e: &[f64], kept: &[bool], noise: f64) -> Vec<(usize, usize)> {
+/// The windows where a signed residual `e` (in time order, the scalar method's magnitude) is shifted among the
+/// `kept` samples, each found by a window scan on the samples the previous ones left, as sample ranges
+/// `[start, end)`: while a field is fixed in the room for a while, |B| moves by a constant; while one is fixed to
+/// the sensor, by `d·u` (`u`: the field's direction per sample, sensor axes), which averages out over a turning
+/// window; either may be too small to be gross. `noise` is the noise of `e`.
+pub fn shifted_windows(
+    e: &[f64],
+    u: &[[f64; 3]],
+    kept: &[bool],
+    noise: f64,
+) -> Vec<(usize, usize)> {
     let mut out: Vec<(usize, usize)> = Vec::new();
     let mut free = kept.to_vec();
     for _ in 0..MAX_SHIFTS {
@@ -585,16 +597,18 @@ pub fn shifted_windows(e: &[f64], kept: &[bool], noise: f64) -> Vec<(usize, usiz
         let m = idx.len() as f64;
         let mean = idx.iter().map(|&i| e[i]).sum::<f64>() / m;
         let values: Vec<f64> = idx.iter().map(|&i| e[i] - mean).collect();
+        let dirs: Vec<[f64; 3]> = idx.iter().map(|&i| u[i]).collect();
         let sigma2 = values.iter().map(|v| v * v).sum::<f64>() / m;
         let sigma2 = sigma2.max(long_run_variance(&values));
-        let Some(w) = crate::diagnosis::scan::window(&values, sigma2) else {
+        let Some(w) = crate::diagnosis::scan::window_with_directions(&values, &dirs, sigma2) else {
             break;
         };
+        let size = crate::diagnosis::scan::window_terms_rms(&values, &dirs, w.start, w.end);
         let len = (w.end - w.start) as f64;
-        let shift = values[w.start..w.end].iter().sum::<f64>() / len;
-        // The rest's mean moves the opposite way: the shift against it.
-        let step = shift * m / (m - len);
-        if w.stat < SHIFT_SCAN_PENALTY || step.abs() < SHIFT_MIN_NOISE * noise || 2.0 * len > m {
+        if w.stat < SHIFT_SCAN_PENALTY
+            || size < SHIFT_MIN_NOISE * noise
+            || len > SHIFT_MAX_SHARE * m
+        {
             break;
         }
         let (a, b) = (idx[w.start], idx[w.end - 1] + 1);
@@ -822,24 +836,54 @@ mod tests {
         (0..n).map(|_| StandardNormal.sample(&mut rng)).collect()
     }
 
+    /// A field direction that turns about a tilted axis once every `period` samples, `n` samples.
+    fn turning(n: usize, period: f64) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let a = i as f64 * std::f64::consts::TAU / period;
+                let (s, c) = a.sin_cos();
+                [0.8 * c, 0.8 * s, 0.6]
+            })
+            .collect()
+    }
+
     #[test]
     fn a_shifted_window_is_found_and_noise_alone_finds_none() {
         let kept = vec![true; 4000];
+        let u = turning(4000, 500.0);
         for seed in 0..5 {
-            assert_eq!(shifted_windows(&white(4000, seed), &kept, 1.0), vec![]);
+            assert_eq!(shifted_windows(&white(4000, seed), &u, &kept, 1.0), vec![]);
         }
         let mut e = white(4000, 9);
         for x in &mut e[1200..1600] {
             *x += 5.0;
         }
-        let found = shifted_windows(&e, &kept, 1.0);
+        let found = shifted_windows(&e, &u, &kept, 1.0);
         assert_eq!(found.len(), 1, "{found:?}");
         let (a, b) = found[0];
         assert!(a.abs_diff(1200) <= 5 && b.abs_diff(1600) <= 5, "{found:?}");
         // The samples not kept are not looked at: the window there is not found.
         let mut kept = kept;
         kept[1100..1700].fill(false);
-        assert_eq!(shifted_windows(&e, &kept, 1.0), vec![]);
+        assert_eq!(shifted_windows(&e, &u, &kept, 1.0), vec![]);
+    }
+
+    #[test]
+    fn a_field_fixed_to_the_sensor_is_a_shifted_window_though_it_averages_out() {
+        // 6 noise along the sensor's x axis: in |B| it is 6·u_x, which turns through ±4.8 and averages to zero
+        // over each turn of the window.
+        let u = turning(4000, 200.0);
+        let mut e = white(4000, 4);
+        for (x, d) in e[2000..2600].iter_mut().zip(&u[2000..2600]) {
+            *x += 6.0 * d[0];
+        }
+        let found = shifted_windows(&e, &u, &vec![true; 4000], 1.0);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let (a, b) = found[0];
+        assert!(
+            a.abs_diff(2000) <= 20 && b.abs_diff(2600) <= 20,
+            "{found:?}"
+        );
     }
 
     #[test]
@@ -850,7 +894,21 @@ mod tests {
             .enumerate()
             .map(|(i, x)| x + 6.0 * (i as f64 * std::f64::consts::TAU / 2000.0).sin())
             .collect();
-        assert_eq!(shifted_windows(&e, &vec![true; 8000], 1.0), vec![]);
+        let u = turning(8000, 700.0);
+        assert_eq!(shifted_windows(&e, &u, &vec![true; 8000], 1.0), vec![]);
+    }
+
+    #[test]
+    fn a_lasting_change_of_the_offset_is_not_a_shifted_window() {
+        // The offset moves by 6 noise along x for the last 40 % of the recording (a drift, or a step the diagnosis
+        // tests): no window to leave out.
+        let n = 8000;
+        let u = turning(n, 400.0);
+        let mut e = white(n, 5);
+        for (x, d) in e[4800..].iter_mut().zip(&u[4800..]) {
+            *x += 6.0 * d[0];
+        }
+        assert_eq!(shifted_windows(&e, &u, &vec![true; n], 1.0), vec![]);
     }
 
     #[test]

@@ -232,9 +232,13 @@ impl RobustProblem for ScalarProblem<'_> {
         let b = Vector3::from(fit.b_ut);
         let var = Vector3::from(self.raw_noise_var_ut2);
         let raw = &self.raw_ut;
-        let rho = chunks::map(raw.len(), |i| {
-            (a * Vector3::from(raw[i]) + b).norm() - fit.field_ut
-        });
+        let field = chunks::map(raw.len(), |i| a * Vector3::from(raw[i]) + b);
+        let rho: Vec<f64> = field.iter().map(|f| f.norm() - fit.field_ut).collect();
+        let u: Vec<[f64; 3]> = field
+            .iter()
+            .map(|f| f.try_normalize(0.0).map_or([0.0; 3], Into::into))
+            .collect();
+        drop(field);
         // The noise of |B|: the raw noise seen along the field direction, averaged over (at most ~10 000) readings.
         let stride = (raw.len() / 10_000).max(1);
         let (sum, count) = raw
@@ -251,7 +255,7 @@ impl RobustProblem for ScalarProblem<'_> {
             .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
         let noise = (sum / count.max(1) as f64).sqrt();
         if noise > 0.0 {
-            robust::shifted_windows(&rho, kept, noise)
+            robust::shifted_windows(&rho, &u, kept, noise)
         } else {
             Vec::new()
         }

@@ -13,8 +13,9 @@
 //!    model absorbs are reported as absorbed.
 //! 5. **Selection** ([`select`]): a Wald test with a BIC penalty, blocked cross-validation on the clean samples, a
 //!    share of the residual it must explain, and for local effects a size above the reference's own error; greedy,
-//!    with ambiguity. The catalogue effects then come out of the residual and the spans are looked for again (a
-//!    timing lag's residual is not a disturbance), at most [`ROUNDS`] times.
+//!    with ambiguity. In the vector method the catalogue effects then come out of the residual and the spans are
+//!    looked for again (a timing lag's residual is not a disturbance), at most [`ROUNDS`] times; the scalar method's
+//!    spans stay the base fit's exclusions, whose window scan sees more than one residual's gross samples.
 //! 6. **Plausibility and no harm** ([`guard`]): an effect stays only if the model stays physical (a non-linearity of
 //!    a few per cent at most, `apply` invertible over the measured range, gains near the base fit's) and it is not an
 //!    unnoticeable guess between two ambiguous effects, and the model must fit the clean held-out samples no worse
@@ -74,28 +75,6 @@ const _: () = assert!(
 );
 /// Passes of looking for gross spans (again after the catalogue's effects are out of the residual).
 pub const ROUNDS: usize = 3;
-
-/// A span the scalar method leaves out takes this share of its length on each side with it (at most
-/// [`GUARD_MAX_S`]): a magnet's field fades below the gross threshold before and after it, and in |B| what is left
-/// of it biases the ellipsoid. (On the simulated disturbed benches: scalar runs worse than the base fit 1 → 0, the
-/// other figures unchanged; the vector method lost more with the samples than it gained, 95.5 → 91.5 % good.)
-const GUARD_SHARE: f64 = 0.5;
-/// The guard band's largest width on each side, s.
-const GUARD_MAX_S: f64 = 5.0;
-
-/// The samples `[a, b)` widened by the guard band (by time when known).
-fn guard_band(s: &Samples, a: usize, b: usize) -> (usize, usize) {
-    let n = s.len();
-    if !s.has_time {
-        let w = ((b - a) as f64 * GUARD_SHARE) as usize;
-        return (a.saturating_sub(w), (b + w).min(n));
-    }
-    let t = &s.t;
-    let w = (GUARD_SHARE * (t[b - 1] - t[a])).min(GUARD_MAX_S);
-    let lo = t[..a].partition_point(|x| *x < t[a] - w);
-    let hi = b + t[b..].partition_point(|x| *x <= t[b - 1] + w);
-    (lo, hi)
-}
 
 /// The reference a recording offers.
 #[derive(Clone, Copy, Debug)]
@@ -392,7 +371,6 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     let mut span_residual = Cow::Borrowed(base_residual.as_slice());
     let mut left_out: Vec<(usize, usize)> = Vec::new();
     let mut rejected = Vec::new();
-    setup.exclude_shifts(&span_residual, &mut kept);
     let mut round = setup.round(&span_residual, &kept, scale, &left_out)?;
     for _ in 1..ROUNDS {
         // Guard first: effects that make the model unphysical go, and if modelling the spans harms the clean
@@ -409,6 +387,11 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             round = setup.round(&span_residual, &kept, scale, &left_out)?;
             continue;
         }
+        // The scalar method's exclusions are the base fit's (its scan for shifted windows sees more than the gross
+        // spans of one residual).
+        if !setup.vector {
+            break;
+        }
         // The spans again, with the catalogue's effects out of the residual.
         let (a, b) = linear_of(&round.sel.last, setup.vector, base, setup.raw_mean);
         let effects = round.catalogue_effects();
@@ -416,8 +399,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         let scale2 = setup.scale(&residual);
         let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
         let times = samples.has_time.then_some(&samples.t[..]);
-        let mut kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
-        setup.exclude_shifts(&residual, &mut kept2);
+        let kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
         if kept2 == kept {
             break;
         }
@@ -558,18 +540,6 @@ impl<'a> Setup<'a> {
         }
     }
 
-    /// Scalar method with time: the windows where the magnitude's residual is shifted among the `kept` samples (a
-    /// field fixed in the room, too small to be gross) are no longer kept.
-    fn exclude_shifts(&self, residual: &[[f64; 3]], kept: &mut [bool]) {
-        if self.vector || !self.samples.has_time {
-            return;
-        }
-        let rho: Vec<f64> = residual.iter().map(|e| e[0]).collect();
-        for (a, b) in robust::shifted_windows(&rho, kept, self.noise_floor_ut) {
-            kept[a..b].fill(false);
-        }
-    }
-
     /// The residual's scale: its median size as a standard deviation (per axis, or of |B|).
     fn scale(&self, residual: &[[f64; 3]]) -> f64 {
         let mut v: Vec<f64> = residual.iter().map(|e| self.size(e)).collect();
@@ -617,11 +587,6 @@ impl<'a> Setup<'a> {
         for span in &mut spans {
             clean[span.start..span.end].fill(false);
             included[span.start..span.end].fill(false);
-            if !self.vector && !span.modelled() {
-                let (a, b) = guard_band(s, span.start, span.end);
-                clean[a..b].fill(false);
-                included[a..b].fill(false);
-            }
             if left_out
                 .iter()
                 .any(|&(a, b)| a < span.end && span.start < b)
@@ -714,6 +679,11 @@ impl<'a> Setup<'a> {
             &cands,
             &self.a_columns(),
             self.noise_floor_ut.powi(2),
+            if self.vector {
+                select::MIN_EXCESS_SHARE
+            } else {
+                select::MIN_EXCESS_SHARE_MAGNITUDE
+            },
         )
         .ok_or(FitError::Singular(
             "the diagnosis' base problem has no solution",

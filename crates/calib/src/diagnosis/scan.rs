@@ -117,61 +117,117 @@ const WINDOW_GRID: usize = 400;
 /// A disturbance covers at most this fraction of the recording (a longer one is a field error, not a transient).
 const WINDOW_MAX_FRACTION: f64 = 0.8;
 
-/// A residual the window scan sums: a vector (three components) or a scalar.
-pub(crate) trait Summed: Copy {
-    const ZERO: Self;
-    fn add(self, other: Self) -> Self;
-    fn sub(self, other: Self) -> Self;
-    /// The squared size.
-    fn size2(self) -> f64;
-}
-
-impl Summed for [f64; 3] {
-    const ZERO: Self = [0.0; 3];
-    fn add(self, other: Self) -> Self {
-        frames::add(self, other)
-    }
-    fn sub(self, other: Self) -> Self {
-        frames::sub(self, other)
-    }
-    fn size2(self) -> f64 {
-        frames::dot(self, self)
-    }
-}
-
-impl Summed for f64 {
-    const ZERO: Self = 0.0;
-    fn add(self, other: Self) -> Self {
-        self + other
-    }
-    fn sub(self, other: Self) -> Self {
-        self - other
-    }
-    fn size2(self) -> f64 {
-        self * self
-    }
-}
-
 /// The most likely window of a world-fixed disturbance in a vector residual seen through the attitude, `world`
 /// (`R·e` per sample, NED): the disturbance is a constant `d` there inside the window, so the statistic is
-/// `|Σ_window R·e|² / (L·σ²)`. Coarse grid first, then each boundary refined at sample resolution. The same scan
-/// finds a window where a scalar residual (the magnitude's) is shifted by a constant.
-pub(crate) fn window<V: Summed>(world: &[V], sigma2: f64) -> Option<Scan> {
+/// `|Σ_window R·e|² / (L·σ²)`. Coarse grid first, then each boundary refined at sample resolution
+/// ([`best_window`]).
+pub(crate) fn window(world: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
     let n = world.len();
     if n < 4 * MIN_SIDE {
         return None;
     }
-    let mut prefix = vec![V::ZERO; n + 1];
+    let mut prefix = vec![[0.0; 3]; n + 1];
     for i in 0..n {
-        prefix[i + 1] = prefix[i].add(world[i]);
+        prefix[i + 1] = frames::add(prefix[i], world[i]);
     }
     let max_len = (WINDOW_MAX_FRACTION * n as f64) as usize;
-    let stat = |a: usize, b: usize| {
+    best_window(n, |a, b| {
         if b <= a + MIN_SIDE || b - a > max_len {
             return f64::NEG_INFINITY;
         }
-        prefix[b].sub(prefix[a]).size2() / ((b - a) as f64 * sigma2)
+        let sum = frames::sub(prefix[b], prefix[a]);
+        frames::dot(sum, sum) / ((b - a) as f64 * sigma2)
+    })
+}
+
+/// Regressors of the scan of a window of a field fixed to the sensor in a magnitude: a constant and the field
+/// direction's three components.
+const TERMS: usize = 4;
+type Terms = nalgebra::SMatrix<f64, TERMS, TERMS>;
+type TermVec = nalgebra::SVector<f64, TERMS>;
+
+/// The regressors `[1, u]` of a sample with field direction `u`.
+fn terms(u: [f64; 3]) -> TermVec {
+    TermVec::new(1.0, u[0], u[1], u[2])
+}
+
+/// The most likely window of a field fixed to the sensor (or to the room) in a scalar (magnitude) residual `rho`
+/// with field directions `u`: inside it the residual moves by `c + d·u` (a field `d` fixed to the sensor shows in
+/// |B| along the field's direction; `c` is what a field fixed in the room leaves there), against the same terms
+/// fitted to all samples (partitioned regression, from prefix sums). The statistic is the window terms' explained
+/// sum of squares in units of `sigma2` (χ² with four degrees of freedom under noise alone). Grid and refinement as
+/// [`window`].
+pub(crate) fn window_with_directions(rho: &[f64], u: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
+    let n = rho.len();
+    if n < 4 * MIN_SIDE || u.len() != n {
+        return None;
+    }
+    let mut m_prefix = vec![Terms::zeros(); n + 1];
+    let mut v_prefix = vec![TermVec::zeros(); n + 1];
+    for i in 0..n {
+        let x = terms(u[i]);
+        m_prefix[i + 1] = m_prefix[i] + x * x.transpose();
+        v_prefix[i + 1] = v_prefix[i] + x * rho[i];
+    }
+    let (m_all, v_all) = (m_prefix[n], v_prefix[n]);
+    let m_inv = m_all.try_inverse()?;
+    let fitted_all = m_inv * v_all;
+    let max_len = (WINDOW_MAX_FRACTION * n as f64) as usize;
+    best_window(n, |a, b| {
+        if b <= a + MIN_SIDE || b - a > max_len {
+            return f64::NEG_INFINITY;
+        }
+        let (m_w, v_w) = (m_prefix[b] - m_prefix[a], v_prefix[b] - v_prefix[a]);
+        window_terms(&m_w, &v_w, &m_inv, &fitted_all)
+            .map_or(f64::NEG_INFINITY, |(_, ess)| ess / sigma2)
+    })
+}
+
+/// The window terms (the window's sums `m_w` of `xxᵀ` and `v_w` of `x·rho`) against the same terms on all samples
+/// (`m_inv`, the inverse of all samples' `xxᵀ`, and `fitted_all`, their coefficients): the window terms'
+/// coefficients and the sum of squares they explain. A window where the direction hardly turns leaves `c` and `d·u`
+/// confounded: a small ridge keeps the statistic that of their sum.
+fn window_terms(
+    m_w: &Terms,
+    v_w: &TermVec,
+    m_inv: &Terms,
+    fitted_all: &TermVec,
+) -> Option<(TermVec, f64)> {
+    let mut s = m_w - m_w * m_inv * m_w;
+    let r = v_w - m_w * fitted_all;
+    let ridge = 1e-6 * s.trace() / TERMS as f64;
+    for k in 0..TERMS {
+        s[(k, k)] += ridge;
+    }
+    let beta = s.try_inverse()? * r;
+    Some((beta, r.dot(&beta)))
+}
+
+/// The RMS over the window `[a, b)` of the terms [`window_with_directions`] fits there, in `rho`'s units.
+pub(crate) fn window_terms_rms(rho: &[f64], u: &[[f64; 3]], a: usize, b: usize) -> f64 {
+    let (mut m_all, mut v_all) = (Terms::zeros(), TermVec::zeros());
+    let (mut m_w, mut v_w) = (Terms::zeros(), TermVec::zeros());
+    for (i, (r, d)) in rho.iter().zip(u).enumerate() {
+        let x = terms(*d);
+        let (xx, xr) = (x * x.transpose(), x * *r);
+        m_all += xx;
+        v_all += xr;
+        if (a..b).contains(&i) {
+            m_w += xx;
+            v_w += xr;
+        }
+    }
+    let Some(m_inv) = m_all.try_inverse() else {
+        return 0.0;
     };
+    window_terms(&m_w, &v_w, &m_inv, &(m_inv * v_all)).map_or(0.0, |(beta, _)| {
+        (beta.dot(&(m_w * beta)) / (b - a).max(1) as f64).sqrt()
+    })
+}
+
+/// The window `[a, b)` of `0..=n` with the largest `stat(a, b)`: on a coarse grid of [`WINDOW_GRID`] boundaries
+/// first, then the start refined with the end fixed and the end with the start fixed, each within a grid step.
+fn best_window(n: usize, stat: impl Fn(usize, usize) -> f64) -> Option<Scan> {
     let g = WINDOW_GRID.min(n);
     let grid: Vec<usize> = (0..=g).map(|i| i * n / g).collect();
     let mut best = (0, 0, f64::NEG_INFINITY);
@@ -187,7 +243,6 @@ pub(crate) fn window<V: Summed>(world: &[V], sigma2: f64) -> Option<Scan> {
         return None;
     }
     let step = n.div_ceil(g);
-    // Refine the start with the end fixed, then the end with the start fixed, each within a grid step.
     let near = |x: usize, last: usize| x.saturating_sub(step)..=(x + step).min(last);
     let a = argmax_of(near(best.0, n - 1), |x| stat(x, best.1));
     let b = argmax_of(near(best.1, n), |x| stat(a, x));
