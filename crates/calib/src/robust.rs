@@ -589,31 +589,36 @@ pub fn shifted_windows(
     noise: f64,
 ) -> Vec<(usize, usize)> {
     let mut out: Vec<(usize, usize)> = Vec::new();
-    let mut free = kept.to_vec();
+    let mut free: Vec<bool> = kept
+        .iter()
+        .zip(e)
+        .map(|(k, x)| *k && x.is_finite())
+        .collect();
     for _ in 0..MAX_SHIFTS {
-        let idx: Vec<usize> = (0..e.len())
-            .filter(|&i| free[i] && e[i].is_finite())
-            .collect();
-        let m = idx.len() as f64;
-        let mean = idx.iter().map(|&i| e[i]).sum::<f64>() / m;
-        let values: Vec<f64> = idx.iter().map(|&i| e[i] - mean).collect();
-        let dirs: Vec<[f64; 3]> = idx.iter().map(|&i| u[i]).collect();
-        let sigma2 = values.iter().map(|v| v * v).sum::<f64>() / m;
-        let sigma2 = sigma2.max(long_run_variance(&values));
-        let Some(w) = crate::diagnosis::scan::window_with_directions(&values, &dirs, sigma2) else {
+        let values = || e.iter().zip(&free).filter(|(_, f)| **f).map(|(x, _)| *x);
+        let m = values().count() as f64;
+        let mean = values().sum::<f64>() / m;
+        let sigma2 = values().map(|x| (x - mean).powi(2)).sum::<f64>() / m;
+        let sigma2 = sigma2.max(long_run_variance(values().map(|x| x - mean)));
+        let Some(found) = crate::diagnosis::scan::window_with_directions(e, u, &free, sigma2)
+        else {
             break;
         };
-        let size = crate::diagnosis::scan::window_terms_rms(&values, &dirs, w.start, w.end);
-        let len = (w.end - w.start) as f64;
-        if w.stat < SHIFT_SCAN_PENALTY
-            || size < SHIFT_MIN_NOISE * noise
+        let (a, b) = (found.scan.start, found.scan.end);
+        let len = free[a..b].iter().filter(|f| **f).count() as f64;
+        if found.scan.stat < SHIFT_SCAN_PENALTY
+            || found.terms_rms < SHIFT_MIN_NOISE * noise
             || len > SHIFT_MAX_SHARE * m
         {
             break;
         }
-        let (a, b) = (idx[w.start], idx[w.end - 1] + 1);
-        free[a..b].fill(false);
-        out.push((a, b));
+        // The window from its first to its last free sample.
+        let Some(first) = (a..b).find(|&i| free[i]) else {
+            break;
+        };
+        let last = (a..b).rev().find(|&i| free[i]).expect("a free sample");
+        free[first..=last].fill(false);
+        out.push((first, last + 1));
     }
     out
 }
@@ -625,11 +630,17 @@ const LONG_RUN_BLOCK: usize = 50;
 /// [`LONG_RUN_BLOCK`] samples (their median absolute size, as a standard deviation): a residual that wanders slowly
 /// (a hand-held sensor moved through a room's field gradients) has one above its sample variance, and a few shifted
 /// blocks do not raise it.
-fn long_run_variance(x: &[f64]) -> f64 {
-    let mut means: Vec<f64> = x
-        .chunks_exact(LONG_RUN_BLOCK)
-        .map(|c| (c.iter().sum::<f64>() / LONG_RUN_BLOCK as f64).abs())
-        .collect();
+fn long_run_variance(x: impl Iterator<Item = f64>) -> f64 {
+    let mut means = Vec::new();
+    let (mut sum, mut count) = (0.0, 0);
+    for v in x {
+        sum += v;
+        count += 1;
+        if count == LONG_RUN_BLOCK {
+            means.push((sum / LONG_RUN_BLOCK as f64).abs());
+            (sum, count) = (0.0, 0);
+        }
+    }
     if means.is_empty() {
         return 0.0;
     }

@@ -232,13 +232,14 @@ impl RobustProblem for ScalarProblem<'_> {
         let b = Vector3::from(fit.b_ut);
         let var = Vector3::from(self.raw_noise_var_ut2);
         let raw = &self.raw_ut;
-        let field = chunks::map(raw.len(), |i| a * Vector3::from(raw[i]) + b);
-        let rho: Vec<f64> = field.iter().map(|f| f.norm() - fit.field_ut).collect();
-        let u: Vec<[f64; 3]> = field
-            .iter()
-            .map(|f| f.try_normalize(0.0).map_or([0.0; 3], Into::into))
-            .collect();
-        drop(field);
+        let rho = chunks::map(raw.len(), |i| {
+            (a * Vector3::from(raw[i]) + b).norm() - fit.field_ut
+        });
+        let u = chunks::map(raw.len(), |i| {
+            (a * Vector3::from(raw[i]) + b)
+                .try_normalize(0.0)
+                .map_or([0.0; 3], Into::into)
+        });
         // The noise of |B|: the raw noise seen along the field direction, averaged over (at most ~10 000) readings.
         let stride = (raw.len() / 10_000).max(1);
         let (sum, count) = raw

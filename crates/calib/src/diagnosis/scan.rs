@@ -146,55 +146,148 @@ const TERMS: usize = 4;
 type Terms = nalgebra::SMatrix<f64, TERMS, TERMS>;
 type TermVec = nalgebra::SVector<f64, TERMS>;
 
-/// The regressors `[1, u]` of a sample with field direction `u`.
-fn terms(u: [f64; 3]) -> TermVec {
-    TermVec::new(1.0, u[0], u[1], u[2])
+/// Sums of `xxᵀ` and `x·rho` over samples, `x = [1, u]`; `xxᵀ[(0, 0)]` counts the samples.
+#[derive(Clone, Copy)]
+struct TermSums {
+    xx: Terms,
+    xr: TermVec,
+}
+
+impl TermSums {
+    fn zero() -> Self {
+        Self {
+            xx: Terms::zeros(),
+            xr: TermVec::zeros(),
+        }
+    }
+
+    fn sub(self, other: Self) -> Self {
+        Self {
+            xx: self.xx - other.xx,
+            xr: self.xr - other.xr,
+        }
+    }
+}
+
+/// The samples a directions scan sees: the residual `rho` and the field direction `u` where `free`; the others
+/// count as absent.
+struct Directional<'a> {
+    rho: &'a [f64],
+    u: &'a [[f64; 3]],
+    free: &'a [bool],
+}
+
+impl Directional<'_> {
+    /// The sums over `[a, b)` added to `from`.
+    fn add(&self, mut from: TermSums, a: usize, b: usize) -> TermSums {
+        for i in (a..b).filter(|&i| self.free[i]) {
+            let [x, y, z] = self.u[i];
+            let x = TermVec::new(1.0, x, y, z);
+            from.xx += x * x.transpose();
+            from.xr += x * self.rho[i];
+        }
+        from
+    }
+
+    /// The prefix sums at `lo..=hi`, from the prefix sum `at_lo` at `lo`.
+    fn prefix(&self, at_lo: TermSums, lo: usize, hi: usize) -> Vec<TermSums> {
+        let mut out = Vec::with_capacity(hi - lo + 1);
+        out.push(at_lo);
+        for i in lo..hi {
+            let last = *out.last().expect("one pushed");
+            out.push(self.add(last, i, i + 1));
+        }
+        out
+    }
+}
+
+/// A window the directions scan found, with the RMS over it of the terms it fits there (`rho`'s units).
+pub(crate) struct DirectionsWindow {
+    pub scan: Scan,
+    pub terms_rms: f64,
 }
 
 /// The most likely window of a field fixed to the sensor (or to the room) in a scalar (magnitude) residual `rho`
-/// with field directions `u`: inside it the residual moves by `c + d·u` (a field `d` fixed to the sensor shows in
-/// |B| along the field's direction; `c` is what a field fixed in the room leaves there), against the same terms
-/// fitted to all samples (partitioned regression, from prefix sums). The statistic is the window terms' explained
-/// sum of squares in units of `sigma2` (χ² with four degrees of freedom under noise alone). Grid and refinement as
-/// [`window`].
-pub(crate) fn window_with_directions(rho: &[f64], u: &[[f64; 3]], sigma2: f64) -> Option<Scan> {
+/// with field directions `u`, among the samples `free` (a window's length counts those): inside it the residual
+/// moves by `c + d·u` (a field `d` fixed to the sensor shows in |B| along the field's direction; `c` is what a field
+/// fixed in the room leaves there), against the same terms fitted to all samples (partitioned regression). The
+/// statistic is the window terms' explained sum of squares in units of `sigma2` (χ² with four degrees of freedom
+/// under noise alone). Grid and refinement as [`window`], from prefix sums kept only at the grid's boundaries and
+/// near the two being refined: a few hundred sums, whatever the recording's length.
+pub(crate) fn window_with_directions(
+    rho: &[f64],
+    u: &[[f64; 3]],
+    free: &[bool],
+    sigma2: f64,
+) -> Option<DirectionsWindow> {
     let n = rho.len();
-    if n < 4 * MIN_SIDE || u.len() != n {
+    let d = Directional { rho, u, free };
+    let g = WINDOW_GRID.min(n);
+    let grid: Vec<usize> = (0..=g).map(|i| i * n / g).collect();
+    let mut at_grid = vec![TermSums::zero()];
+    for w in grid.windows(2) {
+        let last = *at_grid.last().expect("one pushed");
+        at_grid.push(d.add(last, w[0], w[1]));
+    }
+    let all = at_grid[g];
+    let count = all.xx[(0, 0)] as usize;
+    if count < 4 * MIN_SIDE {
         return None;
     }
-    let mut m_prefix = vec![Terms::zeros(); n + 1];
-    let mut v_prefix = vec![TermVec::zeros(); n + 1];
-    for i in 0..n {
-        let x = terms(u[i]);
-        m_prefix[i + 1] = m_prefix[i] + x * x.transpose();
-        v_prefix[i + 1] = v_prefix[i] + x * rho[i];
-    }
-    let (m_all, v_all) = (m_prefix[n], v_prefix[n]);
-    let m_inv = m_all.try_inverse()?;
-    let fitted_all = m_inv * v_all;
-    let max_len = (WINDOW_MAX_FRACTION * n as f64) as usize;
-    best_window(n, |a, b| {
-        if b <= a + MIN_SIDE || b - a > max_len {
+    let m_inv = all.xx.try_inverse()?;
+    let fitted_all = m_inv * all.xr;
+    let max_len = WINDOW_MAX_FRACTION * count as f64;
+    let stat = |lo: TermSums, hi: TermSums| {
+        let w = hi.sub(lo);
+        let len = w.xx[(0, 0)];
+        if len <= MIN_SIDE as f64 || len > max_len {
             return f64::NEG_INFINITY;
         }
-        let (m_w, v_w) = (m_prefix[b] - m_prefix[a], v_prefix[b] - v_prefix[a]);
-        window_terms(&m_w, &v_w, &m_inv, &fitted_all)
-            .map_or(f64::NEG_INFINITY, |(_, ess)| ess / sigma2)
-    })
+        window_terms(&w, &m_inv, &fitted_all).map_or(f64::NEG_INFINITY, |(_, ess)| ess / sigma2)
+    };
+    let (ga, gb) = coarse(&grid, |a, b| stat(at_grid[a], at_grid[b]))?;
+    // Prefix sums at every sample within a grid step of the two boundaries found; elsewhere (a profile interval
+    // reaching further) summed from the grid boundary below.
+    let near = |k: usize| {
+        (
+            grid[k.saturating_sub(2)],
+            grid[(k + 2).min(g)],
+            k.saturating_sub(2),
+        )
+    };
+    let tables: Vec<(usize, Vec<TermSums>)> = [ga, gb]
+        .iter()
+        .map(|&k| {
+            let (lo, hi, below) = near(k);
+            (lo, d.prefix(at_grid[below], lo, hi))
+        })
+        .collect();
+    let prefix = |x: usize| {
+        for (lo, t) in &tables {
+            if let Some(p) = x.checked_sub(*lo).and_then(|k| t.get(k)) {
+                return *p;
+            }
+        }
+        let k = grid.partition_point(|&b| b <= x) - 1;
+        d.add(at_grid[k], grid[k], x)
+    };
+    let scan = refine(n, g, (grid[ga], grid[gb]), |a, b| {
+        stat(prefix(a), prefix(b))
+    });
+    let w = prefix(scan.end).sub(prefix(scan.start));
+    let terms_rms = window_terms(&w, &m_inv, &fitted_all).map_or(0.0, |(beta, _)| {
+        (beta.dot(&(w.xx * beta)) / w.xx[(0, 0)].max(1.0)).sqrt()
+    });
+    Some(DirectionsWindow { scan, terms_rms })
 }
 
-/// The window terms (the window's sums `m_w` of `xxᵀ` and `v_w` of `x·rho`) against the same terms on all samples
-/// (`m_inv`, the inverse of all samples' `xxᵀ`, and `fitted_all`, their coefficients): the window terms'
-/// coefficients and the sum of squares they explain. A window where the direction hardly turns leaves `c` and `d·u`
-/// confounded: a small ridge keeps the statistic that of their sum.
-fn window_terms(
-    m_w: &Terms,
-    v_w: &TermVec,
-    m_inv: &Terms,
-    fitted_all: &TermVec,
-) -> Option<(TermVec, f64)> {
-    let mut s = m_w - m_w * m_inv * m_w;
-    let r = v_w - m_w * fitted_all;
+/// The window terms (the window's sums) against the same terms on all samples (`m_inv`, the inverse of all
+/// samples' `xxᵀ`, and `fitted_all`, their coefficients): the window terms' coefficients and the sum of squares
+/// they explain. A window where the direction hardly turns leaves `c` and `d·u` confounded: a small ridge keeps the
+/// statistic that of their sum.
+fn window_terms(w: &TermSums, m_inv: &Terms, fitted_all: &TermVec) -> Option<(TermVec, f64)> {
+    let mut s = w.xx - w.xx * m_inv * w.xx;
+    let r = w.xr - w.xx * fitted_all;
     let ridge = 1e-6 * s.trace() / TERMS as f64;
     for k in 0..TERMS {
         s[(k, k)] += ridge;
@@ -203,57 +296,44 @@ fn window_terms(
     Some((beta, r.dot(&beta)))
 }
 
-/// The RMS over the window `[a, b)` of the terms [`window_with_directions`] fits there, in `rho`'s units.
-pub(crate) fn window_terms_rms(rho: &[f64], u: &[[f64; 3]], a: usize, b: usize) -> f64 {
-    let (mut m_all, mut v_all) = (Terms::zeros(), TermVec::zeros());
-    let (mut m_w, mut v_w) = (Terms::zeros(), TermVec::zeros());
-    for (i, (r, d)) in rho.iter().zip(u).enumerate() {
-        let x = terms(*d);
-        let (xx, xr) = (x * x.transpose(), x * *r);
-        m_all += xx;
-        v_all += xr;
-        if (a..b).contains(&i) {
-            m_w += xx;
-            v_w += xr;
-        }
-    }
-    let Some(m_inv) = m_all.try_inverse() else {
-        return 0.0;
-    };
-    window_terms(&m_w, &v_w, &m_inv, &(m_inv * v_all)).map_or(0.0, |(beta, _)| {
-        (beta.dot(&(m_w * beta)) / (b - a).max(1) as f64).sqrt()
-    })
-}
-
 /// The window `[a, b)` of `0..=n` with the largest `stat(a, b)`: on a coarse grid of [`WINDOW_GRID`] boundaries
-/// first, then the start refined with the end fixed and the end with the start fixed, each within a grid step.
+/// first ([`coarse`]), then refined ([`refine`]).
 fn best_window(n: usize, stat: impl Fn(usize, usize) -> f64) -> Option<Scan> {
     let g = WINDOW_GRID.min(n);
     let grid: Vec<usize> = (0..=g).map(|i| i * n / g).collect();
+    let (a, b) = coarse(&grid, |a, b| stat(grid[a], grid[b]))?;
+    Some(refine(n, g, (grid[a], grid[b]), stat))
+}
+
+/// The pair of `grid` boundaries (their indices) with the largest `stat`, if any is finite.
+fn coarse(grid: &[usize], stat: impl Fn(usize, usize) -> f64) -> Option<(usize, usize)> {
     let mut best = (0, 0, f64::NEG_INFINITY);
-    for (ia, &a) in grid.iter().enumerate() {
-        for &b in &grid[ia + 1..] {
+    for a in 0..grid.len() {
+        for b in a + 1..grid.len() {
             let s = stat(a, b);
             if s > best.2 {
                 best = (a, b, s);
             }
         }
     }
-    if !best.2.is_finite() {
-        return None;
-    }
+    best.2.is_finite().then_some((best.0, best.1))
+}
+
+/// The window `coarse` (sample indices, from a grid of `g` steps over `0..=n`) refined: the start with the end
+/// fixed, then the end with the start fixed, each within a grid step; with the profile intervals of both.
+fn refine(n: usize, g: usize, coarse: (usize, usize), stat: impl Fn(usize, usize) -> f64) -> Scan {
     let step = n.div_ceil(g);
     let near = |x: usize, last: usize| x.saturating_sub(step)..=(x + step).min(last);
-    let a = argmax_of(near(best.0, n - 1), |x| stat(x, best.1));
-    let b = argmax_of(near(best.1, n), |x| stat(a, x));
+    let a = argmax_of(near(coarse.0, n - 1), |x| stat(x, coarse.1));
+    let b = argmax_of(near(coarse.1, n), |x| stat(a, x));
     let best_stat = stat(a, b);
-    Some(Scan {
+    Scan {
         start: a,
         end: b,
         stat: best_stat,
         start_interval: profile(|x| stat(x, b), n, a, best_stat),
         end_interval: profile(|x| stat(a, x), n + 1, b, best_stat),
-    })
+    }
 }
 
 /// The `x` of `range` with the largest `f(x)` (the last of equals).
@@ -315,5 +395,46 @@ mod tests {
             (s.start as i64 - 1000).abs() < 40 && (s.end as i64 - 1600).abs() < 40,
             "{s:?}"
         );
+    }
+
+    #[test]
+    fn the_directions_scan_finds_a_sensor_fixed_window_and_its_statistic_is_that_of_its_samples() {
+        let n = 5000;
+        let u: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let (s, c) = (i as f64 * 0.03).sin_cos();
+                [0.8 * c, 0.8 * s, 0.6]
+            })
+            .collect();
+        let mut rho: Vec<f64> = noise(n, 3).iter().map(|v| v[0]).collect();
+        for i in 3000..3500 {
+            rho[i] += 0.1 * u[i][0] + 0.05 * u[i][1];
+        }
+        // Samples left out elsewhere do not count.
+        let mut free = vec![true; n];
+        free[500..900].fill(false);
+        let found = window_with_directions(&rho, &u, &free, 0.01).unwrap();
+        let s = found.scan;
+        assert!(
+            s.start.abs_diff(3000) < 30 && s.end.abs_diff(3500) < 30,
+            "{s:?}"
+        );
+        // The statistic from sums over the window's own samples, as the scan's sparse prefix sums give it.
+        let d = Directional {
+            rho: &rho,
+            u: &u,
+            free: &free,
+        };
+        let all = d.add(TermSums::zero(), 0, n);
+        let w = d.add(TermSums::zero(), s.start, s.end);
+        let m_inv = all.xx.try_inverse().unwrap();
+        let (_, ess) = window_terms(&w, &m_inv, &(m_inv * all.xr)).unwrap();
+        assert!(
+            (ess / 0.01 - s.stat).abs() < 1e-6 * s.stat,
+            "{} vs {}",
+            ess / 0.01,
+            s.stat
+        );
+        assert!(found.terms_rms > 0.05, "{}", found.terms_rms);
     }
 }
