@@ -190,6 +190,9 @@ pub struct RobustSummary {
     pub scale_ut: f64,
     /// The excluded spans: recording rows `[start, end)`, and their times when the recording has them, s.
     pub spans: Vec<ExcludedSpan>,
+    /// Whether windows where the magnitude moved too little to be gross were looked for too (the scalar method on
+    /// a recording with time, [`robust::shifted_windows`]).
+    pub magnitude_windows: bool,
 }
 
 /// A span of rows the base fit excluded.
@@ -208,7 +211,7 @@ pub struct ExcludedSpan {
 }
 
 impl RobustSummary {
-    fn of(kept: Vec<bool>, scale_ut: f64, rec: &Recording) -> RobustSummary {
+    fn of(kept: Vec<bool>, scale_ut: f64, rec: &Recording, scalar: bool) -> RobustSummary {
         let t = rec.t_s.as_deref();
         let spans = robust::excluded_runs(&kept)
             .into_iter()
@@ -224,6 +227,7 @@ impl RobustSummary {
             kept,
             scale_ut,
             spans,
+            magnitude_windows: scalar && t.is_some(),
         }
     }
 
@@ -253,8 +257,16 @@ impl RobustSummary {
         if self.spans.len() > SHOWN {
             spans.push(format!("and {} more", self.spans.len() - SHOWN));
         }
+        let windows = if self.magnitude_windows {
+            format!(
+                " or in a window where |B| moved by more than {:.0} times the sensor's noise",
+                robust::SHIFT_MIN_NOISE
+            )
+        } else {
+            String::new()
+        };
         Some(format!(
-            "{} samples left out of the base fit, their residual more than {:.0} times the typical {:.2} µT: {}",
+            "{} samples left out of the base fit, their residual more than {:.0} times the typical {:.2} µT{windows}: {}",
             self.excluded(),
             robust::GROSS_SIGMA,
             self.scale_ut,
@@ -378,7 +390,7 @@ pub fn calibrate(
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
-                RobustSummary::of(r.kept, r.sigma_ut, rec),
+                RobustSummary::of(r.kept, r.sigma_ut, rec, false),
             );
             (fit, noise, n, kept)
         }
@@ -410,7 +422,7 @@ pub fn calibrate(
                 Fit::Scalar(s),
                 noise,
                 n,
-                RobustSummary::of(r.kept, r.sigma_ut, rec),
+                RobustSummary::of(r.kept, r.sigma_ut, rec, true),
             )
         }
     };

@@ -569,7 +569,7 @@ const SHIFT_SCAN_PENALTY: f64 = 30.7;
 /// …and the shift it fits is at least this many times the sensor's noise (RMS over the window): smaller ones are
 /// within the field's own wander across a room as the sensor moves (up to 2.2 times in |B| on the physical
 /// recordings), not a disturbance…
-const SHIFT_MIN_NOISE: f64 = 3.0;
+pub const SHIFT_MIN_NOISE: f64 = 3.0;
 /// …and it holds at most this share of the samples scanned: a longer one is a drift of the offset or the room's
 /// gradients along the path (on an undisturbed phone recording, windows of a third and a half of it), not a field
 /// that came and went.
