@@ -92,8 +92,8 @@ pub trait RobustProblem: Sized + Sync {
     fn residuals(&self, fit: &Self::Fit) -> Vec<f64>;
     /// The linear model of a fit.
     fn model(fit: &Self::Fit) -> Model;
-    /// The windows (sample ranges) where the residual of the `kept` samples is shifted by a constant too small to be
-    /// gross that the residual sizes do not show: none, unless a problem says otherwise.
+    /// The windows (sample ranges) where the signed residual of the `kept` samples is shifted, too little to be
+    /// gross, in a way the residual sizes do not show: none, unless a problem says otherwise.
     fn shifted(&self, _fit: &Self::Fit, _kept: &[bool]) -> Vec<(usize, usize)> {
         Vec::new()
     }
@@ -211,8 +211,8 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             break;
         }
     }
-    // Windows shifted by a constant too small to be gross (a field fixed in the room, in the magnitude) go too, when
-    // the samples are in time order; the fit without them replaces the last one if it can be made.
+    // Windows shifted too little to be gross (a field fixed in the room or to the sensor, in the magnitude) go too,
+    // when the samples are in time order; the fit without them replaces the last one if it can be made.
     if t_s.is_some() {
         for _ in 0..SPAN_PASSES {
             let fit = final_fit.as_ref().expect("at least one pass");

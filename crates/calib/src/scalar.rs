@@ -225,8 +225,9 @@ impl RobustProblem for ScalarProblem<'_> {
         fit.model()
     }
 
-    /// A field fixed in the room adds a constant to the magnitude whatever the attitude: the windows where the
-    /// magnitude's residual is shifted, against the sensor's noise in |B| (none without a noise figure).
+    /// A field fixed in the room adds about a constant to the magnitude whatever the attitude, one fixed to the
+    /// sensor `d·u` along the field's direction `u`: the windows where the magnitude's residual moves so, against the
+    /// sensor's noise in |B| (none without a noise figure).
     fn shifted(&self, fit: &ScalarFit, kept: &[bool]) -> Vec<(usize, usize)> {
         let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
         let b = Vector3::from(fit.b_ut);

@@ -246,8 +246,8 @@ pub(crate) fn window_with_directions(
         window_terms(&w, &m_inv, &fitted_all).map_or(f64::NEG_INFINITY, |(_, ess)| ess / sigma2)
     };
     let (ga, gb) = coarse(&grid, |a, b| stat(at_grid[a], at_grid[b]))?;
-    // Prefix sums at every sample within a grid step of the two boundaries found; elsewhere (a profile interval
-    // reaching further) summed from the grid boundary below.
+    // Prefix sums at every sample within two grid steps of the two boundaries found (the refinement looks one step
+    // either way); elsewhere (a profile interval reaching further) summed from the grid boundary below.
     let near = |k: usize| {
         (
             grid[k.saturating_sub(2)],
