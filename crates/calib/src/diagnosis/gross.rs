@@ -14,6 +14,9 @@
 //! - **unexplained** — neither, and the sensor did not move (something moved near it), or a glitch of a few
 //!   samples: excluded, with the reason.
 //!
+//! A span no constant explains is split at its quiet stretches when a constant explains each part between them
+//! (vector method: two fields on the board one after the other, merged by the robust fit across the lull between).
+//!
 //! A constant explains a span when what it leaves is at the scale of the rest of the recording (or is a small
 //! part of the span's energy). The frame is told by the attitude: when the sensor hardly turned during the span the
 //! two constants are the same, and the span is modelled as fixed to the sensor with that said.
@@ -162,8 +165,74 @@ pub(crate) fn spans(
 ) -> Vec<Span> {
     crate::robust::excluded_runs(kept)
         .into_iter()
-        .map(|(a, b)| classify(residual, a, b, scale_ut, directions))
+        .flat_map(|(a, b)| {
+            let span = classify(residual, a, b, scale_ut, directions);
+            match span.kind {
+                SpanKind::Moving | SpanKind::Unexplained
+                    if matches!(residual, Residual::Vector { .. }) =>
+                {
+                    split_at_lulls(residual, a, b, scale_ut, directions).unwrap_or(vec![span])
+                }
+                _ => vec![span],
+            }
+        })
         .collect()
+}
+
+/// A quiet stretch inside a span holds at least this share of the span's samples…
+const LULL_SHARE: f64 = 0.05;
+/// …and at least this many samples.
+const LULL_SAMPLES: usize = 20;
+
+/// A span neither constant explains, split at its quiet stretches (residual within
+/// [`crate::robust::RAMP_SIGMA`] scales) into the disturbed stretches between them, when a constant explains each
+/// of those: two fields on the board one after the other, merged across a lull, are not a magnet nearby. The quiet
+/// stretches belong to no span.
+fn split_at_lulls(
+    residual: &Residual<'_>,
+    a: usize,
+    b: usize,
+    scale_ut: f64,
+    directions: &[[f64; 3]],
+) -> Option<Vec<Span>> {
+    let quiet = |i: usize| residual.size(i) <= crate::robust::RAMP_SIGMA * scale_ut;
+    let min_lull = LULL_SAMPLES.max((LULL_SHARE * (b - a) as f64) as usize);
+    // The disturbed stretches: maximal runs not interrupted by a quiet run of at least `min_lull` samples.
+    let mut parts: Vec<(usize, usize)> = Vec::new();
+    let mut i = a;
+    while i < b {
+        if quiet(i) {
+            let start = i;
+            while i < b && quiet(i) {
+                i += 1;
+            }
+            if i - start >= min_lull || parts.is_empty() || i == b {
+                continue;
+            }
+            // A short quiet run belongs to the stretch around it.
+            parts.last_mut().expect("a part").1 = i;
+        } else {
+            let start = i;
+            while i < b && !quiet(i) {
+                i += 1;
+            }
+            match parts.last_mut() {
+                Some(last) if last.1 == start => last.1 = i,
+                _ => parts.push((start, i)),
+            }
+        }
+    }
+    if parts.len() < 2 {
+        return None;
+    }
+    let spans: Vec<Span> = parts
+        .into_iter()
+        .map(|(p, q)| classify(residual, p, q, scale_ut, directions))
+        .collect();
+    spans
+        .iter()
+        .all(|s| !matches!(s.kind, SpanKind::Moving | SpanKind::Unexplained))
+        .then_some(spans)
 }
 
 /// What explains the residual of samples `[a, b)`.
@@ -319,5 +388,58 @@ pub(crate) fn refine_edges(
     match scan::window(&world, scale_ut * scale_ut) {
         Some(w) => (lo + w.start, lo + w.end),
         None => (span.start, span.end),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Field directions that turn through a full circle every 200 samples.
+    fn turning(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let (s, c) = (i as f64 * std::f64::consts::TAU / 200.0).sin_cos();
+                [0.8 * c, 0.8 * s, 0.6]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn two_fields_on_the_board_merged_across_a_lull_are_two_spans() {
+        // Samples 100–400 carry one field on the board, 500–900 another; between them a clean lull, all of it one
+        // excluded run (as the robust fit's merge across short lulls makes it).
+        let n = 1000;
+        let mut e = vec![[0.0; 3]; n];
+        for (i, v) in e.iter_mut().enumerate() {
+            // A little noise-like wobble so that no residual is exactly zero.
+            let w = 0.01 * ((i * 7919) % 13) as f64;
+            *v = [w, -w, w];
+        }
+        e[100..400].fill([20.0, 0.0, 0.0]);
+        e[500..900].fill([0.0, -15.0, 5.0]);
+        let mut kept = vec![true; n];
+        kept[100..900].fill(false);
+        let dirs = turning(n);
+        let residual = Residual::Vector { e: &e, rot: None };
+        let found = spans(&residual, &kept, 0.1, &dirs);
+        let ranges: Vec<(usize, usize)> = found.iter().map(|s| (s.start, s.end)).collect();
+        assert_eq!(ranges, vec![(100, 400), (500, 900)], "{found:?}");
+        assert!(
+            found
+                .iter()
+                .all(|s| matches!(s.kind, SpanKind::SensorFixed { .. })),
+            "{found:?}"
+        );
+        // When the second is a field that changes as the sensor moves (no constant explains it), the span stays
+        // whole: a magnet's pass is not cut into pieces.
+        for (k, v) in e[500..900].iter_mut().enumerate() {
+            let x = k as f64 / 400.0;
+            *v = [40.0 * x * x, -30.0 * x, 10.0 * (1.0 - x)];
+        }
+        let residual = Residual::Vector { e: &e, rot: None };
+        let whole = spans(&residual, &kept, 0.1, &dirs);
+        assert_eq!(whole.len(), 1, "{whole:?}");
+        assert!(matches!(whole[0].kind, SpanKind::Moving), "{whole:?}");
     }
 }
