@@ -198,11 +198,29 @@ fn nexus5_every_perturbation_above_10_ut_is_located() {
     assert_within(&r, [60.0, -56.0, 408.0], "nexus5 Dist");
 }
 
-/// `rel` with its quaternion columns removed (and, if `no_field`, the field and the place that give it too).
-fn without_reference(rel: &str, dir: &Path, no_field: bool) -> PathBuf {
+/// A field fixed to the sensor's board, added to a recording's readings: `field_ut` from `t0_s` to `t1_s`, put on
+/// and taken off by hand over `RAMP_S` at each end.
+struct OnBoard {
+    t0_s: f64,
+    t1_s: f64,
+    field_ut: [f64; 3],
+}
+
+impl OnBoard {
+    const RAMP_S: f64 = 2.0;
+
+    /// The share of the field present at time `t`.
+    fn at(&self, t: f64) -> f64 {
+        ((t - self.t0_s).min(self.t1_s - t) / Self::RAMP_S).clamp(0.0, 1.0)
+    }
+}
+
+/// `rel` with its quaternion columns removed (and, if `no_field`, the field and the place that give it too), and
+/// `on_board`'s field added to the readings.
+fn without_reference(rel: &str, dir: &Path, no_field: bool, on_board: Option<&OnBoard>) -> PathBuf {
     let text = std::fs::read_to_string(real(rel)).unwrap();
     let mut out = String::new();
-    let mut keep: Vec<bool> = Vec::new();
+    let mut header: Vec<&str> = Vec::new();
     for line in text.lines() {
         if line.starts_with('#') {
             let drop = no_field
@@ -215,18 +233,22 @@ fn without_reference(rel: &str, dir: &Path, no_field: bool) -> PathBuf {
             }
             continue;
         }
-        let cells: Vec<&str> = line.split(',').collect();
-        if keep.is_empty() {
-            keep = cells
-                .iter()
-                .map(|c| !["qw", "qx", "qy", "qz"].contains(c))
-                .collect();
+        let mut cells: Vec<String> = line.split(',').map(str::to_owned).collect();
+        if header.is_empty() {
+            header = line.split(',').collect();
+        } else if let Some(board) = on_board {
+            let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+            let share = board.at(cells[column("t")].parse().unwrap());
+            for (k, axis) in ["mx", "my", "mz"].into_iter().enumerate() {
+                let v: f64 = cells[column(axis)].parse().unwrap();
+                cells[column(axis)] = format!("{:.6}", v + share * board.field_ut[k]);
+            }
         }
         let kept: Vec<&str> = cells
             .iter()
-            .zip(&keep)
-            .filter(|(_, k)| **k)
-            .map(|(c, _)| *c)
+            .zip(&header)
+            .filter(|(_, name)| !["qw", "qx", "qy", "qz"].contains(name))
+            .map(|(c, _)| c.as_str())
             .collect();
         out.push_str(&kept.join(","));
         out.push('\n');
@@ -242,7 +264,7 @@ fn broad_recordings_without_quaternions_calibrate_by_the_scalar_method() {
     for rel in [BROAD_02, BROAD_29, BROAD_33] {
         for no_field in [false, true] {
             let dir = tempfile::tempdir().unwrap();
-            let path = without_reference(rel, dir.path(), no_field);
+            let path = without_reference(rel, dir.path(), no_field, None);
             let r = fit_report(&path, &[]);
             let what = format!("{rel} without quaternions (field removed too: {no_field})");
             assert_eq!(r["method"], "scalar", "{what}");
@@ -256,6 +278,40 @@ fn broad_recordings_without_quaternions_calibrate_by_the_scalar_method() {
                 );
             }
         }
+    }
+}
+
+/// A hand-held sensor without a reference, with something magnetic on its board for a third of the recording, a few
+/// times the noise in |B| — as BROAD's trial with the magnet 3 cm from the chip would be (27 µT at 2 cm, falling as
+/// the cube of the distance): broad 02 with 8–12 µT added while it turned. The robust fit's seeds on a cap of the
+/// recording made a huge sphere through a band of the readings and the minute at rest at each end, which fitted
+/// best, and the window was longer than a shifted window could be: every one of these was refused. The window is
+/// left out and the calibration is the undisturbed one. (With 16 µT it is not yet: the fit is 5 µT off, and the
+/// verdict says redo.)
+#[test]
+fn a_field_on_the_board_for_a_third_of_a_recording_without_reference_is_left_out() {
+    for (t0_s, t1_s, field_ut) in [
+        (60.0, 120.0, [3.0, -5.0, 5.5]),
+        (60.0, 120.0, [-3.0, 5.0, -5.5]),
+        (45.0, 105.0, [0.0, 0.0, 8.0]),
+        (45.0, 105.0, [3.0, -7.0, 9.0]),
+    ] {
+        let board = OnBoard {
+            t0_s,
+            t1_s,
+            field_ut,
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = without_reference(BROAD_02, dir.path(), false, Some(&board));
+        let r = fit_report(&path, &[]);
+        let what =
+            format!("broad 02 without quaternions, {field_ut:?} µT on the board {t0_s}–{t1_s} s");
+        assert_eq!(r["method"], "scalar", "{what}");
+        assert_within(&r, [0.0; 3], &what);
+        let o = frames::norm(offset(&r));
+        assert!(o < 1.0, "{what}: offset {o:.2} µT off");
+        let s = spans(&r);
+        assert!(located(&s, t0_s, t1_s), "{what}: spans {s:?}");
     }
 }
 

@@ -12,7 +12,11 @@
 //! 2. **The best seed** is the one with the smallest median residual over all samples — the state the recording is
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
-//!    plausible ones.
+//!    plausible ones, and so do seeds the samples do not support ([`RobustProblem::support`]): seen from a scalar
+//!    seed fitted to a cap of the recording — a huge sphere through a band of the readings and a still stretch —
+//!    the readings lie in a cap, and its median residual can be the smallest of all when the sensor rested for much
+//!    of the recording (an undisturbed physical recording with a minute at rest at each end was refused, or fitted
+//!    5 µT off, when 8–16 µT sat on its board for a third of it).
 //! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle; on a subsample of at
 //!    most [`REWEIGHT_SAMPLES`] samples, which fixes the fit far more closely than the spans need); then the samples
 //!    of the whole recording whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps
@@ -25,8 +29,9 @@
 //! 4. **Shifted windows** (a problem that has them, see [`RobustProblem::shifted`]): in the scalar method's
 //!    magnitude a field fixed in the room for a while shows as a constant, one fixed to the sensor as `d·u` along
 //!    the field's direction `u` (which averages out over a turning window), often too little to be gross; windows of
-//!    up to a quarter of the recording where the signed residual moves so are found by a scan ([`shifted_windows`])
-//!    and excluded too, and the rest fitted again.
+//!    up to a quarter of the recording where the signed residual moves so — up to a half, inside the recording, when
+//!    the evidence is ten times as strong — are found by a scan ([`shifted_windows`]) and excluded too, and the
+//!    rest fitted again.
 
 use crate::FitError;
 use crate::chunks;
@@ -51,6 +56,9 @@ pub const SEED_SAMPLES: usize = 8_000;
 pub const GROSS_SIGMA: f64 = 6.0;
 /// Tukey's biweight cut-off, in the same units: samples beyond get no weight while reweighting.
 const BIWEIGHT_SIGMA: f64 = 6.0;
+/// A seed is supported when the samples cover at least this share of the directions, seen from it, that they cover
+/// seen from the seed they cover most from.
+const SUPPORT_SHARE: f64 = 0.75;
 /// A matrix whose singular values differ by more than this factor is an implausible calibration.
 pub const PLAUSIBLE_GAIN_RATIO: f64 = 2.5;
 const SEED_ITERATIONS: usize = 20;
@@ -97,6 +105,11 @@ pub trait RobustProblem: Sized + Sync {
     fn shifted(&self, _fit: &Self::Fit, _kept: &[bool]) -> Vec<(usize, usize)> {
         Vec::new()
     }
+    /// How much of the sphere of directions the samples cover as seen from a fit (see [`fit`]): all of it, unless a
+    /// problem can tell.
+    fn support(&self, _fit: &Self::Fit) -> f64 {
+        1.0
+    }
 }
 
 /// A robust fit and what it left out.
@@ -134,23 +147,32 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
         w[a..b].fill(1.0);
         reweight(seeds, &w, SEED_ITERATIONS)
     });
-    // (plausible, scale, fit): plausible seeds first, then the smallest scale.
-    let mut best: Option<(bool, f64, P::Fit)> = None;
-    for (fit, scale) in fitted.into_iter().flatten() {
+    // Plausible seeds first, then those the samples support, then the smallest scale (see the module docs). Seeds
+    // compare in raw units: a fit that shrinks the readings (a scalar fit's huge sphere through a cap, at a tiny gain)
+    // shrinks its residuals with them.
+    let fitted: Vec<(P::Fit, f64, f64)> = fitted
+        .into_iter()
+        .flatten()
+        .map(|(fit, scale)| {
+            let support = seeds.support(&fit);
+            (fit, scale, support)
+        })
+        .collect();
+    let most_support = fitted.iter().map(|f| f.2).fold(0.0, f64::max);
+    let mut best: Option<((bool, bool, f64), P::Fit)> = None;
+    for (fit, scale, support) in fitted {
         let a = P::model(&fit).a;
-        let plausible = plausible(&a);
-        // Seeds compare in raw units: a fit that shrinks the readings (a scalar fit's huge sphere through a cap, at
-        // a tiny gain) shrinks its residuals with them.
-        let scale = scale / mean_gain(&a);
-        let better = best
-            .as_ref()
-            .is_none_or(|(p, s, _)| (plausible, -scale) > (*p, -*s));
-        if better {
-            best = Some((plausible, scale, fit));
+        let merit = (
+            plausible(&a),
+            support >= SUPPORT_SHARE * most_support,
+            -scale / mean_gain(&a),
+        );
+        if best.as_ref().is_none_or(|(m, _)| merit > *m) {
+            best = Some((merit, fit));
         }
     }
     // No seed could be fitted: the full data decides (and its error says why).
-    let Some((_, _, seed)) = best else {
+    let Some((_, seed)) = best else {
         let fit = problem.final_fit(&vec![true; n], None)?;
         let residual_ut = problem.residuals(&fit);
         let sigma_ut = scale::<P>(&residual_ut);
@@ -574,6 +596,16 @@ pub const SHIFT_MIN_NOISE: f64 = 3.0;
 /// gradients along the path (on an undisturbed phone recording, windows of a third and a half of it), not a field
 /// that came and went.
 const SHIFT_MAX_SHARE: f64 = 0.25;
+/// A window of more than [`SHIFT_MAX_SHARE`] and up to this share of the samples (beyond, the shifted state is the
+/// recording's own) is a field that came and went only when its statistic exceeds [`SHIFT_LONG_PENALTY`]: a field
+/// of 8 µT on the board of a hand-held sensor for a third of the recording stands at 1700, the offset drift of an
+/// undisturbed phone at 120.
+const SHIFT_LONG_MAX_SHARE: f64 = 0.5;
+/// The statistic a window longer than [`SHIFT_MAX_SHARE`] must exceed…
+const SHIFT_LONG_PENALTY: f64 = 10.0 * SHIFT_SCAN_PENALTY;
+/// …and the share of the samples it must leave on each side (one that reaches an end of the recording is a lasting
+/// change of the offset, which the diagnosis tests as a step).
+const SHIFT_LONG_MARGIN: f64 = 0.1;
 /// At most this many shifted windows are looked for.
 const MAX_SHIFTS: usize = 4;
 
@@ -606,10 +638,20 @@ pub fn shifted_windows(
         };
         let (a, b) = (found.scan.start, found.scan.end);
         let len = free[a..b].iter().filter(|f| **f).count() as f64;
-        if found.scan.stat < SHIFT_SCAN_PENALTY
-            || found.terms_rms < SHIFT_MIN_NOISE * noise
-            || len > SHIFT_MAX_SHARE * m
-        {
+        // A long window must also come and go: free samples on both sides of it.
+        let long_enough_apart = || {
+            let before = free[..a].iter().filter(|f| **f).count() as f64;
+            let after = free[b..].iter().filter(|f| **f).count() as f64;
+            before.min(after) >= SHIFT_LONG_MARGIN * m
+        };
+        let acceptable = if len <= SHIFT_MAX_SHARE * m {
+            found.scan.stat >= SHIFT_SCAN_PENALTY
+        } else {
+            len <= SHIFT_LONG_MAX_SHARE * m
+                && found.scan.stat >= SHIFT_LONG_PENALTY
+                && long_enough_apart()
+        };
+        if !acceptable || found.terms_rms < SHIFT_MIN_NOISE * noise {
             break;
         }
         // The window from its first to its last free sample.
@@ -907,6 +949,25 @@ mod tests {
             .collect();
         let u = turning(8000, 700.0);
         assert_eq!(shifted_windows(&e, &u, &vec![true; 8000], 1.0), vec![]);
+    }
+
+    #[test]
+    fn a_field_on_the_board_for_a_third_of_the_recording_is_a_shifted_window() {
+        // 8 noise along x from 3000 to 5700 of 8000 samples: longer than a quarter, but it came and went and stands
+        // far above the residual's wander (a magnet 3 cm from a hand-held sensor's chip for a minute).
+        let n = 8000;
+        let u = turning(n, 400.0);
+        let mut e = white(n, 6);
+        for (x, d) in e[3000..5700].iter_mut().zip(&u[3000..5700]) {
+            *x += 8.0 * d[0];
+        }
+        let found = shifted_windows(&e, &u, &vec![true; n], 1.0);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let (a, b) = found[0];
+        assert!(
+            a.abs_diff(3000) <= 20 && b.abs_diff(5700) <= 20,
+            "{found:?}"
+        );
     }
 
     #[test]

@@ -29,7 +29,7 @@ use std::borrow::Cow;
 
 use crate::FitError;
 use crate::chunks;
-use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe};
+use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe, sphere_fraction};
 use crate::frames::Mat3;
 use crate::model::Model;
 use crate::robust::{self, RobustProblem};
@@ -261,6 +261,21 @@ impl RobustProblem for ScalarProblem<'_> {
         } else {
             Vec::new()
         }
+    }
+
+    /// The share of the sphere of directions the readings cover as seen from a fit's centre: from a wrong centre
+    /// (a huge sphere through a band of the readings and a still stretch, as a seed on a cap of the recording can
+    /// make) they lie in a cap.
+    fn support(&self, fit: &ScalarFit) -> f64 {
+        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
+        let b = Vector3::from(fit.b_ut);
+        sphere_fraction(
+            self.raw_ut
+                .iter()
+                .filter(|m| m.iter().all(|v| v.is_finite()))
+                .map(|m| (a * Vector3::from(*m) + b).into()),
+            DIRECTION_CELLS,
+        )
     }
 }
 
@@ -1142,6 +1157,34 @@ mod tests {
         }
         assert!(fit.residual_rms_ut < 1e-8);
         assert!(fit.shape_prior_share < 1e-6, "{}", fit.shape_prior_share);
+    }
+
+    #[test]
+    fn readings_seen_from_a_wrong_centre_lie_in_a_cap() {
+        // Readings all round a sphere: from the right fit they cover the sphere of directions; from a fit whose
+        // centre lies far outside them (a huge sphere through a band of them, at a tiny gain), a cap.
+        let a_true = Matrix3::from_diagonal(&Vector3::new(1.05, 0.95, 1.0));
+        let b_true = Vector3::new(10.0, -20.0, 5.0);
+        let raw = ellipsoid(a_true, b_true, 0.2, 4000, 8);
+        let problem = ScalarProblem {
+            raw_ut: Cow::Borrowed(&raw),
+            field_ut: Some(50.0),
+            raw_noise_var_ut2: [0.04; 3],
+        };
+        let right = fit(
+            &raw,
+            &ScalarOptions {
+                field_ut: Some(50.0),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut wrong = right.clone();
+        wrong.a = [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]];
+        wrong.b_ut = [30.0, 0.0, 0.0];
+        let (from_right, from_wrong) = (problem.support(&right), problem.support(&wrong));
+        assert!(from_right > 0.95, "{from_right}");
+        assert!(from_wrong < 0.2, "{from_wrong}");
     }
 
     #[test]
