@@ -26,6 +26,9 @@ pub(crate) struct Split {
     pub piece_bytes: usize,
     /// Every row through the `csv` crate on one thread: the sequential reader the tests compare with.
     pub sequential: bool,
+    /// The file's size, when known: after the first block the columns are reserved for the rows the rest of it
+    /// holds at the first block's bytes a row (no copies as they grow, and no room to spare).
+    pub size_bytes: Option<u64>,
 }
 
 impl Split {
@@ -35,6 +38,7 @@ impl Split {
         block_bytes: 4 << 20,
         piece_bytes: 256 << 10,
         sequential: false,
+        size_bytes: None,
     };
 }
 
@@ -98,9 +102,15 @@ impl Rows<'_> {
             } else {
                 memchr::memrchr(b'\n', &block).map_or(0, |i| i + 1)
             };
+            let first = line == first_line;
             line = self.parse_block(&block[..cut], line, out, &mut time, &mut pieces, split)?;
             if end {
                 return Ok(());
+            }
+            if let Some(size) = split.size_bytes.filter(|_| first && cut > 0) {
+                let per_byte = out.mag_ut.len() as f64 / cut as f64;
+                let rest = size.saturating_sub(cut as u64) as f64;
+                reserve(out, (RESERVE_MARGIN * rest * per_byte) as usize);
             }
             // A line longer than a block: read on until it ends.
             want = if cut == 0 {
@@ -149,7 +159,7 @@ impl Rows<'_> {
             line += piece.lines;
             accepted += 1;
         }
-        append(out, &buffers[..accepted], self.to_reference);
+        append(out, &buffers[..accepted]);
         buffers.iter_mut().for_each(clear);
         match problem {
             Some(p) => Err(Ok(p)),
@@ -191,11 +201,24 @@ impl Rows<'_> {
             }
             lines += 1;
         }
+        // On the piece's thread.
+        self.turn_attitude(rows);
         Piece {
             lines,
             time,
             first_line,
             problem,
+        }
+    }
+
+    /// With [`Rows::to_reference`], the expected field of `rows`' quaternions (the file's layout) into their
+    /// `ref_ut`, which [`append`] takes.
+    fn turn_attitude(&self, rows: &mut Recording) {
+        if let Some(turn) = self.to_reference {
+            let quat = rows.quat.as_ref().expect("the file's layout");
+            let turned = rows.ref_ut.get_or_insert_with(Vec::new);
+            turned.clear();
+            turned.extend(quat.iter().map(|q| turn(*q)));
         }
     }
 
@@ -247,12 +270,14 @@ impl Rows<'_> {
             if let Some(rows) = &mut batch
                 && rows.mag_ut.len() >= QUOTED_BATCH_ROWS
             {
-                append(out, std::slice::from_ref(rows), self.to_reference);
+                self.turn_attitude(rows);
+                append(out, std::slice::from_ref(rows));
                 clear(rows);
             }
         }
-        if let Some(rows) = &batch {
-            append(out, std::slice::from_ref(rows), self.to_reference);
+        if let Some(rows) = &mut batch {
+            self.turn_attitude(rows);
+            append(out, std::slice::from_ref(rows));
         }
         Ok(())
     }
@@ -304,8 +329,9 @@ fn piece_bounds(block: &[u8], piece_bytes: usize, threads: usize) -> Vec<usize> 
 }
 
 /// Appends the rows of `pieces` (the file's layout), in order, to `out`: the columns on the threads, the largest
-/// apart; with `to_reference`, the pieces' quaternions as `out`'s expected field.
-fn append(out: &mut Recording, pieces: &[Recording], to_reference: Option<AttitudeToReference>) {
+/// apart. With the attitude turned ([`Rows::turn_attitude`]), `out` has no quaternions and takes the pieces'
+/// expected field.
+fn append(out: &mut Recording, pieces: &[Recording]) {
     fn extend<T: Clone>(
         out: &mut Vec<T>,
         pieces: &[Recording],
@@ -342,21 +368,10 @@ fn append(out: &mut Recording, pieces: &[Recording], to_reference: Option<Attitu
         || extend(mag_ut, pieces, |p| &p.mag_ut),
         || {
             rayon::join(
-                || match to_reference {
-                    Some(turn) => {
-                        let out = ref_ut.as_mut().expect("made for the turned attitude");
-                        let quat =
-                            |p: &Recording| p.quat.as_ref().expect("the file's layout").len();
-                        out.reserve(pieces.iter().map(quat).sum());
-                        for p in pieces {
-                            let q = p.quat.as_ref().expect("the file's layout");
-                            out.extend(q.iter().map(|q| turn(*q)));
-                        }
-                    }
-                    None => {
-                        extend_some(quat, pieces, |p| &p.quat);
-                        extend_some(ref_ut, pieces, |p| &p.ref_ut);
-                    }
+                || {
+                    // With the attitude turned, the pieces hold the expected field, and `out` no quaternions.
+                    extend_some(quat, pieces, |p| &p.quat);
+                    extend_some(ref_ut, pieces, |p| &p.ref_ut);
                 },
                 || {
                     extend_some(t_s, pieces, |p| &p.t_s);
@@ -372,6 +387,31 @@ fn append(out: &mut Recording, pieces: &[Recording], to_reference: Option<Attitu
             )
         },
     );
+}
+
+/// The rows reserved for the rest of a file of known size, per row its first block holds at the same bytes a row:
+/// numbers tend to grow longer further on (time), not shorter.
+const RESERVE_MARGIN: f64 = 1.02;
+
+/// Reserves room for `rows` more rows in every column of `out`.
+fn reserve(out: &mut Recording, rows: usize) {
+    fn some<T>(c: &mut Option<Vec<T>>, rows: usize) {
+        if let Some(c) = c {
+            c.reserve_exact(rows);
+        }
+    }
+    out.mag_ut.reserve_exact(rows);
+    some(&mut out.t_s, rows);
+    some(&mut out.temp_c, rows);
+    some(&mut out.quat, rows);
+    some(&mut out.ref_ut, rows);
+    some(&mut out.gyro_rad_s, rows);
+    out.currents
+        .iter_mut()
+        .for_each(|c| c.values.reserve_exact(rows));
+    out.extra
+        .iter_mut()
+        .for_each(|c| c.values.reserve_exact(rows));
 }
 
 /// Empties every column, keeping its memory.

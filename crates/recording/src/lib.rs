@@ -51,6 +51,7 @@
 //! ```
 
 mod blocks;
+mod decimal;
 mod error;
 mod layout;
 pub mod limits;

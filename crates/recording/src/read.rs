@@ -66,7 +66,13 @@ impl Recording {
     pub fn read_with(path: &Path, options: ReadOptions) -> Result<Recording, ReadError> {
         let name = path.display().to_string();
         match File::open(path) {
-            Ok(file) => read_split(&name, file, Split::DEFAULT, options),
+            Ok(file) => {
+                let split = Split {
+                    size_bytes: file.metadata().ok().map(|m| m.len()),
+                    ..Split::DEFAULT
+                };
+                read_split(&name, file, split, options)
+            }
             Err(e) => Err(ReadError::new(&name, None, None, ReadErrorKind::Io(e))),
         }
     }

@@ -3,6 +3,7 @@
 
 use csv::ByteRecord;
 
+use crate::decimal;
 use crate::error::{ReadErrorKind, excerpt};
 use crate::layout::Role;
 use crate::limits::{self, Limit};
@@ -291,7 +292,9 @@ impl RowParser<'_> {
                 {
                     return give_up(out);
                 }
-                let Ok((value, used)) = fast_float2::parse_partial::<f64, _>(rest) else {
+                let parsed = decimal::parse_plain(rest)
+                    .or_else(|| fast_float2::parse_partial::<f64, _>(rest).ok());
+                let Some((value, used)) = parsed else {
                     return give_up(out);
                 };
                 pos += used;

@@ -14,6 +14,7 @@ const SEQUENTIAL: Split = Split {
     block_bytes: 8 << 20,
     piece_bytes: 256 << 10,
     sequential: true,
+    size_bytes: None,
 };
 
 /// Cuts from a few bytes (a piece per line or less) to the default.
@@ -22,21 +23,26 @@ const SPLITS: [Split; 5] = [
         block_bytes: 1,
         piece_bytes: 1,
         sequential: false,
+        size_bytes: None,
     },
+    // A size hint (true or not) only reserves room.
     Split {
         block_bytes: 97,
         piece_bytes: 13,
         sequential: false,
+        size_bytes: Some(1 << 20),
     },
     Split {
         block_bytes: 600,
         piece_bytes: 50,
         sequential: false,
+        size_bytes: None,
     },
     Split {
         block_bytes: 4096,
         piece_bytes: 300,
         sequential: false,
+        size_bytes: Some(10),
     },
     Split::DEFAULT,
 ];
