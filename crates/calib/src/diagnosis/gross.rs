@@ -15,7 +15,9 @@
 //!   samples: excluded, with the reason.
 //!
 //! A span no constant explains is split at its quiet stretches when a constant explains each part between them
-//! (vector method: two fields on the board one after the other, merged by the robust fit across the lull between).
+//! (vector method: two fields on the board one after the other, merged by the robust fit across the lull between),
+//! or else around a steady stretch a constant explains (a field on the board or in the room next to a pass by a
+//! magnet, with no lull between); the parts are classified on their own.
 //!
 //! A constant explains a span when what it leaves is at the scale of the rest of the recording (or is a small
 //! part of the span's energy). The frame is told by the attitude: when the sensor hardly turned during the span the
@@ -171,7 +173,9 @@ pub(crate) fn spans(
                 SpanKind::Moving | SpanKind::Unexplained
                     if matches!(residual, Residual::Vector { .. }) =>
                 {
-                    split_at_lulls(residual, a, b, scale_ut, directions).unwrap_or(vec![span])
+                    split_at_lulls(residual, a, b, scale_ut, directions)
+                        .or_else(|| split_at_steady(residual, a, b, scale_ut, directions))
+                        .unwrap_or(vec![span])
                 }
                 _ => vec![span],
             }
@@ -233,6 +237,112 @@ fn split_at_lulls(
         .iter()
         .all(|s| !matches!(s.kind, SpanKind::Moving | SpanKind::Unexplained))
         .then_some(spans)
+}
+
+/// Samples apart over which a residual that holds still is compared with itself ([`split_at_steady`])…
+const STEADY_LAG: usize = 5;
+/// …the share of the span a steady stretch holds at least…
+const STEADY_SHARE: f64 = 0.25;
+/// …the share of its samples its constant must explain…
+const STEADY_EXPLAINED: f64 = 0.9;
+/// …and the share of the span's peak the constant must reach (the still moments of a magnet's pass are a small part
+/// of its field).
+const STEADY_OF_PEAK: f64 = 0.25;
+
+/// A span neither constant explains, split around its steady stretches — runs of at least [`LULL_SAMPLES`] and
+/// [`STEADY_SHARE`] of the span in which the residual holds still in sensor axes or in the room (it moves by at most
+/// [`crate::robust::RAMP_SIGMA`] times the noise of a difference over [`STEADY_LAG`] samples) — when a constant
+/// explains one of them sample by sample ([`STEADY_EXPLAINED`] of its samples within [`KEPT_SCALES`]) while the
+/// sensor turned, and stands out of the noise and the span ([`STEADY_OF_PEAK`]): a field on the board, or one placed in the room, next to a pass by a
+/// magnet with no lull between, is not all a magnet nearby. The other parts are classified on their own; quiet ones
+/// belong to no span. (A shorter steady stretch is as likely a moment in which a magnet's field, seen from a sensor
+/// carried past it, held still: on the Nexus 5 walked past perturbations, 1.4 s of a 10 s pass.)
+fn split_at_steady(
+    residual: &Residual<'_>,
+    a: usize,
+    b: usize,
+    scale_ut: f64,
+    directions: &[[f64; 3]],
+) -> Option<Vec<Span>> {
+    let Residual::Vector { e, rot } = residual else {
+        return None;
+    };
+    // A difference of two samples' noise: √2 scales per axis, over three axes.
+    let still = crate::robust::RAMP_SIGMA * scale_ut * 6f64.sqrt();
+    let steady = |i: usize| {
+        if i < a + STEADY_LAG {
+            return false;
+        }
+        let j = i - STEADY_LAG;
+        let body = frames::norm(frames::sub(e[i], e[j])) <= still;
+        let world = rot.is_some_and(|r| {
+            let (wi, wj) = (
+                frames::mat_vec(&r.at(i), e[i]),
+                frames::mat_vec(&r.at(j), e[j]),
+            );
+            frames::norm(frames::sub(wi, wj)) <= still
+        });
+        body || world
+    };
+    let quiet = |i: usize| residual.size(i) <= crate::robust::RAMP_SIGMA * scale_ut;
+    let peak_ut = (a..b).map(|i| residual.size(i)).fold(0.0, f64::max);
+    let constant_part = |s: &Span| {
+        let (offset, explained) = match s.kind {
+            SpanKind::SensorFixed {
+                offset_ut,
+                told_apart: true,
+            } => (offset_ut, true),
+            SpanKind::RoomFixed { field_ned_ut } => (field_ned_ut, true),
+            _ => ([0.0; 3], false),
+        };
+        let inside = (s.start..s.end)
+            .filter(|&i| explained_at(residual, &s.kind, i, scale_ut))
+            .count();
+        explained
+            && s.turned
+            && frames::norm(offset)
+                > (crate::robust::GROSS_SIGMA * scale_ut).max(STEADY_OF_PEAK * peak_ut)
+            && inside as f64 >= STEADY_EXPLAINED * (s.end - s.start) as f64
+    };
+    let min_run = LULL_SAMPLES.max((STEADY_SHARE * (b - a) as f64) as usize);
+    // The steady runs that a constant explains (a run's first sample is the one STEADY_LAG before its first steady
+    // one), and the parts between them.
+    let mut constants: Vec<Span> = Vec::new();
+    let mut i = a;
+    while i < b {
+        if !steady(i) {
+            i += 1;
+            continue;
+        }
+        let start = (i - STEADY_LAG).max(constants.last().map_or(a, |s| s.end));
+        while i < b && steady(i) {
+            i += 1;
+        }
+        if i - start >= min_run {
+            let span = classify(residual, start, i, scale_ut, directions);
+            if constant_part(&span) {
+                constants.push(span);
+            }
+        }
+    }
+    if constants.is_empty() {
+        return None;
+    }
+    // The parts between, without their quiet edges.
+    let between = |p: usize, q: usize| {
+        let p = (p..q).find(|&i| !quiet(i))?;
+        let q = (p..q).rev().find(|&i| !quiet(i))? + 1;
+        Some(classify(residual, p, q, scale_ut, directions))
+    };
+    let mut parts = Vec::new();
+    let mut at = a;
+    for c in constants {
+        parts.extend(between(at, c.start));
+        at = c.end;
+        parts.push(c);
+    }
+    parts.extend(between(at, b));
+    Some(parts)
 }
 
 /// What explains the residual of samples `[a, b)`.
@@ -431,15 +541,63 @@ mod tests {
                 .all(|s| matches!(s.kind, SpanKind::SensorFixed { .. })),
             "{found:?}"
         );
-        // When the second is a field that changes as the sensor moves (no constant explains it), the span stays
-        // whole: a magnet's pass is not cut into pieces.
+        // When the second is a field that changes as the sensor moves (no constant explains it), the field on the
+        // board is still its own span, and the magnet's pass is not cut into pieces.
         for (k, v) in e[500..900].iter_mut().enumerate() {
             let x = k as f64 / 400.0;
             *v = [40.0 * x * x, -30.0 * x, 10.0 * (1.0 - x)];
         }
         let residual = Residual::Vector { e: &e, rot: None };
+        let found = spans(&residual, &kept, 0.1, &dirs);
+        let ranges: Vec<(usize, usize)> = found.iter().map(|s| (s.start, s.end)).collect();
+        assert_eq!(ranges, vec![(100, 400), (500, 900)], "{found:?}");
+        assert!(matches!(found[1].kind, SpanKind::Moving), "{found:?}");
+        // And a pass alone stays whole.
+        kept[100..500].fill(true);
         let whole = spans(&residual, &kept, 0.1, &dirs);
         assert_eq!(whole.len(), 1, "{whole:?}");
         assert!(matches!(whole[0].kind, SpanKind::Moving), "{whole:?}");
+    }
+
+    #[test]
+    fn a_field_on_the_board_next_to_a_pass_by_a_magnet_is_its_own_span() {
+        // A magnet's pass (a field changing as the sensor moves) from 100 to 400, and straight after it a field on
+        // the board from 400 to 700, no lull between: one excluded run, two spans.
+        let n = 800;
+        let mut e: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let w = 0.05 * (((i * 7919) % 13) as f64 / 6.0 - 1.0);
+                [w, -w, w]
+            })
+            .collect();
+        for (k, v) in e[100..400].iter_mut().enumerate() {
+            let x = k as f64 / 300.0;
+            let bump = 60.0 * (std::f64::consts::PI * x).sin();
+            *v = [bump * x, -bump, 0.5 * bump];
+        }
+        for v in &mut e[400..700] {
+            *v = frames::add(*v, [12.0, -30.0, 8.0]);
+        }
+        let mut kept = vec![true; n];
+        kept[100..700].fill(false);
+        let dirs = turning(n);
+        let residual = Residual::Vector { e: &e, rot: None };
+        let found = spans(&residual, &kept, 0.1, &dirs);
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert!(matches!(found[0].kind, SpanKind::Moving), "{found:?}");
+        assert!(
+            matches!(
+                found[1].kind,
+                SpanKind::SensorFixed {
+                    told_apart: true,
+                    ..
+                }
+            ),
+            "{found:?}"
+        );
+        assert!(
+            found[1].start.abs_diff(400) <= 10 && found[1].end == 700,
+            "{found:?}"
+        );
     }
 }
