@@ -15,9 +15,9 @@
 //!   samples: excluded, with the reason.
 //!
 //! A span no constant explains is split at its quiet stretches when a constant explains each part between them
-//! (vector method: two fields on the board one after the other, merged by the robust fit across the lull between),
-//! or else around a steady stretch a constant explains (a field on the board or in the room next to a pass by a
-//! magnet, with no lull between); the parts are classified on their own.
+//! (two fields on the board one after the other, merged by the robust fit across the lull between), or else, in
+//! the vector method, around a steady stretch a constant explains (a field on the board or in the room next to a
+//! pass by a magnet, with no lull between); the parts are classified on their own.
 //!
 //! A constant explains a span when what it leaves is at the scale of the rest of the recording (or is a small
 //! part of the span's energy). The frame is told by the attitude: when the sensor hardly turned during the span the
@@ -170,9 +170,7 @@ pub(crate) fn spans(
         .flat_map(|(a, b)| {
             let span = classify(residual, a, b, scale_ut, directions);
             match span.kind {
-                SpanKind::Moving | SpanKind::Unexplained
-                    if matches!(residual, Residual::Vector { .. }) =>
-                {
+                SpanKind::Moving | SpanKind::Unexplained => {
                     split_at_lulls(residual, a, b, scale_ut, directions)
                         .or_else(|| split_at_steady(residual, a, b, scale_ut, directions))
                         .unwrap_or(vec![span])
@@ -556,6 +554,34 @@ mod tests {
         let whole = spans(&residual, &kept, 0.1, &dirs);
         assert_eq!(whole.len(), 1, "{whole:?}");
         assert!(matches!(whole[0].kind, SpanKind::Moving), "{whole:?}");
+    }
+
+    #[test]
+    fn in_the_magnitude_two_fields_on_the_board_merged_across_a_lull_are_two_spans() {
+        // The scalar method sees a field on the board as u·d in |B|: 100–400 one field, 500–900 another, the lull
+        // between clean, all of it one excluded run.
+        let n = 1000;
+        let unit = turning(n);
+        let rho: Vec<f64> = (0..n)
+            .map(|i| {
+                let wobble = 0.01 * ((i * 7919) % 13) as f64;
+                let d = match i {
+                    100..400 => [20.0, 0.0, 0.0],
+                    500..900 => [0.0, -15.0, 5.0],
+                    _ => [0.0; 3],
+                };
+                wobble + frames::dot(unit[i], d)
+            })
+            .collect();
+        let mut kept = vec![true; n];
+        kept[100..900].fill(false);
+        let residual = Residual::Magnitude {
+            rho: &rho,
+            unit: &unit,
+        };
+        let found = spans(&residual, &kept, 0.1, &unit);
+        let ranges: Vec<(usize, usize)> = found.iter().map(|s| (s.start, s.end)).collect();
+        assert_eq!(ranges, vec![(100, 400), (500, 900)], "{found:?}");
     }
 
     #[test]
