@@ -27,7 +27,7 @@ pub(crate) struct Split {
     /// Every row through the `csv` crate on one thread: the sequential reader the tests compare with.
     pub sequential: bool,
     /// The file's size, when known: after the first block the columns are reserved for the rows the rest of it
-    /// holds at the first block's bytes a row (no copies as they grow, and no room to spare).
+    /// holds at the first block's bytes a row (no copies as they grow, and little room to spare).
     pub size_bytes: Option<u64>,
 }
 
