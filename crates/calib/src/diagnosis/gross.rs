@@ -126,6 +126,11 @@ impl Residual<'_> {
         }
     }
 
+    /// Whether sample `i` is quiet: within [`crate::robust::RAMP_SIGMA`] scales.
+    fn quiet(&self, i: usize, scale_ut: f64) -> bool {
+        self.size(i) <= crate::robust::RAMP_SIGMA * scale_ut
+    }
+
     fn dims(&self) -> f64 {
         match self {
             Residual::Vector { .. } => 3.0,
@@ -197,7 +202,7 @@ fn split_at_lulls(
     scale_ut: f64,
     directions: &[[f64; 3]],
 ) -> Option<Vec<Span>> {
-    let quiet = |i: usize| residual.size(i) <= crate::robust::RAMP_SIGMA * scale_ut;
+    let quiet = |i: usize| residual.quiet(i, scale_ut);
     let min_lull = LULL_SAMPLES.max((LULL_SHARE * (b - a) as f64) as usize);
     // The disturbed stretches: maximal runs not interrupted by a quiet run of at least `min_lull` samples.
     let mut parts: Vec<(usize, usize)> = Vec::new();
@@ -251,10 +256,11 @@ const STEADY_OF_PEAK: f64 = 0.25;
 /// [`STEADY_SHARE`] of the span in which the residual holds still in sensor axes or in the room (it moves by at most
 /// [`crate::robust::RAMP_SIGMA`] times the noise of a difference over [`STEADY_LAG`] samples) — when a constant
 /// explains one of them sample by sample ([`STEADY_EXPLAINED`] of its samples within [`KEPT_SCALES`]) while the
-/// sensor turned, and stands out of the noise and the span ([`STEADY_OF_PEAK`]): a field on the board, or one placed in the room, next to a pass by a
-/// magnet with no lull between, is not all a magnet nearby. The other parts are classified on their own, whole (a
-/// part all quiet belongs to no span). (A shorter steady stretch is as likely a moment in which a magnet's field, seen from a sensor
-/// carried past it, held still: on the Nexus 5 walked past perturbations, 1.4 s of a 10 s pass.)
+/// sensor turned, and stands out of the noise and the span ([`STEADY_OF_PEAK`]): a field on the board, or one
+/// placed in the room, next to a pass by a magnet with no lull between, is not all a magnet nearby. The other parts
+/// are classified on their own, whole (a part all quiet belongs to no span). (A shorter steady stretch is as likely
+/// a moment in which a magnet's field, seen from a sensor carried past it, held still: on the Nexus 5 walked past
+/// perturbations, 1.4 s of a 10 s pass.)
 fn split_at_steady(
     residual: &Residual<'_>,
     a: usize,
@@ -282,7 +288,7 @@ fn split_at_steady(
         });
         body || world
     };
-    let quiet = |i: usize| residual.size(i) <= crate::robust::RAMP_SIGMA * scale_ut;
+    let quiet = |i: usize| residual.quiet(i, scale_ut);
     let peak_ut = (a..b).map(|i| residual.size(i)).fold(0.0, f64::max);
     let constant_part = |s: &Span| {
         let (offset, explained) = match s.kind {
