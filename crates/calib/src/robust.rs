@@ -15,8 +15,8 @@
 //!    plausible ones, and so do seeds the samples do not support ([`RobustProblem::support`]): seen from a scalar
 //!    seed fitted to a cap of the recording — a huge sphere through a band of the readings and a still stretch —
 //!    the readings lie in a cap, and its median residual can be the smallest of all when the sensor rested for much
-//!    of the recording (an undisturbed physical recording with a minute at rest at each end was refused, or fitted
-//!    5 µT off, when 8–16 µT sat on its board for a third of it).
+//!    of the recording (an undisturbed physical recording with a minute at rest at each end was refused when
+//!    8–12 µT sat on its board for a third of it).
 //! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle; on a subsample of at
 //!    most [`REWEIGHT_SAMPLES`] samples, which fixes the fit far more closely than the spans need); then the samples
 //!    of the whole recording whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps
