@@ -85,6 +85,7 @@ fn assert_undisturbed(r: &Value, what: &str) {
         assert!(!ids.iter().any(|i| i == id), "{what}: found {ids:?}");
     }
     assert!(spans(r).is_empty(), "{what}: spans {:?}", spans(r));
+    assert!(!other_state_warned(r), "{what}: {}", r["warnings"]);
     assert!(
         r["diagnosis"]["located"]["segments"]
             .as_array()
@@ -118,6 +119,21 @@ fn broad_33_the_magnet_attached_to_the_board_is_a_bias_window() {
     assert!((39.0..=44.0).contains(&t0), "attached at {t0} s");
     assert!((96.6..=100.6).contains(&t1), "taken off at {t1} s");
     assert_within(&r, [0.0; 3], "broad 33");
+    // A third of the recording in another state is said, with which state was calibrated.
+    assert!(
+        other_state_warned(&r),
+        "no warning of the other offset: {}",
+        r["warnings"]
+    );
+}
+
+/// Whether the report warns that part of the recording sat on another offset.
+fn other_state_warned(r: &Value) -> bool {
+    r["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().contains("sat on another offset"))
 }
 
 #[test]

@@ -492,10 +492,49 @@ pub fn calibrate(
         } else {
             let first =
                 diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model)?;
-            cal.diagnosis = Some(around_spans(rec, &cal, first)?);
+            let d = around_spans(rec, &cal, first)?;
+            cal.warnings.extend(other_offset_state(&d, rec.len()));
+            cal.diagnosis = Some(d);
         }
     }
     Ok(cal)
+}
+
+/// Spans fixed to the sensor covering at least this share of a recording make it a recording of two states.
+const OTHER_STATE_SHARE: f64 = 0.25;
+
+/// A warning when spans of a constant field fixed to the sensor — something magnetic on the board — cover
+/// [`OTHER_STATE_SHARE`] of the recording or more: the calibration is of the state the rest of it was in, which the
+/// user may not mean (a magnet left on the board for most of a recording is the state most of it was in).
+fn other_offset_state(d: &Diagnosis, total: usize) -> Option<String> {
+    let fixed: Vec<&diagnosis::GrossSpan> = d
+        .spans
+        .iter()
+        .filter(|s| matches!(s.kind, diagnosis::SpanKind::SensorFixed { .. }))
+        .collect();
+    let samples: usize = fixed.iter().map(|s| s.samples).sum();
+    let share = samples as f64 / total.max(1) as f64;
+    if share < OTHER_STATE_SHARE {
+        return None;
+    }
+    let size_ut = fixed
+        .iter()
+        .map(|s| match s.kind {
+            diagnosis::SpanKind::SensorFixed { offset_ut, .. } => frames::norm(offset_ut),
+            _ => 0.0,
+        })
+        .fold(0.0, f64::max);
+    let when: Vec<String> = fixed
+        .iter()
+        .map(|s| format!("{:.1}–{:.1} s", s.t0_s, s.t1_s))
+        .collect();
+    Some(format!(
+        "for {:.0} % of the recording ({}) the readings sat on another offset, by up to {size_ut:.1} µT: something \
+         magnetic on or near the board. The calibration is of the state the rest of the recording was in; if the \
+         sensor will be used as it was during those spans, record again in that state",
+        100.0 * share,
+        when.join(", ")
+    ))
 }
 
 /// The noise of |B| in calibrated units: the calibrated noise along the field direction, averaged over the
