@@ -507,26 +507,26 @@ const OTHER_STATE_SHARE: f64 = 0.25;
 /// [`OTHER_STATE_SHARE`] of the recording or more: the calibration is of the state the rest of it was in, which the
 /// user may not mean (a magnet left on the board for most of a recording is the state most of it was in).
 fn other_offset_state(d: &Diagnosis, total: usize) -> Option<String> {
-    let fixed: Vec<&diagnosis::GrossSpan> = d
+    // Each such span with the size of its field.
+    let fixed: Vec<(&diagnosis::GrossSpan, f64)> = d
         .spans
         .iter()
-        .filter(|s| matches!(s.kind, diagnosis::SpanKind::SensorFixed { .. }))
+        .filter_map(|s| match s.kind {
+            diagnosis::SpanKind::SensorFixed { offset_ut, .. } => {
+                Some((s, frames::norm(offset_ut)))
+            }
+            _ => None,
+        })
         .collect();
-    let samples: usize = fixed.iter().map(|s| s.samples).sum();
+    let samples: usize = fixed.iter().map(|(s, _)| s.samples).sum();
     let share = samples as f64 / total.max(1) as f64;
     if share < OTHER_STATE_SHARE {
         return None;
     }
-    let size_ut = fixed
-        .iter()
-        .map(|s| match s.kind {
-            diagnosis::SpanKind::SensorFixed { offset_ut, .. } => frames::norm(offset_ut),
-            _ => 0.0,
-        })
-        .fold(0.0, f64::max);
+    let size_ut = fixed.iter().map(|(_, size)| *size).fold(0.0, f64::max);
     let when: Vec<String> = fixed
         .iter()
-        .map(|s| format!("{:.1}–{:.1} s", s.t0_s, s.t1_s))
+        .map(|(s, _)| format!("{:.1}–{:.1} s", s.t0_s, s.t1_s))
         .collect();
     Some(format!(
         "for {:.0} % of the recording ({}) the readings sat on another offset, by up to {size_ut:.1} µT: something \

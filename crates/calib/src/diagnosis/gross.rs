@@ -291,22 +291,22 @@ fn split_at_steady(
     let quiet = |i: usize| residual.quiet(i, scale_ut);
     let peak_ut = (a..b).map(|i| residual.size(i)).fold(0.0, f64::max);
     let constant_part = |s: &Span| {
-        let (offset, explained) = match s.kind {
+        let offset = match s.kind {
             SpanKind::SensorFixed {
                 offset_ut,
                 told_apart: true,
-            } => (offset_ut, true),
-            SpanKind::RoomFixed { field_ned_ut } => (field_ned_ut, true),
-            _ => ([0.0; 3], false),
+            } => offset_ut,
+            SpanKind::RoomFixed { field_ned_ut } => field_ned_ut,
+            _ => return false,
         };
+        let floor = (crate::robust::GROSS_SIGMA * scale_ut).max(STEADY_OF_PEAK * peak_ut);
+        if !s.turned || frames::norm(offset) <= floor {
+            return false;
+        }
         let inside = (s.start..s.end)
             .filter(|&i| explained_at(residual, &s.kind, i, scale_ut))
             .count();
-        explained
-            && s.turned
-            && frames::norm(offset)
-                > (crate::robust::GROSS_SIGMA * scale_ut).max(STEADY_OF_PEAK * peak_ut)
-            && inside as f64 >= STEADY_EXPLAINED * (s.end - s.start) as f64
+        inside as f64 >= STEADY_EXPLAINED * (s.end - s.start) as f64
     };
     let min_run = LULL_SAMPLES.max((STEADY_SHARE * (b - a) as f64) as usize);
     // The steady runs that a constant explains (a run's first sample is the one STEADY_LAG before its first steady
