@@ -34,7 +34,7 @@ pub enum NoiseSource {
         /// One past its last sample.
         end: usize,
     },
-    /// From k-th order differences of the whole recording (the order that was least contaminated by signal).
+    /// From k-th order differences over the recording (the order that was least contaminated by signal).
     Differences {
         /// Order of the differences.
         order: usize,
@@ -87,6 +87,8 @@ pub fn rms3(v: [f64; 3]) -> f64 {
 const LSB_PROBE: usize = 20_000;
 /// Differences used for the median that sets the robust scale (evenly strided over the recording).
 const MEDIAN_PROBE: usize = 65_536;
+/// Differences summed per order and axis, at most (in blocks spread evenly over the recording): σ to 0.2 %.
+const DIFFERENCES_MOST: usize = 1 << 18;
 /// Length of the windows searched for a still segment, samples.
 const STILL_WINDOW: usize = 50;
 /// A still segment must be at least this many windows long.
@@ -145,8 +147,9 @@ const ORDERS: usize = 4;
 /// The noise σ per axis from the 1st to 4th differences, robust to jumps: per order, the median absolute
 /// difference sets a scale, and the RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its
 /// variance there, corrected) is the estimate. Where most differences are exactly zero (readings on a coarse grid)
-/// the scale falls back to five times the plain RMS. One pass over the readings for every order and axis at once (two
-/// on a coarse grid), on all threads; NaN for an order the readings are too few for.
+/// the scale falls back to five times the plain RMS. One pass for every order and axis at once (two on a coarse grid),
+/// on all threads, over the readings or, in a long recording, over blocks spread evenly over them
+/// ([`DIFFERENCES_MOST`] samples); NaN for an order the readings are too few for.
 fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
     let n = raw_ut.len();
     let usable = |o: usize| n > o + 3;
@@ -169,23 +172,35 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
     let diff = |o: usize, i: usize| order(o, &window(i));
     type Sums = [([f64; 3], [usize; 3]); ORDERS];
     let rms_within = |limit: &[[f64; 3]; ORDERS]| -> [[f64; 3]; ORDERS] {
-        let sums: Sums = chunks::fold(
+        let sums: Sums = chunks::fold_spread(
             count(0),
+            DIFFERENCES_MOST,
             |range| {
                 let mut sums: Sums = [([0.0; 3], [0usize; 3]); ORDERS];
-                for i in range {
-                    let all = diffs(&window(i));
-                    for (o, ((sum, m), d)) in sums.iter_mut().zip(all).enumerate() {
-                        if i >= count(o) {
-                            continue;
-                        }
+                // The differences of the orders that exist at a sample, added in sample order.
+                let mut add = |all: [[f64; 3]; ORDERS], orders: usize| {
+                    for ((sum, m), (d, limit)) in
+                        sums.iter_mut().zip(all.iter().zip(limit)).take(orders)
+                    {
                         for k in 0..3 {
-                            if d[k].abs() <= limit[o][k] {
-                                sum[k] += d[k] * d[k];
-                                m[k] += 1;
-                            }
+                            let within = d[k].abs() <= limit[k];
+                            sum[k] += if within { d[k] * d[k] } else { 0.0 };
+                            m[k] += usize::from(within);
                         }
                     }
+                };
+                // Where all five readings exist, straight from the slice; the last few samples the long way.
+                let inner = range.start..range.end.min(n.saturating_sub(ORDERS)).max(range.start);
+                if !inner.is_empty() {
+                    for w in raw_ut[inner.start..inner.end + ORDERS].windows(ORDERS + 1) {
+                        add(diffs(w.try_into().expect("five readings")), ORDERS);
+                    }
+                }
+                for i in inner.end..range.end {
+                    add(
+                        diffs(&window(i)),
+                        (0..ORDERS).filter(|&o| i < count(o)).count(),
+                    );
                 }
                 sums
             },
@@ -410,6 +425,22 @@ mod tests {
                 );
             }
             assert!(f.lsb_ut.is_none());
+        }
+    }
+
+    #[test]
+    fn a_long_recording_is_measured_on_blocks_spread_over_it() {
+        // σ 0.1 µT in the first half, 0.12 µT in the second: blocks from one end alone would give one of them.
+        let n = 3 * DIFFERENCES_MOST;
+        let mut data = rotating(n, 100.0, 0.1, None, 5);
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        let extra = Normal::new(0.0, (0.12f64.powi(2) - 0.1f64.powi(2)).sqrt()).unwrap();
+        for m in &mut data[n / 2..] {
+            *m = m.map(|v| v + extra.sample(&mut rng));
+        }
+        let expected = ((0.1f64.powi(2) + 0.12f64.powi(2)) / 2.0).sqrt();
+        for s in estimate(&data, None).sigma_ut {
+            assert!((s / expected - 1.0).abs() < 0.02, "{s} against {expected}");
         }
     }
 
