@@ -95,8 +95,11 @@ const STILL_WINDOW: usize = 50;
 const STILL_MIN_WINDOWS: usize = 4;
 /// A still window's spread is at most this fraction of the recording's largest spread.
 const STILL_OF_ROTATION: f64 = 0.1;
-/// Poses give the noise when their pooled degrees of freedom reach this.
+/// Poses give the noise when their pooled degrees of freedom reach this…
 const POSES_MIN_DOF: usize = 20;
+/// …and their runs hold at least this share of the samples: a recording of poses is made of them, not of a few runs
+/// that happen to share a reference.
+const POSES_MIN_SHARE: f64 = 0.5;
 
 /// Estimates the noise floor of raw readings (µT). `reference`, when given, is the expected field (or any
 /// per-sample reference) in sample order: runs of identical references are poses, and their spread is the noise.
@@ -275,7 +278,8 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
 }
 
 /// The pooled spread inside runs of consecutive samples whose reference is identical, if they give enough degrees of
-/// freedom: σ per axis, the runs of two or more, and the pooled degrees of freedom.
+/// freedom and hold enough of the samples ([`POSES_MIN_SHARE`]): σ per axis, the runs of two or more, and the pooled
+/// degrees of freedom.
 fn pose_sigma(raw_ut: &[[f64; 3]], reference: &[[f64; 3]]) -> Option<([f64; 3], usize, usize)> {
     let (mut ss, mut dof, mut runs) = ([0.0; 3], 0usize, 0usize);
     let mut start = 0;
@@ -285,7 +289,9 @@ fn pose_sigma(raw_ut: &[[f64; 3]], reference: &[[f64; 3]]) -> Option<([f64; 3], 
             continue;
         }
         let run = &raw_ut[start..end];
-        if run.len() >= 2 && known(&reference[start]) {
+        // Rows written twice (reading and reference alike) are no pose: a run of one reading says nothing of noise.
+        let one_reading = run.iter().all(|m| m == &run[0]);
+        if run.len() >= 2 && known(&reference[start]) && !one_reading {
             let mean: [f64; 3] =
                 std::array::from_fn(|k| run.iter().map(|m| m[k]).sum::<f64>() / run.len() as f64);
             for m in run {
@@ -299,7 +305,9 @@ fn pose_sigma(raw_ut: &[[f64; 3]], reference: &[[f64; 3]]) -> Option<([f64; 3], 
         start = end;
     }
     let finite = ss.iter().all(|s| s.is_finite());
-    (dof >= POSES_MIN_DOF && finite).then(|| (ss.map(|s| (s / dof as f64).sqrt()), runs, dof))
+    let most = (dof + runs) as f64 >= POSES_MIN_SHARE * raw_ut.len() as f64;
+    (dof >= POSES_MIN_DOF && finite && most)
+        .then(|| (ss.map(|s| (s / dof as f64).sqrt()), runs, dof))
 }
 
 /// The longest run of windows whose spread (no motion removed) is no more than the difference-based noise allows,
@@ -514,6 +522,27 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn rows_a_logger_wrote_twice_are_no_poses() {
+        // A tumbling recording with its own reference per row, one row in a hundred (or every other row) written
+        // twice: the twins are runs of one reference with no spread, and must not set the noise to zero.
+        let raw = rotating(20_000, 100.0, 0.2, None, 8);
+        for every in [100, 2] {
+            let mut twice = Vec::new();
+            let mut reference = Vec::new();
+            for (i, m) in raw.iter().enumerate() {
+                let r = m.map(|v| v + 0.5);
+                for _ in 0..if i % every == 1 { 2 } else { 1 } {
+                    twice.push(*m);
+                    reference.push(r);
+                }
+            }
+            let f = estimate(&twice, Some(&reference));
+            assert!(!matches!(f.source, NoiseSource::Poses { .. }), "{f:?}");
+            assert!(f.sigma_ut.iter().all(|s| *s > 0.1), "one in {every}: {f:?}");
         }
     }
 
