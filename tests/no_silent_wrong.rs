@@ -386,3 +386,136 @@ fn raw_counts_get_a_units_warning_with_the_scale() {
         );
     }
 }
+
+/// `text` (a recording) with every data row's `mx,my,mz` (columns 1–3) replaced by `f` of them.
+fn map_readings(text: &str, f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        if line.starts_with('#') || line.starts_with('t') {
+            out += line;
+        } else {
+            let mut cells: Vec<String> = line.split(',').map(str::to_owned).collect();
+            let m: [f64; 3] = std::array::from_fn(|k| cells[k + 1].parse().unwrap());
+            for (k, v) in f(m).iter().enumerate() {
+                cells[k + 1] = format!("{v:.4}");
+            }
+            out += &cells.join(",");
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// A simulated tumble with attitude and the field in its metadata (60 s), and its text.
+fn tumble(dir: &Path) -> (PathBuf, String) {
+    let rec = simulate(dir, "tumble.csv", &["--duration", "60"]);
+    let text = std::fs::read_to_string(&rec).unwrap();
+    (rec, text)
+}
+
+/// Defect 7 (hand-made inputs, 2026-11-26): `mx` and `my` swapped fitted GOOD with no word, and the ArduPilot export
+/// kept A's symmetric part, leaving the axes mirrored. Now a warning, and no export that cannot hold a reflection.
+#[test]
+fn mirrored_axes_are_warned_and_not_exported_to_a_symmetric_matrix() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = tumble(dir.path());
+    let rec = write(
+        dir.path(),
+        "swapped.csv",
+        &map_readings(&text, |m| [m[1], m[0], m[2]]),
+    );
+    let param = dir.path().join("ap.param");
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--export",
+        "ardupilot",
+        "--export-out",
+        param.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("mirrors the axes"),
+        "{stderr}"
+    );
+    assert!(
+        !param.exists(),
+        "an export that cannot hold the reflection was written"
+    );
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose", "--export", "json"]);
+    assert!(out.status.success());
+    let summary = String::from_utf8_lossy(&out.stderr);
+    assert!(summary.contains("WARNING: A mirrors the axes"), "{summary}");
+}
+
+/// Defect 8: readings turned 90° about z against the attitude fitted GOOD, and the PX4 export left the turn out with
+/// only a comment in the file. Now a warning says so where the user reads; an aligned sensor gets none.
+#[test]
+fn a_rotation_an_export_leaves_out_is_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, text) = tumble(dir.path());
+    let turned = write(
+        dir.path(),
+        "turned.csv",
+        &map_readings(&text, |m| [-m[1], m[0], m[2]]),
+    );
+    for (path, warned) in [(&turned, true), (&rec, false)] {
+        let out = magcal_fit(&[path.to_str().unwrap(), "--no-diagnose", "--export", "px4"]);
+        assert!(out.status.success());
+        let summary = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            summary.contains("WARNING: the export leaves out a rotation of 9"),
+            warned,
+            "{summary}"
+        );
+    }
+}
+
+/// Defect 9: a field given at half its size was absorbed into A (gains of 0.5) with a GOOD verdict.
+#[test]
+fn a_field_of_the_wrong_size_is_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, text) = tumble(dir.path());
+    let ned: Vec<f64> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# field_ned_ut:"))
+        .expect("the simulator writes the field")
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    let half = format!(
+        "--field-ned={},{},{}",
+        ned[0] / 2.0,
+        ned[1] / 2.0,
+        ned[2] / 2.0
+    );
+    for (extra, warned) in [(Some(half.as_str()), true), (None, false)] {
+        let mut args = vec![rec.to_str().unwrap(), "--no-diagnose"];
+        args.extend(extra);
+        let out = magcal_fit(&args);
+        assert!(out.status.success());
+        let summary = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            summary.contains("A scales the readings by 0.5"),
+            warned,
+            "{summary}"
+        );
+    }
+}
+
+/// Defect 10: `--field-ut` on a recording with attitude and a field vector gave a scalar fit with a warning that the
+/// recording had no field vector (it had one: `--field-ut` replaced it). Now the warning says what replaced what.
+#[test]
+fn field_ut_says_it_replaced_the_field_vector() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, _) = tumble(dir.path());
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose", "--field-ut", "30"]);
+    assert!(out.status.success());
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("scalar calibration")
+            && summary.contains("--field-ut gives a magnitude alone")
+            && !summary.contains("no world field vector"),
+        "{summary}"
+    );
+}

@@ -9,7 +9,7 @@ use clap::Parser;
 use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
-use magcal_app::export::{ExportFormat, export};
+use magcal_app::export::{ExportFormat, dropped_rotation, export, refusal};
 use magcal_app::field::resolve;
 use magcal_app::files::{check_outputs, write_atomic};
 use magcal_app::howto::{Target, how_to_apply};
@@ -49,7 +49,8 @@ struct Args {
     /// The world field (otherwise the recording's metadata says it).
     #[command(flatten)]
     field: WorldFieldOpts,
-    /// Field magnitude in µT (scalar method; ignored when a field vector is known).
+    /// Field magnitude in µT, for the scalar method: it replaces a field vector from the recording's metadata (so
+    /// only |B| is fitted); --field-ned replaces the vector instead.
     #[arg(long, value_name = "UT")]
     field_ut: Option<f64>,
     /// Write the parameters file (TOML) here, atomically.
@@ -180,6 +181,12 @@ fn run(args: Args) -> anyhow::Result<()> {
     let target = target_model(&cal);
     let found = cal.diagnosis.as_ref().map_or(&[][..], |d| &d.effects[..]);
     if let Some(format) = args.export {
+        if let Some(why) = refusal(&target, format) {
+            bail!("{name}: not exported: {why}");
+        }
+        if let Some(warning) = dropped_rotation(&target, format) {
+            say(&format!("  WARNING: {warning}\n"));
+        }
         let text = export(&target, format, found);
         match &args.export_out {
             Some(path) => write_atomic(path, text.as_bytes())

@@ -361,7 +361,15 @@ pub fn calibrate(
     let method = match method {
         Method::Auto if has_reference => Method::Vector,
         Method::Auto => {
-            if rec.quat.is_some() {
+            if rec.quat.is_some() && field.source() == "--field-ut" {
+                warnings.push(
+                    "only the magnitude was fitted (scalar method: misalignment unobserved) though the recording has \
+                     attitude quaternions: --field-ut gives a magnitude alone and replaces any field vector the \
+                     recording's metadata holds. Drop --field-ut to use that vector, or give --field-ned N,E,D (µT), \
+                     to fit every component (vector method)"
+                        .to_owned(),
+                );
+            } else if rec.quat.is_some() {
                 warnings.push(
                     "the recording has attitude quaternions but no world field vector, so only the magnitude was \
                      fitted (scalar method: misalignment unobserved). Give the field with --field-ned N,E,D (µT), or \

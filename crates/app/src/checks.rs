@@ -15,6 +15,9 @@ pub const EARTH_FIELD_UT: (f64, f64) = (22.0, 67.0);
 const GAIN_SPREAD_WARN: f64 = 1.5;
 /// Below this ratio of the smallest to the largest singular value, `A` is as good as singular: refused.
 const GAIN_SPREAD_REFUSE: f64 = 1e-3;
+/// Readings in µT whose mean gain against a given field is off by more than this factor (either way): a sensor's
+/// sensitivity is within 10–20 % of its datasheet's, so the field given is more likely wrong.
+const MEAN_GAIN_WARN: f64 = 1.3;
 
 /// Raw-count scales of common chips and units, µT per unit, for the units warning.
 const SCALES: [(&str, f64); 9] = [
@@ -86,6 +89,24 @@ pub fn check(
              are µT, the field given (or fitted) is wrong or the sensor sits in a strongly disturbed place; if the \
              sensor's gain is off, A corrects it only for this field"
         ));
+    }
+    let mean_gain = sv.iter().product::<f64>().cbrt();
+    if raw_in_range && known.is_some() && (mean_gain.ln().abs() > MEAN_GAIN_WARN.ln()) {
+        warnings.push(format!(
+            "A scales the readings by {mean_gain:.3} on average: they lie {raw_radius:.1} µT from their centre, and \
+             the field they were fitted to is {calibrated:.1} µT ({}). A sensor that reports µT is rarely off by \
+             more than 10–20 %: check that field (or the readings' units): calibrated readings take its magnitude",
+            field.source()
+        ));
+    }
+    if matches!(fit, Fit::Vector(_)) && a.determinant() < 0.0 {
+        warnings.push(
+            "A mirrors the axes (its determinant is negative): the readings' axes are left-handed against the \
+             attitude reference's — two axes swapped or one reversed (a wiring or a driver's axis map). A as fitted \
+             undoes it, but exports with a symmetric matrix (ArduPilot, PX4) cannot: fix the axis map and record \
+             again"
+                .to_owned(),
+        );
     }
     let offset = frames::norm(c);
     if raw_in_range && offset > 10.0 * calibrated {

@@ -127,6 +127,40 @@ pub fn left_out_lines(found: &[FoundEffect], holder: Holder) -> Vec<String> {
     lines
 }
 
+/// A rotation a symmetric target leaves out is worth a warning above this angle, degrees: the heading error it leaves
+/// unless the board's orientation takes it.
+const ROTATION_WARN_DEG: f64 = 3.0;
+
+/// Whether `format` holds only a symmetric matrix (the rotation of `A = R·S` is left out).
+fn symmetric_only(format: ExportFormat) -> bool {
+    matches!(format, ExportFormat::Ardupilot | ExportFormat::Px4)
+}
+
+/// Why `model` cannot go to `format` at all: its `A` mirrors the axes (a negative determinant), which neither a
+/// symmetric matrix nor a board rotation can hold.
+pub fn refusal(model: &Model, format: ExportFormat) -> Option<String> {
+    let det = Matrix3::from_fn(|j, k| model.a[j][k]).determinant();
+    (symmetric_only(format) && det < 0.0).then(|| {
+        "A mirrors the axes (two swapped or one reversed): the target's symmetric matrix cannot undo that, and a \
+         board orientation is a rotation. Fix the axis map (the wiring or the driver's), record again and fit that; \
+         --export json or c-header carry the whole A"
+            .to_owned()
+    })
+}
+
+/// A warning when the rotation `format` leaves out of `model`'s `A` exceeds [`ROTATION_WARN_DEG`].
+pub fn dropped_rotation(model: &Model, format: ExportFormat) -> Option<String> {
+    let angle = Polar::of(&model.a).angle_deg();
+    (symmetric_only(format) && angle > ROTATION_WARN_DEG).then(|| {
+        format!(
+            "the export leaves out a rotation of {angle:.1}° between the sensor's axes and the attitude \
+             reference's (its matrix is symmetric): unless the target's orientation setting (ArduPilot's \
+             COMPASS_ORIENT or AHRS_ORIENTATION, PX4's CAL_MAG0_ROT or SENS_BOARD_ROT) takes that rotation, headings \
+             will be off by up to {angle:.0}°"
+        )
+    })
+}
+
 /// `A = R·S`, `R` a rotation and `S` symmetric positive definite.
 pub struct Polar {
     /// The rotation.
