@@ -211,3 +211,46 @@ fn scalar_recordings_say_what_they_cannot_test() {
         );
     }
 }
+
+/// Broad 02's rows reordered (a permutation by a prime, coprime to their count) and without `t`, as a user's export
+/// may come: the sample-to-sample noise cannot be measured, so it may explain none of the residual — the verdict must
+/// not turn GOOD by taking the attitude reference's error for noise (it did: 0.41° left instead of 2.4°).
+#[test]
+fn reordered_rows_do_not_pass_the_references_error_off_as_noise() {
+    let rec = Recording::read(&real("broad/broad_02_undisturbed_slow_rotation.csv")).unwrap();
+    let n = rec.len();
+    let order: Vec<usize> = (0..n).map(|i| i * 7919 % n).collect();
+    fn pick<T: Clone>(v: &[T], order: &[usize]) -> Vec<T> {
+        order.iter().map(|&i| v[i].clone()).collect()
+    }
+    let reordered = Recording {
+        t_s: None,
+        mag_ut: pick(&rec.mag_ut, &order),
+        temp_c: rec.temp_c.as_deref().map(|v| pick(v, &order)),
+        quat: rec.quat.as_deref().map(|v| pick(v, &order)),
+        ref_ut: rec.ref_ut.as_deref().map(|v| pick(v, &order)),
+        gyro_rad_s: None,
+        ..rec.clone()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("reordered.csv");
+    reordered.write(&path).unwrap();
+    let (before, after) = (
+        fit_report(
+            &real("broad/broad_02_undisturbed_slow_rotation.csv"),
+            &["--no-diagnose"],
+        ),
+        fit_report(&path, &["--no-diagnose"]),
+    );
+    assert_eq!(after["verdict"]["grade"], "usable", "{}", after["verdict"]);
+    let reason = after["verdict"]["reason"].as_str().unwrap();
+    assert!(reason.contains("could not be measured"), "{reason}");
+    // The whole residual counts: no less heading error left than with the noise measured.
+    let left = |r: &serde_json::Value| r["heading"]["left_worst_deg"].as_f64().unwrap();
+    assert!(
+        left(&after) >= left(&before),
+        "{} < {}",
+        left(&after),
+        left(&before)
+    );
+}

@@ -13,7 +13,7 @@ use magcal_calib::noise;
 use magcal_calib::{Inputs, Model, frames};
 use magcal_recording::Recording;
 
-use crate::calibrate::expected_field;
+use crate::calibrate::{UNMEASURED_NOISE_BOUND, expected_field};
 use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
 use crate::params::ParamsFile;
@@ -213,6 +213,13 @@ pub fn check(
     } = misfit(&calibrated_ut, rec, expected.as_deref(), field.magnitude());
     let noise_floor_ut =
         noise::estimate(&rec.mag_ut, expected.as_deref()).calibrated_rms_ut(&model.a);
+    // Differences above the residual measure the rotation, not the noise: it then explains none of the residual.
+    let noise_unmeasured = noise_floor_ut * UNMEASURED_NOISE_BOUND > residual_rms_ut;
+    let noise_floor_ut = if noise_unmeasured {
+        0.0
+    } else {
+        noise_floor_ut
+    };
     let measured = match (&rec.quat, field.vector()) {
         (Some(q), Some(f)) => measured_heading(q, f, &rec.mag_ut, &calibrated_ut),
         _ => None,
@@ -242,6 +249,7 @@ pub fn check(
         spans_s: Vec::new(),
         coverage: 1.0,
         diagnosis_skipped: false,
+        noise_unmeasured,
     };
     let (heading, mut verdict) = match field.vector() {
         Some(f) => {

@@ -79,6 +79,10 @@ pub struct Calibration {
     pub residual_rms_ut: f64,
     /// The noise floor to compare it with, in calibrated units, µT.
     pub noise_floor_ut: f64,
+    /// Whether the sample-to-sample noise was measured. When not (rows that change orientation from one to the next:
+    /// their differences measure the rotation), the residual bounds it for the figures, and the verdict counts the
+    /// whole residual as error.
+    pub noise_measured: bool,
     /// Fraction of the sphere of field directions the recording visited (100 cells).
     pub sphere_coverage: f64,
     /// Sample counts.
@@ -349,6 +353,10 @@ pub fn read_to_calibrate(
     Ok((rec, field))
 }
 
+/// A noise floor from the readings' differences above the fit's residual by more than `1 / this` is not the noise:
+/// the rows change orientation from one to the next, and the differences measure the rotation.
+pub const UNMEASURED_NOISE_BOUND: f64 = 0.8;
+
 /// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out.
 pub fn calibrate(
     rec: &Recording,
@@ -452,9 +460,11 @@ pub fn calibrate(
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
         Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
     };
+    let mut noise_measured = true;
     if floor_now > 0.0 && residual_rms_ut < floor_now {
         let bound = residual_rms_ut / floor_now;
-        if bound < 0.8 {
+        if bound < UNMEASURED_NOISE_BOUND {
+            noise_measured = false;
             notes.push(format!(
                 "the sample-to-sample noise could not be measured ({:.3} µT from {}, more than the fit's residual \
                  of {residual_rms_ut:.3} µT allows: the rows change orientation from one to the next); the residual \
@@ -476,6 +486,7 @@ pub fn calibrate(
         noise,
         residual_rms_ut,
         noise_floor_ut,
+        noise_measured,
         sphere_coverage: 0.0,
         samples: SampleCounts {
             total: rec.len(),

@@ -82,6 +82,9 @@ pub struct Hints {
     pub coverage: f64,
     /// The diagnosis was skipped (`--no-diagnose`): running it would say what the model leaves out.
     pub diagnosis_skipped: bool,
+    /// The sensor's noise could not be measured (rows that change orientation from one to the next): the whole
+    /// residual counts as error, and the verdict says why.
+    pub noise_unmeasured: bool,
 }
 
 /// Degrees in two significant figures below 10, whole degrees above.
@@ -119,7 +122,24 @@ pub fn judge(h: &HeadingErrors, hints: &Hints) -> Verdict {
         };
     }
     let unexplained_deg = (h.unexplained_ut / h.field.horizontal_ut).to_degrees();
-    let (reason, todo) = if unexplained_deg >= h.parameters_deg {
+    let (reason, todo) = if unexplained_deg >= h.parameters_deg && hints.noise_unmeasured {
+        (
+            format!(
+                "{} of heading error left: {} by {:.2} µT, and the sensor's noise, which could not be measured (the \
+                 rows change orientation from one to the next), may explain none of it",
+                fmt_deg(left),
+                if hints.vector {
+                    "the readings and the attitude reference disagree"
+                } else {
+                    "the readings depart from a sphere"
+                },
+                h.unexplained_ut
+            ),
+            "record with the rows in time order at the sensor's rate (consecutive readings of one moving sensor), so \
+             that its noise can be measured and told from the misfit"
+                .to_owned(),
+        )
+    } else if unexplained_deg >= h.parameters_deg {
         let why = format!(
             "{} of heading error left: {} by {:.2} µT more than the sensor's noise explains",
             fmt_deg(left),
@@ -241,9 +261,11 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         Fit::Vector(v) => Some(FieldUncertainty::vector(v)),
         Fit::Scalar(s) => Some(FieldUncertainty::scalar(s)),
     };
+    // A noise that could not be measured explains none of the residual.
+    let measured = |floor_ut: f64| if cal.noise_measured { floor_ut } else { 0.0 };
     let (residual_rms_ut, noise_floor_ut) = match &cal.diagnosis {
-        Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
-        None => (cal.residual_rms_ut, cal.noise_floor_ut),
+        Some(d) => (d.extended.rms_ut, measured(d.noise_floor_ut)),
+        None => (cal.residual_rms_ut, measured(cal.noise_floor_ut)),
     };
     let spans_s: Vec<(f64, f64)> = cal.diagnosis.as_ref().map_or_else(Vec::new, |d| {
         d.located
@@ -265,6 +287,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         },
         coverage: cal.sphere_coverage,
         diagnosis_skipped: cal.diagnosis.is_none(),
+        noise_unmeasured: !cal.noise_measured,
     };
     let magnitude_ut = model_field_ut(cal, rec).unwrap_or(f64::NAN);
     let direction = cal.field.vector().map(|f| frames::field_angles(f).1);
@@ -293,7 +316,12 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         let base = cal.base_model();
         (
             corrections,
-            figures(base.a, base.b_ut, cal.residual_rms_ut, cal.noise_floor_ut),
+            figures(
+                base.a,
+                base.b_ut,
+                cal.residual_rms_ut,
+                measured(cal.noise_floor_ut),
+            ),
         )
     });
     let linear_only = linear_only && without_corrections.is_some();
