@@ -519,3 +519,98 @@ fn field_ut_says_it_replaced_the_field_vector() {
         "{summary}"
     );
 }
+
+/// `text` with the cells of the columns named in `names` (by the header) replaced by `f` of them.
+fn map_columns(text: &str, names: &[&str], f: impl Fn(f64) -> f64) -> String {
+    let mut picked: Vec<usize> = Vec::new();
+    let mut out = String::new();
+    for line in text.lines() {
+        if line.starts_with('#') {
+            out += line;
+        } else if picked.is_empty() {
+            picked = line
+                .split(',')
+                .enumerate()
+                .filter(|(_, c)| names.contains(c))
+                .map(|(i, _)| i)
+                .collect();
+            assert_eq!(picked.len(), names.len(), "columns {names:?} in {line}");
+            out += line;
+        } else {
+            let cells: Vec<String> = line
+                .split(',')
+                .enumerate()
+                .map(|(i, c)| {
+                    if picked.contains(&i) {
+                        format!("{:.6}", f(c.parse().unwrap()))
+                    } else {
+                        c.to_owned()
+                    }
+                })
+                .collect();
+            out += &cells.join(",");
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Defect 11: quaternions in another convention (here the conjugate) fitted REDO with gain warnings and advice to
+/// check a saturated axis or record for longer. Now one warning names the likely conventions, and the verdict says
+/// to look there.
+#[test]
+fn a_reference_in_another_convention_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = tumble(dir.path());
+    let rec = write(
+        dir.path(),
+        "conjugate.csv",
+        &map_columns(&text, &["qx", "qy", "qz"], |v| -v),
+    );
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose"]);
+    assert!(out.status.success());
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("REDO")
+            && summary.contains("another convention")
+            && summary.contains("conjugate")
+            && summary.contains("the WARNING below says what to try")
+            && !summary.contains("gains differ"),
+        "{summary}"
+    );
+}
+
+/// Defect 12: a reference column that does not turn (the world field written as `rx,ry,rz`) was refused as "the noise
+/// is as large as the rotation"; readings in gauss were refused as "the sensor was not rotated".
+#[test]
+fn a_still_reference_and_readings_in_gauss_are_refused_saying_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(
+        dir.path(),
+        "ref.csv",
+        &["--duration", "60", "--reference", "field"],
+    );
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let still = write(
+        dir.path(),
+        "still.csv",
+        &map_columns(&text, &["rx", "ry", "rz"], |_| 20.0),
+    );
+    let out = magcal_fit(&[still.to_str().unwrap(), "--no-diagnose"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("the reference field hardly varies"),
+        "{stderr}"
+    );
+    let gauss = write(
+        dir.path(),
+        "gauss.csv",
+        &map_columns(&text, &["mx", "my", "mz"], |v| v / 100.0),
+    );
+    let out = magcal_fit(&[gauss.to_str().unwrap(), "--no-diagnose"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("not in µT (gauss"),
+        "{stderr}"
+    );
+}

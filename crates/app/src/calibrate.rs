@@ -7,6 +7,7 @@ use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
 use rayon::prelude::*;
 use std::borrow::Cow;
 
+use magcal_calib::coverage::CoverageError;
 use magcal_calib::robust::{self, RobustProblem};
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
@@ -289,9 +290,39 @@ pub enum CalibrateError {
          recording's metadata); {0}"
     )]
     NoReference(&'static str),
+    /// The readings hardly vary and lie near zero: another unit than µT.
+    #[error(
+        "the readings hardly vary and lie {median:.3} units from zero, where the Earth's field is 22–67 µT: they are \
+         not in µT (gauss is a hundredth of it: multiply such readings by 100); convert the recording to µT"
+    )]
+    NotMicrotesla {
+        /// The readings' median magnitude, in their units.
+        median: f64,
+    },
     /// The fit failed.
     #[error(transparent)]
     Fit(#[from] FitError),
+}
+
+/// `e`, or [`CalibrateError::NotMicrotesla`] when the readings hardly vary because they are all near zero (below a
+/// tenth of the Earth's weakest field).
+fn in_microtesla(e: FitError, raw_ut: &[[f64; 3]]) -> CalibrateError {
+    if !matches!(e, FitError::Coverage(CoverageError::Still { .. })) {
+        return e.into();
+    }
+    let mut norms: Vec<f64> = raw_ut
+        .iter()
+        .step_by((raw_ut.len() / 10_000).max(1))
+        .map(|m| frames::norm(*m))
+        .filter(|n| n.is_finite())
+        .collect();
+    let mid = norms.len() / 2;
+    match norms.select_nth_unstable_by(mid, f64::total_cmp) {
+        (_, median, _) if *median < 0.1 * checks::EARTH_FIELD_UT.0 => {
+            CalibrateError::NotMicrotesla { median: *median }
+        }
+        _ => e.into(),
+    }
 }
 
 /// The expected field in sensor axes per sample (NaN where the reference is missing), if the recording has one:
@@ -402,7 +433,8 @@ pub fn calibrate(
                     raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
                 },
                 rec.t_s.as_deref(),
-            )?;
+            )
+            .map_err(|e| in_microtesla(e, &rec.mag_ut))?;
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
@@ -419,7 +451,8 @@ pub fn calibrate(
                     raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
                 },
                 rec.t_s.as_deref(),
-            )?;
+            )
+            .map_err(|e| in_microtesla(e, &rec.mag_ut))?;
             let s = r.fit;
             notes.push(format!(
                 "rotation not observable: {}",

@@ -15,6 +15,9 @@ pub const EARTH_FIELD_UT: (f64, f64) = (22.0, 67.0);
 const GAIN_SPREAD_WARN: f64 = 1.5;
 /// Below this ratio of the smallest to the largest singular value, `A` is as good as singular: refused.
 const GAIN_SPREAD_REFUSE: f64 = 1e-3;
+/// A vector fit whose residual (RMS per axis) exceeds this share of the field is no calibration's misfit: the
+/// attitude reference is in another convention, or off in time.
+const REFERENCE_OFF_SHARE: f64 = 0.1;
 /// Readings in µT whose mean gain against a given field is off by more than this factor (either way): a sensor's
 /// sensitivity is within 10–20 % of its datasheet's, so the field given is more likely wrong.
 const MEAN_GAIN_WARN: f64 = 1.3;
@@ -50,7 +53,19 @@ pub fn check(
         ));
     }
     let mut warnings = Vec::new();
-    if hi / lo > GAIN_SPREAD_WARN {
+    // A reference off by a good part of the field bends A every way: that, not the gains, is what to say.
+    let reference_off = reference_off(fit, field);
+    if let Some((rms, f)) = reference_off {
+        warnings.push(format!(
+            "the readings and the attitude reference disagree by {rms:.1} µT RMS per axis, {:.0} % of the field: \
+             more than any sensor's calibration leaves. The reference is likely in another convention than \
+             magcal's — quaternions qw,qx,qy,qz turning the sensor's axes into the world's NED axes, the field in \
+             NED — or off in time: try the conjugate (inverse) quaternion, the x,y,z,w order, an ENU world, or \
+             check the clocks. A and b here are not a calibration",
+            100.0 * rms / f
+        ));
+    }
+    if hi / lo > GAIN_SPREAD_WARN && reference_off.is_none() {
         warnings.push(format!(
             "the fitted gains differ by a factor {:.2} between directions (singular values of A {:.4}–{:.4}): more \
              than a sensor's axes plausibly differ. Check for a saturated axis, a mis-set range, or a magnet moving \
@@ -91,7 +106,11 @@ pub fn check(
         ));
     }
     let mean_gain = sv.iter().product::<f64>().cbrt();
-    if raw_in_range && known.is_some() && (mean_gain.ln().abs() > MEAN_GAIN_WARN.ln()) {
+    if raw_in_range
+        && known.is_some()
+        && reference_off.is_none()
+        && mean_gain.ln().abs() > MEAN_GAIN_WARN.ln()
+    {
         warnings.push(format!(
             "A scales the readings by {mean_gain:.3} on average: they lie {raw_radius:.1} µT from their centre, and \
              the field they were fitted to is {calibrated:.1} µT ({}). A sensor that reports µT is rarely off by \
@@ -99,7 +118,7 @@ pub fn check(
             field.source()
         ));
     }
-    if matches!(fit, Fit::Vector(_)) && a.determinant() < 0.0 {
+    if matches!(fit, Fit::Vector(_)) && reference_off.is_none() && a.determinant() < 0.0 {
         warnings.push(
             "A mirrors the axes (its determinant is negative): the readings' axes are left-handed against the \
              attitude reference's — two axes swapped or one reversed (a wiring or a driver's axis map). A as fitted \
@@ -117,6 +136,18 @@ pub fn check(
         ));
     }
     Ok(warnings)
+}
+
+/// A vector fit's residual (RMS per axis, µT) and the field's magnitude when the residual exceeds
+/// [`REFERENCE_OFF_SHARE`] of it: the attitude reference is not in magcal's convention, or off in time.
+pub fn reference_off(fit: &Fit, field: &ReferenceField) -> Option<(f64, f64)> {
+    match (fit, field.magnitude()) {
+        (Fit::Vector(v), Some(f)) => {
+            let rms = magcal_calib::noise::rms3(v.residual_rms_ut);
+            (rms > REFERENCE_OFF_SHARE * f).then_some((rms, f))
+        }
+        _ => None,
+    }
 }
 
 /// What raw readings of this radius look like, and the scale that would make them µT (exact when the field's

@@ -333,6 +333,12 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         Ok(h) => judge(h, &hints),
         Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
     };
+    // A reference in another convention: its warning says what to try, not more recording.
+    if verdict.grade != Grade::Good && crate::checks::reference_off(&cal.fit, &cal.field).is_some()
+    {
+        "check the attitude reference's convention and timing: the WARNING below says what to try"
+            .clone_into(&mut verdict.todo);
+    }
     // A fit the last checks warn about (units, gains, field range, a huge hard iron) is not good, whatever its
     // heading figures: the warning says what is wrong and what would fix it.
     if verdict.grade == Grade::Good && !cal.warnings.is_empty() {

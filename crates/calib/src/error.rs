@@ -38,6 +38,19 @@ pub enum FitError {
         /// What to do.
         advice: String,
     },
+    /// The reference field hardly varies while the readings do: it cannot be the field in sensor axes.
+    #[error(
+        "the reference field hardly varies (spread {reference_ut:.2} µT) while the readings do ({readings_ut:.1} \
+         µT): it must be the field in the sensor's axes at each sample (rx,ry,rz), which turns with the sensor — \
+         give the attitude instead (qw,qx,qy,qz) with the world field (--field-ned), or fit the magnitude alone \
+         (--method scalar)"
+    )]
+    ReferenceStill {
+        /// The reference's largest spread, µT.
+        reference_ut: f64,
+        /// The readings' largest spread, µT.
+        readings_ut: f64,
+    },
     /// The normal equations were singular.
     #[error("the least-squares problem is singular: {0}")]
     Singular(&'static str),

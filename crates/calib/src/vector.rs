@@ -296,6 +296,13 @@ pub fn fit(
     let coverage = Coverage::from_covariance(&(s_mm / w_sum));
     if !opts.skip_coverage_check {
         coverage.check()?;
+        let reference_ut = Coverage::from_covariance(&(s_rr / w_sum)).spread_ut[0];
+        if reference_ut < crate::coverage::STILL_SPREAD_UT {
+            return Err(FitError::ReferenceStill {
+                reference_ut,
+                readings_ut: coverage.spread_ut[0],
+            });
+        }
     }
     let s_mm_inv = s_mm.try_inverse().ok_or(FitError::Singular(
         "the readings' covariance has no inverse",
