@@ -614,3 +614,33 @@ fn a_still_reference_and_readings_in_gauss_are_refused_saying_so() {
         "{stderr}"
     );
 }
+
+/// Defect 13: a typo in a metadata key (`field_ned:`) dropped to the scalar method with a warning that did not name
+/// it, and `units: nT` was read as µT without a word.
+#[test]
+fn metadata_keys_magcal_does_not_read_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = tumble(dir.path());
+    let typo = write(
+        dir.path(),
+        "typo.csv",
+        &text.replace("# field_ned_ut:", "# field_ned:"),
+    );
+    let out = magcal_fit(&[typo.to_str().unwrap(), "--no-diagnose"]);
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("scalar calibration") && summary.contains("The metadata has `field_ned`"),
+        "{summary}"
+    );
+    let units = write(
+        dir.path(),
+        "units.csv",
+        &text.replacen("# sensor:", "# units: nT\n# sensor:", 1),
+    );
+    let out = magcal_fit(&[units.to_str().unwrap(), "--no-diagnose"]);
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("WARNING: the metadata says `units: nT`"),
+        "{summary}"
+    );
+}

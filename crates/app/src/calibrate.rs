@@ -409,18 +409,19 @@ pub fn calibrate(
                         .to_owned(),
                 );
             } else if rec.quat.is_some() {
-                warnings.push(
+                warnings.push(format!(
                     "the recording has attitude quaternions but no world field vector, so only the magnitude was \
                      fitted (scalar method: misalignment unobserved). Give the field with --field-ned N,E,D (µT), or \
                      --location LAT,LON,ALT --date YYYY-MM-DD, or a field_ned_ut line in the recording's metadata, \
-                     to fit every component (vector method)"
-                        .to_owned(),
-                );
+                     to fit every component (vector method){}",
+                    unread_field_keys(&rec.meta)
+                ));
             }
             Method::Scalar
         }
         m => m,
     };
+    warnings.extend(units_unread(&rec.meta));
     let mut notes = Vec::new();
     let (fit, mut noise, used, robust) = match method {
         Method::Vector => {
@@ -550,6 +551,44 @@ pub fn calibrate(
         }
     }
     Ok(cal)
+}
+
+/// Metadata keys that look like the field's but are not read (a typo: `field_ned:`), as a clause to append.
+fn unread_field_keys(meta: &Metadata) -> String {
+    let looks_like = |k: &str| {
+        ["field", "ned", "location", "lat", "date"]
+            .iter()
+            .any(|w| k.contains(w))
+    };
+    let keys: Vec<String> = meta
+        .other
+        .iter()
+        .filter(|(k, _)| looks_like(&k.to_lowercase()))
+        .map(|(k, _)| format!("`{k}`"))
+        .collect();
+    if keys.is_empty() {
+        String::new()
+    } else {
+        format!(
+            ". The metadata has {}, which magcal does not read: its keys are field_ned_ut, location and date",
+            keys.join(", ")
+        )
+    }
+}
+
+/// A warning when the metadata's `units` says the readings are in another unit than µT, which magcal reads them in.
+fn units_unread(meta: &Metadata) -> Option<String> {
+    let (_, unit) = meta
+        .other
+        .iter()
+        .find(|(k, _)| k.eq_ignore_ascii_case("units"))?;
+    let micro = ["µt", "ut", "microtesla", "micro tesla", "μt"];
+    (!micro.contains(&unit.trim().to_lowercase().as_str())).then(|| {
+        format!(
+            "the metadata says `units: {unit}`, but magcal reads every field and reading as µT (the format's unit): \
+             convert the recording to µT, or read every figure here as {unit} labelled µT"
+        )
+    })
 }
 
 /// Spans fixed to the sensor covering at least this share of a recording make it a recording of two states.
