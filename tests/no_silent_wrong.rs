@@ -446,6 +446,20 @@ fn mirrored_axes_are_warned_and_not_exported_to_a_symmetric_matrix() {
     assert!(out.status.success());
     let summary = String::from_utf8_lossy(&out.stderr);
     assert!(summary.contains("WARNING: A mirrors the axes"), "{summary}");
+    // A MotionCal-style board holds a symmetric matrix too: refused before the port is opened.
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--write-to",
+        "serial:/dev/magcal-no-such-port",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && stderr.contains("not written to serial:")
+            && stderr.contains("mirrors the axes"),
+        "{stderr}"
+    );
 }
 
 /// Defect 8: readings turned 90° about z against the attitude fitted GOOD, and the PX4 export left the turn out with

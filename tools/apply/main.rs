@@ -30,7 +30,8 @@ struct Args {
     /// The world field (otherwise the recording's metadata says it).
     #[command(flatten)]
     field: WorldFieldOpts,
-    /// Field magnitude in µT, when no field vector is known.
+    /// Field magnitude in µT: |B| is checked against it (it replaces a field vector from the recording's
+    /// metadata; --field-ned replaces the vector instead).
     #[arg(long, value_name = "UT")]
     field_ut: Option<f64>,
     /// Write the calibrated recording here (mx,my,mz replaced by the calibrated field).

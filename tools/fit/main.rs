@@ -9,7 +9,7 @@ use clap::Parser;
 use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
-use magcal_app::export::{ExportFormat, dropped_rotation, export, refusal};
+use magcal_app::export::{ExportFormat, dropped_rotation, export, mirror_refusal, refusal};
 use magcal_app::field::resolve;
 use magcal_app::files::{check_outputs, write_atomic};
 use magcal_app::howto::{Target, how_to_apply};
@@ -195,6 +195,9 @@ fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(device) = &args.write_to {
+        if let (DeviceSpec::Serial(_), Some(why)) = (device, mirror_refusal(&target)) {
+            bail!("{name}: not written to {device}: {why}");
+        }
         for line in write_back_calibration(device, &cal)? {
             say(&format!("{line}\n"));
         }

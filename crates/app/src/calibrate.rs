@@ -316,6 +316,9 @@ fn in_microtesla(e: FitError, raw_ut: &[[f64; 3]]) -> CalibrateError {
         .map(|m| frames::norm(*m))
         .filter(|n| n.is_finite())
         .collect();
+    if norms.is_empty() {
+        return e.into();
+    }
     let mid = norms.len() / 2;
     match norms.select_nth_unstable_by(mid, f64::total_cmp) {
         (_, median, _) if *median < 0.1 * checks::EARTH_FIELD_UT.0 => {
@@ -400,7 +403,8 @@ pub fn calibrate(
     let method = match method {
         Method::Auto if has_reference => Method::Vector,
         Method::Auto => {
-            if rec.quat.is_some() && field.source() == "--field-ut" {
+            // A magnitude alone comes from --field-ut (see crate::field::resolve).
+            if rec.quat.is_some() && matches!(field, ReferenceField::Magnitude { .. }) {
                 warnings.push(
                     "only the magnitude was fitted (scalar method: misalignment unobserved) though the recording has \
                      attitude quaternions: --field-ut gives a magnitude alone and replaces any field vector the \

@@ -136,11 +136,16 @@ fn symmetric_only(format: ExportFormat) -> bool {
     matches!(format, ExportFormat::Ardupilot | ExportFormat::Px4)
 }
 
-/// Why `model` cannot go to `format` at all: its `A` mirrors the axes (a negative determinant), which neither a
-/// symmetric matrix nor a board rotation can hold.
+/// Why `model` cannot go to `format` at all: see [`mirror_refusal`].
 pub fn refusal(model: &Model, format: ExportFormat) -> Option<String> {
+    mirror_refusal(model).filter(|_| symmetric_only(format))
+}
+
+/// Why `model` cannot go to a target that holds a symmetric matrix (ArduPilot, PX4, a MotionCal-style board): its
+/// `A` mirrors the axes (a negative determinant), which neither a symmetric matrix nor a board rotation can hold.
+pub fn mirror_refusal(model: &Model) -> Option<String> {
     let det = Matrix3::from_fn(|j, k| model.a[j][k]).determinant();
-    (symmetric_only(format) && det < 0.0).then(|| {
+    (det < 0.0).then(|| {
         "A mirrors the axes (two swapped or one reversed): the target's symmetric matrix cannot undo that, and a \
          board orientation is a rotation. Fix the axis map (the wiring or the driver's), record again and fit that; \
          --export json or c-header carry the whole A"

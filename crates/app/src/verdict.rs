@@ -122,17 +122,17 @@ pub fn judge(h: &HeadingErrors, hints: &Hints) -> Verdict {
         };
     }
     let unexplained_deg = (h.unexplained_ut / h.field.horizontal_ut).to_degrees();
+    let misfit = if hints.vector {
+        "the readings and the attitude reference disagree"
+    } else {
+        "the readings depart from a sphere"
+    };
     let (reason, todo) = if unexplained_deg >= h.parameters_deg && hints.noise_unmeasured {
         (
             format!(
-                "{} of heading error left: {} by {:.2} µT, and the sensor's noise, which could not be measured (the \
-                 rows change orientation from one to the next), may explain none of it",
+                "{} of heading error left: {misfit} by {:.2} µT, and the sensor's noise, which could not be measured \
+                 (the rows change orientation from one to the next), may explain none of it",
                 fmt_deg(left),
-                if hints.vector {
-                    "the readings and the attitude reference disagree"
-                } else {
-                    "the readings depart from a sphere"
-                },
                 h.unexplained_ut
             ),
             "record with the rows in time order at the sensor's rate (consecutive readings of one moving sensor), so \
@@ -141,13 +141,8 @@ pub fn judge(h: &HeadingErrors, hints: &Hints) -> Verdict {
         )
     } else if unexplained_deg >= h.parameters_deg {
         let why = format!(
-            "{} of heading error left: {} by {:.2} µT more than the sensor's noise explains",
+            "{} of heading error left: {misfit} by {:.2} µT more than the sensor's noise explains",
             fmt_deg(left),
-            if hints.vector {
-                "the readings and the attitude reference disagree"
-            } else {
-                "the readings depart from a sphere"
-            },
             h.unexplained_ut
         );
         let todo = match hints.spans_s.first() {
