@@ -349,4 +349,171 @@ fn magcal_apply_checks_parameters_on_a_second_recording() {
     let out = apply(&other, &["--require", "good"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("verdict: REDO"));
+    // Neither input is ever the output (it was: the recording, or the parameters, replaced with exit 0).
+    let before = (
+        std::fs::read(&second).unwrap(),
+        std::fs::read(&params).unwrap(),
+    );
+    for target in [&second, &params] {
+        let out = apply(&second, &["--out", target.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains("never overwrites the input"),
+            "{stderr}"
+        );
+    }
+    assert_eq!(
+        before,
+        (
+            std::fs::read(&second).unwrap(),
+            std::fs::read(&params).unwrap()
+        )
+    );
+}
+
+/// Parameters no calibration can have are refused naming the key (NaN and inf were graded GOOD, with 0 samples),
+/// and parameters whose gain makes the field hundreds of µT are graded REDO even with no field to check against.
+#[test]
+fn magcal_apply_refuses_parameters_no_calibration_has() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(
+        dir.path(),
+        "rec.csv",
+        &["--duration", "40", "--seed", "11", "--reference", "none"],
+    );
+    let params = dir.path().join("params.toml");
+    stdout(&magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--out",
+        params.to_str().unwrap(),
+    ]));
+    let text = std::fs::read_to_string(&params).unwrap();
+    let apply = |p: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
+            .arg(p)
+            .arg(&rec)
+            .output()
+            .unwrap()
+    };
+    let table: toml::Value = toml::from_str(&text).unwrap();
+    let a = table["calibration"]["A"].clone();
+    let b = table["calibration"]["b_ut"].clone();
+    let with = |a: &str, b: &str, method: &str| {
+        let mut t = table.clone();
+        t["calibration"]["A"] =
+            toml::from_str::<toml::Value>(&format!("x = {a}")).unwrap()["x"].clone();
+        t["calibration"]["b_ut"] =
+            toml::from_str::<toml::Value>(&format!("x = {b}")).unwrap()["x"].clone();
+        t["method"] = toml::Value::String(method.to_owned());
+        toml::to_string(&t).unwrap()
+    };
+    let (a_text, b_text) = (a.to_string(), b.to_string());
+    for (bad, says) in [
+        (
+            with(
+                "[[nan, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]",
+                &b_text,
+                "scalar",
+            ),
+            "calibration.A[0][0] is not a finite number",
+        ),
+        (
+            with(&a_text, "[0.0, inf, 0.0]", "scalar"),
+            "calibration.b_ut[1] is not a finite number",
+        ),
+        (
+            with(
+                "[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]]",
+                &b_text,
+                "scalar",
+            ),
+            "no usable inverse",
+        ),
+        (with(&a_text, &b_text, "banana"), "method is \"banana\""),
+    ] {
+        let p = dir.path().join("bad.toml");
+        std::fs::write(&p, bad).unwrap();
+        let out = apply(&p);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(says),
+            "{says}: {stderr}"
+        );
+    }
+    let scale = |v: &toml::Value| -> String {
+        let x: Vec<Vec<f64>> = v.clone().try_into().unwrap();
+        format!(
+            "{:?}",
+            x.iter()
+                .map(|r| r.iter().map(|e| e * 10.0).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        )
+    };
+    let b10: Vec<f64> = b.clone().try_into().unwrap();
+    let p = dir.path().join("ten.toml");
+    std::fs::write(
+        &p,
+        with(
+            &scale(&a),
+            &format!("{:?}", b10.iter().map(|e| e * 10.0).collect::<Vec<_>>()),
+            "scalar",
+        ),
+    )
+    .unwrap();
+    let out = apply(&p);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("verdict: REDO") && text.contains("outside the Earth's"),
+        "{text}"
+    );
+}
+
+/// A correction tied to the fitted recording's clock (a drift of the offset) is applied at another recording's own
+/// times: the check says so, and is not GOOD on its figures alone (the recording it was fitted on is checked as is).
+#[test]
+fn magcal_apply_warns_of_corrections_tied_to_another_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = simulate(
+        dir.path(),
+        "drift.csv",
+        &[
+            "--seed",
+            "5",
+            "--effect",
+            "bias_drift:rate_ut_per_s=0.01,0,0",
+        ],
+    );
+    let params = dir.path().join("params.toml");
+    stdout(&magcal_fit(&[
+        first.to_str().unwrap(),
+        "--out",
+        params.to_str().unwrap(),
+    ]));
+    assert!(
+        std::fs::read_to_string(&params)
+            .unwrap()
+            .contains("bias_drift"),
+        "the diagnosis models the drift"
+    );
+    // Another recording (here the same rows under another name, as a second session's would be read): warned. The
+    // recording the parameters were fitted on: not.
+    let other = dir.path().join("second_session.csv");
+    std::fs::copy(&first, &other).unwrap();
+    for (rec, warned) in [(&other, true), (&first, false)] {
+        let out = Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
+            .arg(&params)
+            .arg(rec)
+            .output()
+            .unwrap();
+        let text = stdout(&out);
+        assert_eq!(
+            text.contains("WARNING: the parameters hold bias_drift tied to the clock"),
+            warned,
+            "{text}"
+        );
+        if warned {
+            assert!(!text.contains("verdict: GOOD"), "{text}");
+        }
+    }
 }

@@ -1,6 +1,6 @@
 //! `magcal-apply`: calibrate a recording with a parameters file and say how well the parameters fit it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, bail};
@@ -8,6 +8,7 @@ use clap::Parser;
 use magcal_app::apply::check;
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::field::resolve;
+use magcal_app::files::check_outputs;
 use magcal_app::params::ParamsFile;
 use magcal_app::summary::check_summary;
 use magcal_app::verdict::Grade;
@@ -47,11 +48,22 @@ fn main() -> ExitCode {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
+    // Neither input is ever overwritten, before anything is read.
+    if let Some(out) = &args.out {
+        check_outputs(&args.recording, &[("--out", out)])?;
+        check_outputs(&args.params, &[("--out", out)])?;
+    }
     let params = ParamsFile::read(&args.params)?;
     let rec = Recording::read(&args.recording)?;
     let name = args.recording.display().to_string();
     let field = resolve(&args.field.field_args(args.field_ut), &rec.meta)?;
-    let c = check(&params, &rec, &field)
+    // The recording the parameters were fitted on, by its file name.
+    let fitted_on_it = params
+        .recording
+        .as_deref()
+        .map(|r| Path::new(r).file_name())
+        == Some(args.recording.file_name());
+    let c = check(&params, &rec, &field, fitted_on_it)
         .with_context(|| format!("{name}: cannot apply {}", args.params.display()))?;
     print!("{}", check_summary(&c, &params, &field, &name));
     if let Some(path) = &args.out {

@@ -16,7 +16,7 @@ use magcal_recording::Recording;
 use crate::calibrate::{UNMEASURED_NOISE_BOUND, expected_field};
 use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
-use crate::params::ParamsFile;
+use crate::params::{Correction, ParamsFile};
 use crate::verdict::{Grade, Hints, Verdict, judge, judge_without_direction};
 
 /// What the residual is measured against.
@@ -65,6 +65,8 @@ pub struct Check {
     pub heading: Option<HeadingErrors>,
     /// The verdict.
     pub verdict: Verdict,
+    /// What the user must not miss: the parameters may not hold here for a reason the figures do not show.
+    pub warnings: Vec<String>,
 }
 
 /// Why a parameters file cannot be applied to a recording.
@@ -196,11 +198,13 @@ pub fn misfit(
 }
 
 /// Applies `params` to `rec` and measures the fit; `field` is the world field (from the command line or the
-/// recording's metadata).
+/// recording's metadata); `fitted_on_it`: `rec` is the recording the parameters were fitted on (corrections tied to
+/// its clock hold there).
 pub fn check(
     params: &ParamsFile,
     rec: &Recording,
     field: &ReferenceField,
+    fitted_on_it: bool,
 ) -> Result<Check, ApplyError> {
     let model = model_for(params, rec)?;
     let calibrated_ut = calibrate_rows(&model, rec);
@@ -263,6 +267,33 @@ pub fn check(
             (None, judge_without_direction(lower.left.worst_deg, &hints))
         }
     };
+    let warnings = apply_warnings(params, &against, fitted_on_it);
+    // A calibrated field far outside the Earth's range is no calibration of these readings, however round it is.
+    let (low, high) = crate::checks::EARTH_FIELD_UT;
+    if let Against::Magnitude { field_ut, .. } = against
+        && !(0.5 * low..=1.5 * high).contains(&field_ut)
+    {
+        verdict = Verdict {
+            grade: Grade::Redo,
+            reason: format!(
+                "the calibrated field is {field_ut:.1} µT, far outside the Earth's {low:.0}–{high:.0} µT"
+            ),
+            todo:
+                "use parameters fitted on this sensor, in the recording's units (the WARNING below)"
+                    .to_owned(),
+        };
+    }
+    if verdict.grade == Grade::Good && !warnings.is_empty() {
+        verdict = Verdict {
+            grade: Grade::Usable,
+            reason: format!(
+                "{}, but {} warning(s) below",
+                verdict.reason,
+                warnings.len()
+            ),
+            todo: "read the WARNING below: it says what the figures do not show".to_owned(),
+        };
+    }
     if verdict.grade == Grade::Good {
         "use them: they hold on this recording too".clone_into(&mut verdict.todo);
     }
@@ -276,7 +307,51 @@ pub fn check(
         measured,
         heading,
         verdict,
+        warnings,
     })
+}
+
+/// What applying `params` to another recording may get wrong that its figures do not show: corrections tied to the
+/// clock of the recording they were fitted on (unless `fitted_on_it`), and a calibrated field outside the Earth's range when no field was
+/// given to check against.
+fn apply_warnings(params: &ParamsFile, against: &Against, fitted_on_it: bool) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let timed: Vec<&str> = params
+        .corrections
+        .iter()
+        .filter_map(|c| match c {
+            Correction::BiasStep { .. } => Some("bias_step"),
+            Correction::BiasDrift { .. } => Some("bias_drift"),
+            _ => None,
+        })
+        .collect();
+    if !timed.is_empty() && !fitted_on_it {
+        warnings.push(format!(
+            "the parameters hold {} tied to the clock of the recording they were fitted on{}: here {} applied at this \
+             recording's own times, which means something only for that recording. For others, use A and b fitted \
+             without it (magcal-fit --no-diagnose)",
+            timed.join(" and "),
+            params
+                .recording
+                .as_ref()
+                .map_or(String::new(), |r| format!(" ({r})")),
+            if timed.len() == 1 { "it is" } else { "they are" }
+        ));
+    }
+    let (low, high) = crate::checks::EARTH_FIELD_UT;
+    if let Against::Magnitude {
+        field_ut,
+        known: false,
+    } = against
+        && !(low..=high).contains(field_ut)
+    {
+        warnings.push(format!(
+            "the calibrated field is {field_ut:.1} µT on this recording, outside the Earth's {low:.0}–{high:.0} µT: \
+             the parameters' gain does not fit these readings (another sensor, range or unit), or the place is \
+             strongly disturbed. Give the field (--field-ut, --field-ned or --location/--date) to check against it"
+        ));
+    }
+    warnings
 }
 
 /// The heading error per sample with the attitude: the azimuth of the reading turned into NED minus the field's.
@@ -346,7 +421,7 @@ mod tests {
             field_ned_ut: second.meta.field_ned_ut.unwrap(),
             source: "test".into(),
         };
-        let c = check(&params, &second, &field).unwrap();
+        let c = check(&params, &second, &field, false).unwrap();
         assert_eq!(c.against, Against::Vector);
         assert!(
             (c.residual_rms_ut / c.noise_floor_ut - 1.0).abs() < 0.1,
@@ -367,7 +442,7 @@ mod tests {
             9,
             SensorTruth::mounted(truth.a, [-20.0, 10.0, 5.0], [0.0; 3]),
         );
-        let c = check(&params, &other, &field).unwrap();
+        let c = check(&params, &other, &field, false).unwrap();
         assert!(c.residual_rms_ut > 10.0 * c.noise_floor_ut, "{c:?}");
         assert_eq!(c.verdict.grade, Grade::Redo);
     }

@@ -86,6 +86,26 @@ pub enum Correction {
     },
 }
 
+/// The key of the first number in `v` that is not finite (`calibration.A[0][1]`), if any.
+fn first_non_finite(v: &toml::Value, at: String) -> Option<String> {
+    match v {
+        toml::Value::Float(x) if !x.is_finite() => Some(at),
+        toml::Value::Array(items) => items
+            .iter()
+            .enumerate()
+            .find_map(|(i, x)| first_non_finite(x, format!("{at}[{i}]"))),
+        toml::Value::Table(t) => t.iter().find_map(|(k, x)| {
+            let key = if at.is_empty() {
+                k.clone()
+            } else {
+                format!("{at}.{k}")
+            };
+            first_non_finite(x, key)
+        }),
+        _ => None,
+    }
+}
+
 /// A parameters file that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ParamsError {
@@ -259,7 +279,39 @@ impl ParamsFile {
                 why: format!("format is {:?}, expected {FORMAT:?}", file.format),
             });
         }
+        file.usable()
+            .map_err(|why| ParamsError::Format { path: name, why })?;
         Ok(file)
+    }
+
+    /// Why the parameters cannot calibrate anything, if they cannot: a method other than `vector` or `scalar`, a
+    /// number that is not finite (named by its key), or an `A` with no usable inverse.
+    fn usable(&self) -> Result<(), String> {
+        if !["vector", "scalar"].contains(&self.method.as_str()) {
+            return Err(format!(
+                "method is {:?}, expected \"vector\" or \"scalar\"",
+                self.method
+            ));
+        }
+        let value = toml::Value::try_from(self).map_err(|e| e.to_string())?;
+        if let Some(key) = first_non_finite(&value, String::new()) {
+            return Err(format!(
+                "{key} is not a finite number: every number in a parameters file must be"
+            ));
+        }
+        let a = nalgebra::Matrix3::from_fn(|j, k| self.calibration.a[j][k]);
+        let sv = a.singular_values();
+        // NaN (an overflow) is no inverse either.
+        let invertible = sv.min() > 1e-3 * sv.max();
+        if !invertible {
+            return Err(format!(
+                "calibration.A has no usable inverse (singular values {:.3e}–{:.3e}): it maps the readings onto \
+                 less than three dimensions, which no calibration does",
+                sv.min(),
+                sv.max()
+            ));
+        }
+        Ok(())
     }
 }
 

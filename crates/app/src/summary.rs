@@ -137,7 +137,11 @@ pub fn check_summary(
             );
         }
     }
-    out + &verdict_line(&c.verdict)
+    out += &verdict_line(&c.verdict);
+    for w in &c.warnings {
+        let _ = writeln!(out, "  WARNING: {w}");
+    }
+    out
 }
 
 /// The summary of a calibration of `recording`, with its heading figures and verdict.
