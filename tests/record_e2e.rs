@@ -245,3 +245,29 @@ fn free_rotation_then_scalar_fit_recovers_the_observable_part_for_every_chip() {
     }
     check(&all);
 }
+
+/// The main job on the simulated sensor with a field the bench does not have: the bench keeps its own (said on
+/// stderr), and the truth check says FAILED instead of a passing figure (a 17 % gain error read as a pass).
+#[test]
+fn the_main_job_says_when_the_field_given_is_not_the_simulated_benchs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("out");
+    let out = run(
+        env!("CARGO_BIN_EXE_magcal"),
+        &[
+            "--out-dir",
+            out_dir.to_str().unwrap(),
+            "--routine",
+            "free",
+            "--field-ned",
+            "10,0,40",
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("the simulated bench's field is"),
+        "{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("simulated truth check FAILED"), "{stdout}");
+}

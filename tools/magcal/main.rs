@@ -11,7 +11,9 @@ use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::params::ParamsFile;
 use magcal_app::record::sim::TruthFile;
-use magcal_app::record::{RecordOptions, Routine, Stop, check_out, device_metadata, record, ui};
+use magcal_app::record::{
+    RecordOptions, Routine, Stop, check_out, device_metadata, record, sim_field_note, ui,
+};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::verdict::assess;
@@ -70,6 +72,9 @@ fn run(args: Args) -> anyhow::Result<()> {
     // Record.
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&args.device, args.sim_seed, opts.meta);
+    if let Some(note) = sim_field_note(&args.device, &opts.meta) {
+        eprintln!("{note}");
+    }
     let open = OpenOptions {
         sim_seed: args.sim_seed,
         ..OpenOptions::default()
@@ -133,6 +138,11 @@ fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A vector fit's entries within this many standard errors of the truth pass the check…
+const TRUTH_SE: f64 = 3.0;
+/// …and a scalar fit's gains within this fraction of the true ones.
+const TRUTH_GAIN: f64 = 0.01;
+
 /// How far the fit is from the simulated sensor's truth.
 fn truth_check(cal: &Calibration, truth: &TruthFile) -> String {
     let model = cal.model();
@@ -146,10 +156,17 @@ fn truth_check(cal: &Calibration, truth: &TruthFile) -> String {
                 }
                 worst = worst.max((model.b_ut[j] - truth.b_ut[j]).abs() / b_se[j]);
             }
-            format!(
-                "simulated truth check: every entry of A and b is within {worst:.2} standard errors of the \
-                 simulated sensor's true value"
-            )
+            if worst <= TRUTH_SE {
+                format!(
+                    "simulated truth check: every entry of A and b is within {worst:.2} standard errors of the \
+                     simulated sensor's true value"
+                )
+            } else {
+                format!(
+                    "simulated truth check FAILED: an entry of A or b is {worst:.1} standard errors from the \
+                     simulated sensor's true value (more than {TRUTH_SE}): the fit is wrong for this sensor"
+                )
+            }
         }
         Fit::Scalar(s) => {
             let c = s.centre_ut();
@@ -157,9 +174,26 @@ fn truth_check(cal: &Calibration, truth: &TruthFile) -> String {
                 .map(|k| (c[k] - truth.offset_ut[k]).powi(2))
                 .sum::<f64>()
                 .sqrt();
+            // The scalar method sees A up to a rotation: its gains (singular values) against the truth's.
+            let gains = |a: &[[f64; 3]; 3]| {
+                let mut sv: Vec<f64> = nalgebra::Matrix3::from_fn(|j, k| a[j][k])
+                    .singular_values()
+                    .iter()
+                    .copied()
+                    .collect();
+                sv.sort_by(f64::total_cmp);
+                sv
+            };
+            let gain_err = gains(&model.a)
+                .iter()
+                .zip(gains(&truth.a))
+                .map(|(g, t)| (g / t - 1.0).abs())
+                .fold(0.0, f64::max);
             format!(
-                "simulated truth check: the hard-iron offset is {err:.3} µT from the simulated sensor's (the scalar \
-                 method cannot see the misalignment)"
+                "simulated truth check{}: the hard-iron offset is {err:.3} µT from the simulated sensor's, its gains \
+                 within {:.2} % of the true ones (the scalar method cannot see the misalignment)",
+                if gain_err > TRUTH_GAIN { " FAILED" } else { "" },
+                100.0 * gain_err
             )
         }
     }

@@ -9,7 +9,8 @@ use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
-    RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record, ui,
+    RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record,
+    sim_field_note, ui,
 };
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
@@ -157,6 +158,9 @@ fn run(args: Args) -> anyhow::Result<()> {
     check_out(&args.out, args.force)?;
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
+    if let Some(note) = sim_field_note(&spec, &opts.meta) {
+        eprintln!("{note}");
+    }
     if let DeviceSpec::Sim { chip } = spec {
         if let Some(path) = &args.truth {
             TruthFile::of(chip, args.sim_seed)

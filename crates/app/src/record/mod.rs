@@ -450,6 +450,28 @@ pub fn device_metadata(spec: &DeviceSpec, sim_seed: u64, mut meta: Metadata) -> 
     meta
 }
 
+/// For a `sim` device whose recording states a field other than the simulated bench's (`--field-ned`, or
+/// `--location`/`--date`), what to tell the user: the bench keeps its own field, and a fit against the stated one is a
+/// fit against a wrong reference.
+pub fn sim_field_note(spec: &DeviceSpec, meta: &Metadata) -> Option<String> {
+    if !spec.is_sim() {
+        return None;
+    }
+    let differs = match meta.field_ned_ut {
+        Some(f) => (0..3).any(|k| (f[k] - sim::FIELD_NED_UT[k]).abs() > 1e-9),
+        None => meta.location.is_some(),
+    };
+    differs.then(|| {
+        let f = sim::FIELD_NED_UT;
+        format!(
+            "note: the simulated bench's field is {}, {}, {} µT NED whatever the field given says; the recording's \
+             metadata keeps the field given, so a fit against it is a fit against a wrong reference field (leave \
+             --field-ned and --location out to fit against the bench's own)",
+            f[0], f[1], f[2]
+        )
+    })
+}
+
 /// The prompt for a cube pose.
 pub fn pose_prompt(k: usize, pose: &CubePose) -> String {
     let edge = if pose.face_down.ends_with('X') {
