@@ -658,3 +658,36 @@ fn metadata_keys_magcal_does_not_read_are_named() {
         "{summary}"
     );
 }
+
+/// Defect 14: the Nexus 5's 415 µT hard iron exported to ArduPilot as COMPASS_OFS_Z −4091 with no word that
+/// ArduPilot refuses to arm beyond COMPASS_OFFS_MAX (1800 by default).
+#[test]
+fn an_ardupilot_offset_beyond_its_limit_is_said() {
+    let rec = common::real("inria-nexus5/nexus5_calib_dance.csv");
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--export",
+        "ardupilot",
+    ]);
+    assert!(out.status.success());
+    let (param, summary) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(
+        param.contains("# an offset of") && param.contains("COMPASS_OFFS_MAX"),
+        "{param}"
+    );
+    assert!(summary.contains("WARNING: an offset of"), "{summary}");
+    // A small hard iron: nothing said.
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, _) = tumble(dir.path());
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--no-diagnose",
+        "--export",
+        "ardupilot",
+    ]);
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("COMPASS_OFFS_MAX"));
+}

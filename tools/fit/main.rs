@@ -9,7 +9,7 @@ use clap::Parser;
 use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
-use magcal_app::export::{ExportFormat, dropped_rotation, export, mirror_refusal, refusal};
+use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
 use magcal_app::field::resolve;
 use magcal_app::files::{check_outputs, write_atomic};
 use magcal_app::howto::{Target, how_to_apply};
@@ -184,7 +184,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         if let Some(why) = refusal(&target, format) {
             bail!("{name}: not exported: {why}");
         }
-        if let Some(warning) = dropped_rotation(&target, format) {
+        for warning in warnings(&target, format) {
             say(&format!("  WARNING: {warning}\n"));
         }
         let text = export(&target, format, found);

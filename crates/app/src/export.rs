@@ -153,17 +153,45 @@ pub fn mirror_refusal(model: &Model) -> Option<String> {
     })
 }
 
-/// A warning when the rotation `format` leaves out of `model`'s `A` exceeds [`ROTATION_WARN_DEG`].
-pub fn dropped_rotation(model: &Model, format: ExportFormat) -> Option<String> {
+/// ArduPilot's default `COMPASS_OFFS_MAX`, mGauss: larger offsets fail its pre-arm check.
+const ARDUPILOT_OFFS_MAX_MGAUSS: f64 = 1800.0;
+
+/// What the user must know before loading `model` into `format`: the rotation a symmetric target leaves out, when
+/// above [`ROTATION_WARN_DEG`]; ArduPilot's offset limit, when the offsets exceed it.
+pub fn warnings(model: &Model, format: ExportFormat) -> Vec<String> {
+    let mut out = Vec::new();
     let angle = Polar::of(&model.a).angle_deg();
-    (symmetric_only(format) && angle > ROTATION_WARN_DEG).then(|| {
-        format!(
+    if symmetric_only(format) && angle > ROTATION_WARN_DEG {
+        out.push(format!(
             "the export leaves out a rotation of {angle:.1}° between the sensor's axes and the attitude \
              reference's (its matrix is symmetric): unless the target's orientation setting (ArduPilot's \
              COMPASS_ORIENT or AHRS_ORIENTATION, PX4's CAL_MAG0_ROT or SENS_BOARD_ROT) takes that rotation, headings \
              will be off by up to {angle:.0}°"
+        ));
+    }
+    if format == ExportFormat::Ardupilot {
+        out.extend(ardupilot_offset_limit(model));
+    }
+    out
+}
+
+/// When an offset exceeds ArduPilot's default `COMPASS_OFFS_MAX`, what to do about it.
+fn ardupilot_offset_limit(model: &Model) -> Option<String> {
+    let largest_mgauss = 10.0 * offset_ut(model).iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    (largest_mgauss >= ARDUPILOT_OFFS_MAX_MGAUSS).then(|| {
+        format!(
+            "an offset of {largest_mgauss:.0} mGauss is beyond ArduPilot's default COMPASS_OFFS_MAX of \
+             {ARDUPILOT_OFFS_MAX_MGAUSS:.0}: it refuses to arm (\"Compass offsets too high\") unless that is raised \
+             above it — or move the sensor away from what magnetises it"
         )
     })
+}
+
+/// The hard-iron offset `−A⁻¹·b` of `model`, µT (zeros if `A` has no inverse).
+fn offset_ut(model: &Model) -> [f64; 3] {
+    let a = Matrix3::from_fn(|j, k| model.a[j][k]);
+    let c = -(a.try_inverse().unwrap_or_else(Matrix3::zeros) * Vector3::from(model.b_ut));
+    [c[0], c[1], c[2]]
 }
 
 /// `A = R·S`, `R` a rotation and `S` symmetric positive definite.
@@ -211,8 +239,7 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
             .count()
     };
     let named = left_out_lines(found, Holder::Format(format));
-    let a = Matrix3::from_fn(|j, k| model.a[j][k]);
-    let centre = -(a.try_inverse().unwrap_or_else(Matrix3::zeros) * Vector3::from(model.b_ut));
+    let centre = Vector3::from(offset_ut(model));
     let polar = Polar::of(&model.a);
     let s = polar.symmetric;
     let dropped = model.corrections().count();
@@ -236,7 +263,11 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
             let mut out = String::from(
                 "# magcal calibration for ArduPilot: corrected = M·(raw + OFS), OFS in mGauss\n",
             );
-            for n in notes.iter().chain(&named) {
+            for n in notes
+                .iter()
+                .chain(&named)
+                .chain(&ardupilot_offset_limit(model))
+            {
                 out += &format!("# {n}\n");
             }
             let ofs = -centre * 10.0;
