@@ -31,7 +31,7 @@ fn an_existing_recording_is_never_replaced_without_force() {
         (
             "sim:lis3mdl",
             vec![],
-            "rec.csv exists: magcal-record never replaces a recording",
+            "rec.csv exists: a recording is never replaced",
         ),
         (
             "sim:lis3mdl",

@@ -348,7 +348,9 @@ fn magcal_apply_checks_parameters_on_a_second_recording() {
     // Another sensor: the parameters do not fit, and --require good says so with the exit code.
     let out = apply(&other, &["--require", "good"]);
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stdout).contains("verdict: REDO"));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("verdict: REDO"), "{text}");
+
     // Neither input is ever the output (it was: the recording, or the parameters, replaced with exit 0).
     let before = (
         std::fs::read(&second).unwrap(),
@@ -369,6 +371,20 @@ fn magcal_apply_checks_parameters_on_a_second_recording() {
             std::fs::read(&params).unwrap()
         )
     );
+    // Parameters that leave more misfit than the raw readings do (b off by 60 µT) are not this sensor's: said so.
+    let mut off: toml::Value = toml::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let b: Vec<f64> = off["calibration"]["b_ut"].clone().try_into().unwrap();
+    off["calibration"]["b_ut"] =
+        toml::Value::try_from(b.iter().map(|v| v + 60.0).collect::<Vec<_>>()).unwrap();
+    let off_path = dir.path().join("off.toml");
+    std::fs::write(&off_path, toml::to_string(&off).unwrap()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
+        .arg(&off_path)
+        .arg(&second)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("they are not this sensor's"), "{text}");
 }
 
 /// Parameters no calibration can have are refused naming the key (NaN and inf were graded GOOD, with 0 samples),

@@ -267,6 +267,14 @@ pub fn check(
             (None, judge_without_direction(lower.left.worst_deg, &hints))
         }
     };
+    // Parameters that leave more misfit than none at all are another sensor's (or another state's).
+    if verdict.grade != Grade::Good && residual_rms_ut > raw_residual_rms_ut {
+        verdict.todo = format!(
+            "these parameters fit this recording worse than its raw readings do ({residual_rms_ut:.2} against \
+             {raw_residual_rms_ut:.2} µT): they are not this sensor's, or its mounting or surroundings changed — fit \
+             this recording with magcal-fit instead"
+        );
+    }
     let warnings = apply_warnings(params, &against, fitted_on_it);
     // A calibrated field far outside the Earth's range is no calibration of these readings, however round it is.
     let (low, high) = crate::checks::EARTH_FIELD_UT;

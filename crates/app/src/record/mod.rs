@@ -153,7 +153,7 @@ pub fn check_out(path: &Path, force: bool) -> Result<(), RecordError> {
     if path.is_dir() {
         return Err(RecordError::Create {
             path: path.to_owned(),
-            source: std::io::Error::other("it is a directory"),
+            io: std::io::Error::other("it is a directory"),
         });
     }
     let Ok(file) = File::open(path) else {
@@ -216,8 +216,8 @@ pub struct RecordSummary {
 pub enum RecordError {
     /// The file exists, and replacing it was not asked for: nothing was recorded, the file is untouched.
     #[error(
-        "{} exists: magcal-record never replaces a recording; choose another --out, or add --force to replace it \
-         (nothing was recorded)",
+        "{} exists: a recording is never replaced; choose another output (--out, or magcal's --out-dir), or add \
+         --force to replace it (nothing was recorded)",
         path.display()
     )]
     Exists {
@@ -235,16 +235,16 @@ pub enum RecordError {
         path: PathBuf,
     },
     /// The file could not be created: nothing was recorded.
-    #[error("cannot create the recording {}: {source}; nothing was recorded", path.display())]
+    #[error("cannot create the recording {}: {io}; nothing was recorded", path.display())]
     Create {
         /// The path.
         path: PathBuf,
-        /// What the system said.
-        source: std::io::Error,
+        /// What the system said (in the message, so not a source: it would be said twice).
+        io: std::io::Error,
     },
     /// Writing rows failed (a full disk, say); the file holds whole lines only, and parses.
     #[error(
-        "writing {} failed: {source}; the file keeps the {kept} samples written before (whole lines: it parses)",
+        "writing {} failed: {io}; the file keeps the {kept} samples written before (whole lines: it parses)",
         path.display()
     )]
     Write {
@@ -252,8 +252,8 @@ pub enum RecordError {
         path: PathBuf,
         /// Rows in the file.
         kept: u64,
-        /// What the system said.
-        source: std::io::Error,
+        /// What the system said (in the message, so not a source: it would be said twice).
+        io: std::io::Error,
     },
     /// The device failed; the file keeps what was recorded.
     #[error(
@@ -406,7 +406,7 @@ impl Out {
         RecordError::Write {
             path: self.writer.path().to_owned(),
             kept: self.writer.rows_in_file(),
-            source,
+            io: source,
         }
     }
 
@@ -429,7 +429,7 @@ impl Out {
         };
         (
             kept,
-            result.map_err(|source| RecordError::Write { path, kept, source }),
+            result.map_err(|io| RecordError::Write { path, kept, io }),
         )
     }
 }
@@ -526,9 +526,21 @@ pub fn record(
             std::io::ErrorKind::WouldBlock => RecordError::Busy {
                 path: opts.out.clone(),
             },
+            // A folder that is not there is named: the system's "No such file" does not say which.
+            std::io::ErrorKind::NotFound => RecordError::Create {
+                path: opts.out.clone(),
+                io: std::io::Error::other(format!(
+                    "its folder {} does not exist",
+                    opts.out
+                        .parent()
+                        .filter(|p| !p.as_os_str().is_empty())
+                        .unwrap_or(Path::new("."))
+                        .display()
+                )),
+            },
             _ => RecordError::Create {
                 path: opts.out.clone(),
-                source,
+                io: source,
             },
         })?
         .with_flush_interval(FLUSH_INTERVAL);
