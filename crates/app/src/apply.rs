@@ -320,8 +320,8 @@ pub fn check(
 }
 
 /// What applying `params` to another recording may get wrong that its figures do not show: corrections tied to the
-/// clock of the recording they were fitted on (unless `fitted_on_it`), and a calibrated field outside the Earth's range when no field was
-/// given to check against.
+/// clock of the recording they were fitted on (unless `fitted_on_it`), and a calibrated field outside the Earth's
+/// range when no field was given to check against.
 fn apply_warnings(params: &ParamsFile, against: &Against, fitted_on_it: bool) -> Vec<String> {
     let mut warnings = Vec::new();
     let timed: Vec<&str> = params
