@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::{Command, Output};
 
-use common::{fit_report, floats, magcal_fit, matrix, simulate};
+use common::{fit_report, floats, magcal_apply, magcal_fit, matrix, simulate};
 
 fn stdout(out: &Output) -> String {
     assert!(
@@ -310,14 +310,7 @@ fn magcal_apply_checks_parameters_on_a_second_recording() {
         "--out",
         params.to_str().unwrap(),
     ]));
-    let apply = |rec: &Path, extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
-            .arg(&params)
-            .arg(rec)
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let apply = |rec: &Path, extra: &[&str]| magcal_apply(&params, rec, extra);
     let calibrated = dir.path().join("calibrated.csv");
     let text = stdout(&apply(
         &second,
@@ -378,11 +371,7 @@ fn magcal_apply_checks_parameters_on_a_second_recording() {
         toml::Value::try_from(b.iter().map(|v| v + 60.0).collect::<Vec<_>>()).unwrap();
     let off_path = dir.path().join("off.toml");
     std::fs::write(&off_path, toml::to_string(&off).unwrap()).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
-        .arg(&off_path)
-        .arg(&second)
-        .output()
-        .unwrap();
+    let out = magcal_apply(&off_path, &second, &[]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("they are not this sensor's"), "{text}");
 }
@@ -405,13 +394,7 @@ fn magcal_apply_refuses_parameters_no_calibration_has() {
         params.to_str().unwrap(),
     ]));
     let text = std::fs::read_to_string(&params).unwrap();
-    let apply = |p: &Path| {
-        Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
-            .arg(p)
-            .arg(&rec)
-            .output()
-            .unwrap()
-    };
+    let apply = |p: &Path| magcal_apply(p, &rec, &[]);
     let table: toml::Value = toml::from_str(&text).unwrap();
     let a = table["calibration"]["A"].clone();
     let b = table["calibration"]["b_ut"].clone();
@@ -517,11 +500,7 @@ fn magcal_apply_warns_of_corrections_tied_to_another_clock() {
     let other = dir.path().join("second_session.csv");
     std::fs::copy(&first, &other).unwrap();
     for (rec, warned) in [(&other, true), (&first, false)] {
-        let out = Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
-            .arg(&params)
-            .arg(rec)
-            .output()
-            .unwrap();
+        let out = magcal_apply(&params, rec, &[]);
         let text = stdout(&out);
         assert_eq!(
             text.contains("WARNING: the parameters hold bias_drift tied to the clock"),

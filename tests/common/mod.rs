@@ -57,6 +57,16 @@ pub fn magcal_fit(args: &[&str]) -> Output {
         .expect("magcal-fit runs")
 }
 
+/// Runs `magcal-apply PARAMS REC` with these further arguments.
+pub fn magcal_apply(params: &Path, rec: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_magcal-apply"))
+        .arg(params)
+        .arg(rec)
+        .args(args)
+        .output()
+        .expect("magcal-apply runs")
+}
+
 /// Runs `magcal-fit REC --report TMP` and returns the report as JSON (panics with stderr if it fails).
 pub fn fit_report(rec: &Path, extra: &[&str]) -> serde_json::Value {
     let dir = tempfile::tempdir().unwrap();

@@ -13,7 +13,7 @@ use magcal_calib::noise;
 use magcal_calib::{Inputs, Model, frames};
 use magcal_recording::Recording;
 
-use crate::calibrate::{UNMEASURED_NOISE_BOUND, expected_field};
+use crate::calibrate::{expected_field, noise_measurable};
 use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
 use crate::params::{Correction, ParamsFile};
@@ -218,7 +218,7 @@ pub fn check(
     let noise_floor_ut =
         noise::estimate(&rec.mag_ut, expected.as_deref()).calibrated_rms_ut(&model.a);
     // Differences above the residual measure the rotation, not the noise: it then explains none of the residual.
-    let noise_unmeasured = noise_floor_ut * UNMEASURED_NOISE_BOUND > residual_rms_ut;
+    let noise_unmeasured = !noise_measurable(noise_floor_ut, residual_rms_ut);
     let noise_floor_ut = if noise_unmeasured {
         0.0
     } else {

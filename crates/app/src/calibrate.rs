@@ -316,15 +316,12 @@ fn in_microtesla(e: FitError, raw_ut: &[[f64; 3]]) -> CalibrateError {
         .map(|m| frames::norm(*m))
         .filter(|n| n.is_finite())
         .collect();
-    if norms.is_empty() {
-        return e.into();
-    }
-    let mid = norms.len() / 2;
-    match norms.select_nth_unstable_by(mid, f64::total_cmp) {
-        (_, median, _) if *median < 0.1 * checks::EARTH_FIELD_UT.0 => {
-            CalibrateError::NotMicrotesla { median: *median }
-        }
-        _ => e.into(),
+    // NaN (no finite reading) is not below anything.
+    let median = checks::median(&mut norms);
+    if median < 0.1 * checks::EARTH_FIELD_UT.0 {
+        CalibrateError::NotMicrotesla { median }
+    } else {
+        e.into()
     }
 }
 
@@ -389,7 +386,13 @@ pub fn read_to_calibrate(
 
 /// A noise floor from the readings' differences above the fit's residual by more than `1 / this` is not the noise:
 /// the rows change orientation from one to the next, and the differences measure the rotation.
-pub const UNMEASURED_NOISE_BOUND: f64 = 0.8;
+const UNMEASURED_NOISE_BOUND: f64 = 0.8;
+
+/// Whether `floor_ut`, the noise the readings' differences give (calibrated units), can be the noise of a fit that
+/// leaves `residual_ut` ([`UNMEASURED_NOISE_BOUND`]).
+pub fn noise_measurable(floor_ut: f64, residual_ut: f64) -> bool {
+    !(floor_ut > 0.0 && residual_ut < UNMEASURED_NOISE_BOUND * floor_ut)
+}
 
 /// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out.
 pub fn calibrate(
@@ -498,20 +501,16 @@ pub fn calibrate(
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
         Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
     };
-    let mut noise_measured = true;
-    if floor_now > 0.0 && residual_rms_ut < floor_now {
-        let bound = residual_rms_ut / floor_now;
-        if bound < UNMEASURED_NOISE_BOUND {
-            noise_measured = false;
-            notes.push(format!(
-                "the sample-to-sample noise could not be measured ({:.3} µT from {}, more than the fit's residual \
-                 of {residual_rms_ut:.3} µT allows: the rows change orientation from one to the next); the residual \
-                 bounds it instead",
-                floor_now,
-                noise_source(&noise),
-            ));
-            noise = noise.scaled(bound);
-        }
+    let noise_measured = noise_measurable(floor_now, residual_rms_ut);
+    if !noise_measured {
+        notes.push(format!(
+            "the sample-to-sample noise could not be measured ({:.3} µT from {}, more than the fit's residual of \
+             {residual_rms_ut:.3} µT allows: the rows change orientation from one to the next); the residual bounds \
+             it instead",
+            floor_now,
+            noise_source(&noise),
+        ));
+        noise = noise.scaled(residual_rms_ut / floor_now);
     }
     warnings.extend(checks::check(&model, &fit, &field, &rec.mag_ut)?);
     let noise_floor_ut = match &fit {

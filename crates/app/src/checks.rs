@@ -192,7 +192,8 @@ fn units_warning(raw_radius: f64, model: &Model, c: [f64; 3], field_ut: Option<f
     )
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// The median of `v` (reordered), NaN when empty.
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
