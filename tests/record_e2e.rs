@@ -271,3 +271,34 @@ fn the_main_job_says_when_the_field_given_is_not_the_simulated_benchs() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("simulated truth check FAILED"), "{stdout}");
 }
+
+/// A recording cut short (here by --max-duration, as by Ctrl-C) is kept, but the recorder no longer sends the user
+/// on to a fit as if it were complete: 2 s of free rotation cover a few per cent of the sphere, and magcal-fit
+/// refuses it.
+#[test]
+fn a_recording_cut_short_says_so_instead_of_next_magcal_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("short.csv");
+    let out = run(
+        env!("CARGO_BIN_EXE_magcal-record"),
+        &[
+            "--routine",
+            "free",
+            "--max-duration",
+            "2",
+            "--out",
+            rec.to_str().unwrap(),
+        ],
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("stopped short of its routine") && !stdout.contains("next: magcal-fit"),
+        "{stdout}"
+    );
+    // And the fit does refuse it, as the recorder warned.
+    let fit = Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
+        .arg(&rec)
+        .output()
+        .unwrap();
+    assert!(!fit.status.success());
+}

@@ -102,11 +102,21 @@ fn run(args: Args) -> anyhow::Result<()> {
             Stop::Coverage | Stop::AllPoses => "",
         }
     );
+    let short = recorded.shortfall(&opts);
     if recorded.stop == Stop::Interrupted {
-        bail!(
-            "interrupted: the recording {} is kept; fit it with magcal-fit",
-            rec_path.display()
-        );
+        match short {
+            Some(short) => bail!(
+                "interrupted: the recording {} is kept, but {short}",
+                rec_path.display()
+            ),
+            None => bail!(
+                "interrupted: the recording {} is kept; fit it with magcal-fit",
+                rec_path.display()
+            ),
+        }
+    }
+    if let Some(short) = short {
+        eprintln!("warning: {short}");
     }
 
     // Fit.

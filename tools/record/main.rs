@@ -195,11 +195,11 @@ fn run(args: Args) -> anyhow::Result<()> {
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
     println!("recording {spec} to {}", args.out.display());
     let summary = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
-    print_summary(&summary);
+    print_summary(&summary, &opts);
     Ok(())
 }
 
-fn print_summary(s: &RecordSummary) {
+fn print_summary(s: &RecordSummary, opts: &RecordOptions) {
     let why = match s.stop {
         Stop::Coverage => "coverage target reached",
         Stop::AllPoses => "all 24 poses taken",
@@ -237,5 +237,11 @@ fn print_summary(s: &RecordSummary) {
     if let Some(g) = &s.garbage {
         println!("garbage lines skipped: {} ({g})", g.total());
     }
-    println!("next: magcal-fit {}", s.path.display());
+    match s.shortfall(opts) {
+        Some(short) => println!(
+            "{short}; magcal-fit {} says what it lacks",
+            s.path.display()
+        ),
+        None => println!("next: magcal-fit {}", s.path.display()),
+    }
 }

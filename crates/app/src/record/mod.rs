@@ -211,6 +211,36 @@ pub struct RecordSummary {
     pub stop: Stop,
 }
 
+impl RecordSummary {
+    /// What the recording lacks when it stopped before its routine's target (Ctrl-C, the longest duration): how far
+    /// it got, and what to do. A fit of it may be refused (too few directions to fix the offset) or loose.
+    pub fn shortfall(&self, opts: &RecordOptions) -> Option<String> {
+        if !matches!(self.stop, Stop::Interrupted | Stop::MaxDuration) {
+            return None;
+        }
+        let poses = cube24_poses().len();
+        let got = match opts.routine {
+            Routine::Free if self.coverage < opts.target_coverage => format!(
+                "{:.0} % of the sphere covered, of the {:.0} % aimed at",
+                100.0 * self.coverage,
+                100.0 * opts.target_coverage
+            ),
+            Routine::Cube24 if self.poses < poses => {
+                format!("{} of the {poses} poses taken", self.poses)
+            }
+            _ => return None,
+        };
+        Some(format!(
+            "the recording stopped short of its routine: {got}. A fit may be refused (too few directions to fix the \
+             offset) or loose: record again, turning the sensor through every orientation{}",
+            match opts.routine {
+                Routine::Free => "",
+                Routine::Cube24 => " (all 24 poses)",
+            }
+        ))
+    }
+}
+
 /// Why a recording failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
