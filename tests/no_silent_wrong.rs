@@ -691,3 +691,38 @@ fn an_ardupilot_offset_beyond_its_limit_is_said() {
     ]);
     assert!(!String::from_utf8_lossy(&out.stdout).contains("COMPASS_OFFS_MAX"));
 }
+
+/// Outputs that cannot be made (a folder that is missing or a file, a folder's name for a file) are refused before
+/// the fit, naming the option: the fit used to run to its end and then fail on the write with the system's words
+/// and the name of a temporary file.
+#[test]
+fn outputs_that_cannot_be_made_are_refused_before_the_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, _) = tumble(dir.path());
+    let file = write(dir.path(), "afile", "x");
+    let inside_file = file.join("p.toml");
+    let missing = dir.path().join("no/such/report.json");
+    for (args, says) in [
+        (
+            vec!["--out", inside_file.to_str().unwrap()],
+            "is a file, not a folder",
+        ),
+        (
+            vec!["--report", missing.to_str().unwrap()],
+            "does not exist",
+        ),
+        (vec!["--out", dir.path().to_str().unwrap()], "is a folder"),
+    ] {
+        let mut all = vec![rec.to_str().unwrap()];
+        all.extend(&args);
+        let out = common::magcal_fit(&all);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            stderr.contains(args[0]) && stderr.contains(says),
+            "{args:?}: {stderr}"
+        );
+        // Refused before the fit: no summary was printed.
+        assert!(out.stdout.is_empty(), "{args:?}");
+    }
+}

@@ -11,7 +11,7 @@ use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
 use magcal_app::field::resolve;
-use magcal_app::files::{check_outputs, write_atomic};
+use magcal_app::files::{check_file_output, check_outputs, write_atomic};
 use magcal_app::howto::{Target, how_to_apply};
 use magcal_app::params::ParamsFile;
 use magcal_app::plots::{write_plots, write_readings_plot};
@@ -87,8 +87,8 @@ fn main() -> ExitCode {
     exit("magcal-fit", run(Args::parse()))
 }
 
-/// Refuses outputs that would overwrite the recording or each other, or plots into a file's place, before anything
-/// is read or written.
+/// Refuses outputs that would overwrite the recording or each other, files that cannot be made (a missing folder, a
+/// folder's name), or plots into a file's place, before anything is read or written.
 fn check_paths(args: &Args) -> anyhow::Result<()> {
     let mut outputs: Vec<(&str, &std::path::Path)> = Vec::new();
     let named = [
@@ -99,6 +99,9 @@ fn check_paths(args: &Args) -> anyhow::Result<()> {
     ];
     for (flag, path) in named {
         if let Some(path) = path {
+            if flag != "--plots" {
+                check_file_output(flag, path)?;
+            }
             outputs.push((flag, path));
         }
     }

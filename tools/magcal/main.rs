@@ -65,6 +65,12 @@ fn run(args: Args) -> anyhow::Result<()> {
     let mut opts = RecordOptions::new(routine, rec_path.clone());
     opts.force = args.force;
     opts.auto = args.device.is_sim();
+    if args.out_dir.exists() && !args.out_dir.is_dir() {
+        bail!(
+            "--out-dir {} is a file: name a folder (it is made if missing); nothing was recorded",
+            args.out_dir.display()
+        );
+    }
     check_out(&rec_path, args.force)?;
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;

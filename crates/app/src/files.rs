@@ -47,6 +47,34 @@ pub enum OutputConflict {
         /// The input path as given.
         input: PathBuf,
     },
+    /// The output's folder is missing, or a file.
+    #[error(
+        "{flag} {}: {} {}; nothing was written (create the folder, or choose another path)",
+        output.display(),
+        folder.display(),
+        if *exists { "is a file, not a folder" } else { "does not exist" }
+    )]
+    NoFolder {
+        /// The option that names the output.
+        flag: String,
+        /// The output path as given.
+        output: PathBuf,
+        /// Its folder.
+        folder: PathBuf,
+        /// Whether the folder's path exists (as a file).
+        exists: bool,
+    },
+    /// The output names a folder.
+    #[error(
+        "{flag} {} is a folder: name a file in it; nothing was written",
+        output.display()
+    )]
+    IsFolder {
+        /// The option that names the output.
+        flag: String,
+        /// The output path as given.
+        output: PathBuf,
+    },
     /// Two outputs name the same file.
     #[error(
         "{first} and {second} both name {}: one would overwrite the other; nothing was written",
@@ -60,6 +88,31 @@ pub enum OutputConflict {
         /// The path, as the second option gives it.
         path: PathBuf,
     },
+}
+
+/// Checks, before anything is written, that the file an option (`flag`) names can be made: its folder exists and is
+/// a folder, and it is not itself a folder (otherwise the work would be done and then lost on the write, with only
+/// the system's word for why).
+pub fn check_file_output(flag: &str, path: &Path) -> Result<(), OutputConflict> {
+    let folder = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        return Err(OutputConflict::NoFolder {
+            flag: flag.to_owned(),
+            output: path.to_owned(),
+            folder: folder.to_owned(),
+            exists: folder.exists(),
+        });
+    }
+    if path.is_dir() {
+        return Err(OutputConflict::IsFolder {
+            flag: flag.to_owned(),
+            output: path.to_owned(),
+        });
+    }
+    Ok(())
 }
 
 /// Where `path` leads: the file itself if it exists (links followed), else its directory's real path joined with
@@ -127,6 +180,24 @@ mod tests {
         write_atomic(&path, b"new").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"new");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn an_output_in_a_missing_folder_or_a_file_or_naming_a_folder_is_refused_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("afile");
+        std::fs::write(&file, b"x").unwrap();
+        let e = check_file_output("--out", &file.join("p.toml")).unwrap_err();
+        assert!(e.to_string().contains("is a file, not a folder"), "{e}");
+        let e = check_file_output("--out", &dir.path().join("no/p.toml")).unwrap_err();
+        assert!(e.to_string().contains("does not exist"), "{e}");
+        let e = check_file_output("--report", dir.path()).unwrap_err();
+        assert!(e.to_string().starts_with("--report") && e.to_string().contains("is a folder"));
+        assert_eq!(
+            check_file_output("--out", &dir.path().join("p.toml")),
+            Ok(())
+        );
+        assert_eq!(check_file_output("--out", Path::new("p.toml")), Ok(()));
     }
 
     #[test]
