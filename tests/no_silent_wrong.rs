@@ -715,7 +715,7 @@ fn outputs_that_cannot_be_made_are_refused_before_the_fit() {
     ] {
         let mut all = vec![rec.to_str().unwrap()];
         all.extend(&args);
-        let out = common::magcal_fit(&all);
+        let out = magcal_fit(&all);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{args:?}");
         assert!(
