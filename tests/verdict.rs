@@ -171,6 +171,38 @@ fn without_the_fields_direction_the_verdict_asks_for_it() {
     );
 }
 
+/// A field given 10.9° off in declination (the bench's field turned about the vertical): the diagnosis finds and
+/// models it, so the calibration itself is good, but the verdict used to send the user on with "check it on a
+/// second recording" only, though a heading computed with the declination given is off by the same 10.9°.
+#[test]
+fn a_declination_the_diagnosis_finds_off_is_said_in_what_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(dir.path(), "tumble.csv", &["--duration", "120"]);
+    // The bench's field (magcal-sim's default, in the file's metadata) turned by 10.9° about the vertical.
+    let text = std::fs::read_to_string(&rec).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("# field_ned_ut:"))
+        .unwrap();
+    let f: Vec<f64> = line["# field_ned_ut:".len()..]
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    let turn = 10.9_f64.to_radians();
+    let (n, e) = (
+        f[0] * turn.cos() - f[1] * turn.sin(),
+        f[0] * turn.sin() + f[1] * turn.cos(),
+    );
+    let given = format!("{n},{e},{}", f[2]);
+    let out = stdout(&magcal_fit(&[rec.to_str().unwrap(), "--field-ned", &given]));
+    let verdict = out.lines().find(|l| l.starts_with("verdict:")).unwrap();
+    let off = degrees_after(verdict, "the recording shows it");
+    assert!((off + 10.9).abs() < 0.5, "{verdict}");
+    // With the bench's own field there is nothing to say.
+    let out = stdout(&magcal_fit(&[rec.to_str().unwrap()]));
+    assert!(!out.contains("in declination from the one given"), "{out}");
+}
+
 #[test]
 fn require_good_refuses_a_usable_fit_and_writes_no_parameters() {
     let dir = tempfile::tempdir().unwrap();

@@ -254,6 +254,7 @@ pub fn check(
         coverage: 1.0,
         diagnosis_skipped: false,
         noise_unmeasured,
+        declination_off_deg: None,
     };
     let (heading, mut verdict) = match field.vector() {
         Some(f) => {

@@ -9,6 +9,8 @@
 //! favourable direction (a horizontal field) leaves more than [`USABLE_DEG`]. A fit the last checks warn about
 //! (units, gains, field range, a huge hard iron: [`crate::checks`]) is at best usable.
 
+use magcal_calib::diagnosis::Diagnosis;
+use magcal_calib::effects::Effect;
 use magcal_calib::frames;
 use magcal_recording::Recording;
 
@@ -85,6 +87,10 @@ pub struct Hints {
     /// The sensor's noise could not be measured (rows that change orientation from one to the next): the whole
     /// residual counts as error, and the verdict says why.
     pub noise_unmeasured: bool,
+    /// The diagnosis found the field's declination off by this much from the one given (true minus assumed),
+    /// degrees, when more than [`GOOD_DEG`]: the calibration models it, but a heading computed with the declination
+    /// given is off by as much.
+    pub declination_off_deg: Option<f64>,
 }
 
 /// Degrees in two significant figures below 10, whole degrees above.
@@ -100,8 +106,22 @@ pub fn fmt_deg(x: f64) -> String {
     }
 }
 
-/// The verdict from the heading figures.
+/// The verdict from the heading figures; a declination found off is added to what to do.
 pub fn judge(h: &HeadingErrors, hints: &Hints) -> Verdict {
+    let mut verdict = judge_heading(h, hints);
+    if let Some(off_deg) = hints.declination_off_deg {
+        verdict.todo = format!(
+            "{}; and mind the local field: the recording shows it {off_deg:+.1}° in declination from the one given \
+             (or the attitude reference's north is off by as much), so a heading computed with the declination \
+             given is off by as much",
+            verdict.todo
+        );
+    }
+    verdict
+}
+
+/// The verdict from the heading figures alone.
+fn judge_heading(h: &HeadingErrors, hints: &Hints) -> Verdict {
     let left = h.left.worst_deg;
     let grade = if left <= GOOD_DEG {
         Grade::Good
@@ -214,6 +234,17 @@ pub fn judge_without_direction(lower_bound_deg: f64, hints: &Hints) -> Verdict {
     }
 }
 
+/// The declination error the diagnosis found, degrees, when it exceeds [`GOOD_DEG`].
+fn declination_off_deg(d: &Diagnosis) -> Option<f64> {
+    d.effects.iter().find_map(|e| match e.effect {
+        Effect::FieldDirectionError {
+            declination_error_deg,
+            ..
+        } if declination_error_deg.abs() > GOOD_DEG => Some(declination_error_deg),
+        _ => None,
+    })
+}
+
 /// The magnitude of the field in the model's calibrated units, µT: the field vector's, the scalar fit's target, or
 /// the mean of the expected field (`rx,ry,rz`).
 fn model_field_ut(cal: &Calibration, rec: &Recording) -> Option<f64> {
@@ -283,6 +314,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         coverage: cal.sphere_coverage,
         diagnosis_skipped: cal.diagnosis.is_none(),
         noise_unmeasured: !cal.noise_measured,
+        declination_off_deg: cal.diagnosis.as_ref().and_then(declination_off_deg),
     };
     let magnitude_ut = model_field_ut(cal, rec).unwrap_or(f64::NAN);
     let direction = cal.field.vector().map(|f| frames::field_angles(f).1);
