@@ -617,6 +617,21 @@ fn a_magnets_tail_widens_the_standard_errors_to_cover_its_bias() {
 /// report used to call the whole spans "left out of the calibration" all the same; now every sample it says is left
 /// out is one the fit did not use, and a span whose samples stayed in says how many, or that all did. (The scalar
 /// method's spans are the base fit's exclusions, so there it cannot happen.)
+/// Seed 98 without the attitude: 230 µT on the board for the first 14 s (nine times the field) and a magnet passing
+/// at up to 244 µT. Every seed of a span that held the field on the board was captured by it (a gain of 0.02) and the
+/// others, fitted on a sixth of a recording that covers half the sphere, settled on an ellipsoid twice too large
+/// (gain 0.5): the fit was refused as undetermined. The seed from the bulk of the readings (their distance from
+/// the median reading within Tukey's far fences) leaves the window out from the start and finds the clean state
+/// (measured: offset 0.146 µT off, A 0.0072).
+#[test]
+fn a_field_many_times_the_earths_on_the_board_cannot_capture_every_seed() {
+    let seed = 98;
+    let (s, cal) = calibrated(seed, false);
+    let (truth_a, truth_offset) = truth(&s, false);
+    let (a_err, o_err) = errors(&cal.model(), &truth_a, truth_offset);
+    assert!(o_err < 0.3 && a_err < 0.01, "A {a_err}, offset {o_err} µT");
+}
+
 #[test]
 fn what_the_report_says_is_left_out_is_left_out() {
     let seed = 159;
@@ -678,9 +693,9 @@ fn scalar_method_calibrates_around_gross_disturbances() {
     // rows the diagnosis located beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration
     // steps and shifted windows), 100 % located (98.9 % before spans merged across a lull were split here too),
     // 94.5 % of the seeds both — short of the 95 % by one seed —, none worse (1 before a scalar finding had
-    // to explain a quarter of the residual's excess), 0 of 50 false alarms, 1 refused (a 230 µT field on the board
-    // for a fifth of the recording and a magnet leave a direction undetermined). These floors keep them, less one
-    // run of good.
+    // to explain a quarter of the residual's excess), 0 of 50 false alarms, none refused (1 before the bulk seed:
+    // seed 98, see below; it is now calibrated, 3.65 standard errors off in one element of A). These floors keep
+    // them, less one run of good and one refusal.
     check(
         &t,
         &Floor {
@@ -689,7 +704,7 @@ fn scalar_method_calibrates_around_gross_disturbances() {
             both_pct: 94.5,
             worse: 0,
             false_alarm_pct: 1.0,
-            refused_pct: 1.0,
+            refused_pct: 0.5,
         },
     );
 }

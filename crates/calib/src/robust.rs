@@ -8,7 +8,10 @@
 //!    that half settles: from a seed that is mostly clean this reaches the clean state even when every long span is
 //!    disturbed somewhere), then by iteratively reweighted least squares with Tukey's biweight on the residual's size
 //!    against a scale from its median. A disturbance covering up to half the recording leaves at least one seed
-//!    clean or mostly clean. The seeds run on a subsample of at most [`SEED_SAMPLES`] samples, on all threads.
+//!    clean or mostly clean. A problem may add one seed from the bulk of its samples ([`RobustProblem::bulk_weights`]:
+//!    the scalar method's readings whose distance from the median reading is not far out), which a field many times
+//!    the Earth's cannot capture however it is spread in time. The seeds run on a subsample of at most
+//!    [`SEED_SAMPLES`] samples, on all threads.
 //! 2. **The best seed** is the one with the smallest median residual over all samples — the state the recording is
 //!    in most of the time, not the one that covers most directions. Seeds whose matrix is implausible (gains more
 //!    than [`PLAUSIBLE_GAIN_RATIO`] apart: a fit to a still stretch that explains it with any matrix) lose to
@@ -105,6 +108,11 @@ pub trait RobustProblem: Sized + Sync {
     fn shifted(&self, _fit: &Self::Fit, _kept: &[bool]) -> Vec<(usize, usize)> {
         Vec::new()
     }
+    /// Weights of one more seed: the bulk of the samples by something a disturbance cannot hide in (none, unless a
+    /// problem has such a thing).
+    fn bulk_weights(&self) -> Option<Vec<f64>> {
+        None
+    }
     /// How much of the sphere of directions the samples cover as seen from a fit (see [`fit`]): all of it, unless a
     /// problem can tell.
     fn support(&self, _fit: &Self::Fit) -> f64 {
@@ -141,8 +149,11 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     let m = seeds.len();
     // The seeds are fitted on all threads, then compared in order.
     let spans = seed_spans(m);
-    let fitted = chunks::parts(spans.len(), |k| {
-        let (a, b) = spans[k];
+    let bulk = seeds.bulk_weights();
+    let fitted = chunks::parts(spans.len() + usize::from(bulk.is_some()), |k| {
+        let Some(&(a, b)) = spans.get(k) else {
+            return reweight(seeds, bulk.as_deref()?, SEED_ITERATIONS);
+        };
         let mut w = vec![0.0; m];
         w[a..b].fill(1.0);
         reweight(seeds, &w, SEED_ITERATIONS)
@@ -528,7 +539,7 @@ fn from_order_key(key: u64) -> f64 {
 }
 
 /// The `q` quantile of the finite values of `e` (NaN if none).
-fn quantile(e: &[f64], q: f64) -> f64 {
+pub(crate) fn quantile(e: &[f64], q: f64) -> f64 {
     let mut v: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
         return f64::NAN;

@@ -30,9 +30,9 @@ use std::borrow::Cow;
 use crate::FitError;
 use crate::chunks;
 use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe, sphere_fraction};
-use crate::frames::Mat3;
+use crate::frames::{self, Mat3};
 use crate::model::Model;
-use crate::robust::{self, RobustProblem};
+use crate::robust::{self, RobustProblem, quantile};
 
 /// What the scalar method cannot see, in words for reports.
 pub const ROTATION_NOTE: &str = "the scalar method constrains only |B|, and a rotation of the calibrated field leaves \
@@ -67,6 +67,8 @@ const NEGLIGIBLE_STEP_SE: f64 = 0.01;
 const MAX_ROUNDS: usize = 8;
 /// Cells of direction for the weights and the cluster-robust standard errors.
 const DIRECTION_CELLS: usize = 100;
+/// The bulk seed's fences, in interquartile ranges beyond the quartiles (Tukey's far out).
+const BULK_FENCE: f64 = 3.0;
 /// Blocks of consecutive samples (of time, in a recording) for the cluster-robust covariance over time.
 const TIME_BLOCKS: usize = 32;
 /// Fewest samples the fit takes.
@@ -261,6 +263,30 @@ impl RobustProblem for ScalarProblem<'_> {
         } else {
             Vec::new()
         }
+    }
+
+    /// The readings whose distance from their median point lies within Tukey's far fences (three interquartile
+    /// ranges beyond the quartiles): a field many times the Earth's on the board or beside it for a while, which
+    /// captures every seed of a span that holds it, lies far beyond them, and the undisturbed readings, at the
+    /// ellipsoid's radius from its centre, within.
+    fn bulk_weights(&self) -> Option<Vec<f64>> {
+        let median_point: [f64; 3] = std::array::from_fn(|k| {
+            let axis: Vec<f64> = self.raw_ut.iter().map(|m| m[k]).collect();
+            quantile(&axis, 0.5)
+        });
+        let distance = |m: &[f64; 3]| frames::norm(frames::sub(*m, median_point));
+        let r: Vec<f64> = self.raw_ut.iter().map(distance).collect();
+        let (q1, q3) = (quantile(&r, 0.25), quantile(&r, 0.75));
+        if !(q1.is_finite() && q3.is_finite()) {
+            return None;
+        }
+        let (low, high) = (q1 - BULK_FENCE * (q3 - q1), q3 + BULK_FENCE * (q3 - q1));
+        Some(
+            self.raw_ut
+                .iter()
+                .map(|m| f64::from(u8::from((low..=high).contains(&distance(m)))))
+                .collect(),
+        )
     }
 
     /// The share of the sphere of directions the readings cover as seen from a fit's centre: from a wrong centre
