@@ -96,6 +96,8 @@ pub struct Calibration {
     pub robust: RobustSummary,
     /// What the base model leaves out, when diagnosed.
     pub diagnosis: Option<Diagnosis>,
+    /// Why the diagnosis, asked for, could not be made (the calibration is then the base fit).
+    pub diagnosis_failed: Option<String>,
 }
 
 impl Calibration {
@@ -535,6 +537,7 @@ pub fn calibrate(
         warnings,
         robust,
         diagnosis: None,
+        diagnosis_failed: None,
     };
     // The recorder's definition of coverage, so both give the same figure for the same rows.
     cal.sphere_coverage = recorded_fraction(&rec.mag_ut);
@@ -546,11 +549,21 @@ pub fn calibrate(
                 diagnosis::MIN_SAMPLES
             ));
         } else {
-            let first =
-                diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model)?;
-            let d = around_spans(rec, &cal, first)?;
-            cal.warnings.extend(other_offset_state(&d, rec.len()));
-            cal.diagnosis = Some(d);
+            // A diagnosis that cannot be made leaves the calibration as it is, said so: the base fit stands on its
+            // own (a recording it calibrates is not refused for what the diagnosis could not do).
+            match diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model) {
+                Ok(first) => {
+                    let d = around_spans(rec, &cal, first)?;
+                    cal.warnings.extend(other_offset_state(&d, rec.len()));
+                    cal.diagnosis = Some(d);
+                }
+                Err(e) => {
+                    cal.notes.push(format!(
+                        "not diagnosed: {e}; the calibration above is the robust base fit, standing on its own"
+                    ));
+                    cal.diagnosis_failed = Some(e.to_string());
+                }
+            }
         }
     }
     Ok(cal)

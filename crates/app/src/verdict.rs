@@ -312,7 +312,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
             Vec::new()
         },
         coverage: cal.sphere_coverage,
-        diagnosis_skipped: cal.diagnosis.is_none(),
+        diagnosis_skipped: cal.diagnosis.is_none() && cal.diagnosis_failed.is_none(),
         noise_unmeasured: !cal.noise_measured,
         declination_off_deg: cal.diagnosis.as_ref().and_then(declination_off_deg),
     };

@@ -371,7 +371,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     let mut span_residual = Cow::Borrowed(base_residual.as_slice());
     let mut left_out: Vec<(usize, usize)> = Vec::new();
     let mut rejected = Vec::new();
-    let mut round = setup.round(&span_residual, &kept, scale, &left_out)?;
+    let mut round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
     for _ in 1..ROUNDS {
         // Guard first: effects that make the model unphysical go, and if modelling the spans harms the clean
         // held-out fit, they are left out instead.
@@ -384,7 +384,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                     .filter(|s| s.modelled())
                     .map(|s| (s.start, s.end)),
             );
-            round = setup.round(&span_residual, &kept, scale, &left_out)?;
+            round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
             continue;
         }
         // The scalar method's exclusions are the base fit's (its scan for shifted windows sees more than the gross
@@ -404,7 +404,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
             break;
         }
         (kept, scale, span_residual) = (kept2, scale2, Cow::Owned(residual));
-        round = setup.round(&span_residual, &kept, scale, &left_out)?;
+        round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
     }
     if setup.guard(&mut round, &mut rejected) {
         left_out.extend(
@@ -414,7 +414,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                 .filter(|s| s.modelled())
                 .map(|s| (s.start, s.end)),
         );
-        round = setup.round(&span_residual, &kept, scale, &left_out)?;
+        round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
         setup.guard(&mut round, &mut rejected);
     }
     let mut diagnosis = setup.report(round, base_residual, rejected, base);
@@ -551,6 +551,24 @@ impl<'a> Setup<'a> {
             } else {
                 <crate::scalar::ScalarProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
             }
+    }
+
+    /// [`Setup::round`]; if the spans' effects leave its base problem without a solution (a field in the room
+    /// while the sensor hardly turned is nearly the offset), every span is left out instead (added to `left_out`).
+    fn round_or_declined(
+        &self,
+        residual: &[[f64; 3]],
+        kept: &[bool],
+        scale: f64,
+        left_out: &mut Vec<(usize, usize)>,
+    ) -> Result<Round, FitError> {
+        match self.round(residual, kept, scale, left_out) {
+            Err(FitError::Singular(_)) => {
+                left_out.extend(robust::excluded_runs(kept));
+                self.round(residual, kept, scale, left_out)
+            }
+            other => other,
+        }
     }
 
     /// Stages 2–5 on the spans of `residual`'s gross samples (those not `kept`), with the spans overlapping
