@@ -198,7 +198,8 @@ pub(crate) struct Offer<'a> {
     pub samples: &'a Samples<'a>,
     pub vector: bool,
     pub current_names: &'a [&'a str],
-    pub step: Option<Scan>,
+    /// The likeliest step, or why none is offered.
+    pub step: Result<Scan, &'static str>,
     pub window: Option<Scan>,
     /// The modelled gross spans: their effect with its times set, and the times' profile intervals.
     pub spans: Vec<(Effect, ScanTimes)>,
@@ -414,7 +415,7 @@ pub(crate) fn candidates(
     );
 
     if s.has_time {
-        if let Some(step) = offer.step {
+        if let Ok(step) = offer.step {
             push(
                 Effect::BiasStep {
                     t_s: between(step.start),
@@ -425,11 +426,8 @@ pub(crate) fn candidates(
                 STEP_SCAN_PENALTY,
                 Some(scan_times(s, &step, false)),
             );
-        } else {
-            refuse(
-                EffectId::BiasStep,
-                "the recording is too short to look for a step",
-            );
+        } else if let Err(why) = offer.step {
+            refuse(EffectId::BiasStep, why);
         }
         push(
             Effect::BiasDrift {
