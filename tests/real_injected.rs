@@ -252,3 +252,23 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
     let (a_err, o_err) = errors(&r, &truth);
     assert!(a_err < 0.02 && o_err < 0.5, "A {a_err}, offset {o_err} µT");
 }
+
+/// 300 µT on the board for the middle 90 s of the turning (49.9–140.1 s): the robust fit took the state with most
+/// directions — the one with the magnet — and the stretches before and after, on the sensor's own offset, for
+/// spans; the calibration was 300 µT off, graded usable with a warning that the rest "sat on another offset". The
+/// recording began and ended on that offset: the verdict is now redo, saying so.
+#[test]
+fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() {
+    let dir = tempfile::tempdir().unwrap();
+    let added = [Added::Board {
+        t0_s: 49.911,
+        t1_s: 140.099,
+        sensor_ut: [-100.71, -269.24, 85.84],
+    }];
+    let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
+    let r = fit_report(&path, &[]);
+    assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+    // Without the magnet, nothing of the sort.
+    let r = fit_report(&real(BROAD_02), &[]);
+    assert_ne!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+}

@@ -554,7 +554,7 @@ pub fn calibrate(
             match diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model) {
                 Ok(first) => {
                     let d = around_spans(rec, &cal, first)?;
-                    cal.warnings.extend(other_offset_state(&d, rec.len()));
+                    cal.warnings.extend(other_offset_state(&d, rec));
                     cal.diagnosis = Some(d);
                 }
                 Err(e) => {
@@ -610,13 +610,9 @@ fn units_unread(meta: &Metadata) -> Option<String> {
 /// Spans fixed to the sensor covering at least this share of a recording make it a recording of two states.
 const OTHER_STATE_SHARE: f64 = 0.25;
 
-/// A warning when spans of a constant field fixed to the sensor — something magnetic on the board — cover
-/// [`OTHER_STATE_SHARE`] of the recording or more: the calibration is of the state the rest of it was in, which the
-/// user may not mean (a magnet left on the board for most of a recording is the state most of it was in).
-fn other_offset_state(d: &Diagnosis, total: usize) -> Option<String> {
-    // Each such span with the size of its field.
-    let fixed: Vec<(&diagnosis::GrossSpan, f64)> = d
-        .spans
+/// The spans of a constant field fixed to the sensor — something magnetic on the board — with the size of each.
+fn sensor_fixed_spans(d: &Diagnosis) -> Vec<(&diagnosis::GrossSpan, f64)> {
+    d.spans
         .iter()
         .filter_map(|s| match s.kind {
             diagnosis::SpanKind::SensorFixed { offset_ut, .. } => {
@@ -624,9 +620,40 @@ fn other_offset_state(d: &Diagnosis, total: usize) -> Option<String> {
             }
             _ => None,
         })
-        .collect();
+        .collect()
+}
+
+/// Spans within this share of the recording's duration of its start and of its end make the recording begin and
+/// end in their state.
+const BOOKEND_SHARE: f64 = 0.1;
+
+/// Whether the recording began and ended on another offset than the one calibrated, for [`OTHER_STATE_SHARE`] of it
+/// or more: the calibration is then of the state in between, most likely something on the board while the sensor
+/// turned (a magnet attached for the middle 90 s of the physical BROAD 02 recording with 300 µT added gave a
+/// calibration 300 µT off, graded usable).
+pub fn calibrated_state_in_between(d: &Diagnosis, rec: &Recording) -> bool {
+    let fixed = sensor_fixed_spans(d);
     let samples: usize = fixed.iter().map(|(s, _)| s.samples).sum();
-    let share = samples as f64 / total.max(1) as f64;
+    let (Some(t), Some(first), Some(last)) = (rec.t_s.as_ref(), fixed.first(), fixed.last()) else {
+        return false;
+    };
+    let (Some(&t0), Some(&t1)) = (t.first(), t.last()) else {
+        return false;
+    };
+    let margin = BOOKEND_SHARE * (t1 - t0);
+    samples as f64 >= OTHER_STATE_SHARE * rec.len() as f64
+        && first.0.t0_s <= t0 + margin
+        && last.0.t1_s >= t1 - margin
+}
+
+/// A warning when spans of a constant field fixed to the sensor — something magnetic on the board — cover
+/// [`OTHER_STATE_SHARE`] of the recording or more: the calibration is of the state the rest of it was in, which the
+/// user may not mean (a magnet left on the board for most of a recording is the state most of it was in), and most
+/// likely not the sensor's own when the recording began and ended in the other.
+fn other_offset_state(d: &Diagnosis, rec: &Recording) -> Option<String> {
+    let fixed = sensor_fixed_spans(d);
+    let samples: usize = fixed.iter().map(|(s, _)| s.samples).sum();
+    let share = samples as f64 / rec.len().max(1) as f64;
     if share < OTHER_STATE_SHARE {
         return None;
     }
@@ -635,10 +662,17 @@ fn other_offset_state(d: &Diagnosis, total: usize) -> Option<String> {
         .iter()
         .map(|(s, _)| format!("{:.1}–{:.1} s", s.t0_s, s.t1_s))
         .collect();
+    let state = if calibrated_state_in_between(d, rec) {
+        "The recording began and ended on that offset: the calibration is of the state in between, most likely \
+         something on the board while the sensor turned, not the sensor's own; record again with nothing magnetic \
+         on or near it"
+    } else {
+        "The calibration is of the state the rest of the recording was in; if the sensor will be used as it was \
+         during those spans, record again in that state"
+    };
     Some(format!(
         "for {:.0} % of the recording ({}) the readings sat on another offset, by up to {size_ut:.1} µT: something \
-         magnetic on or near the board. The calibration is of the state the rest of the recording was in; if the \
-         sensor will be used as it was during those spans, record again in that state",
+         magnetic on or near the board. {state}",
         100.0 * share,
         when.join(", ")
     ))

@@ -366,6 +366,22 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         "check the attitude reference's convention and timing: the WARNING below says what to try"
             .clone_into(&mut verdict.todo);
     }
+    // A calibration of the state between two stretches on another offset is of something on the board.
+    if verdict.grade != Grade::Redo
+        && cal
+            .diagnosis
+            .as_ref()
+            .is_some_and(|d| crate::calibrate::calibrated_state_in_between(d, rec))
+    {
+        verdict = Verdict {
+            grade: Grade::Redo,
+            reason: "the recording began and ended on another offset than the one calibrated: the calibration is \
+                     most likely of something on the board while the sensor turned"
+                .to_owned(),
+            todo: "record again with nothing magnetic on or near the board (the WARNING below says when)"
+                .to_owned(),
+        };
+    }
     // A fit the last checks warn about (units, gains, field range, a huge hard iron) is not good, whatever its
     // heading figures: the warning says what is wrong and what would fix it.
     if verdict.grade == Grade::Good && !cal.warnings.is_empty() {
