@@ -171,6 +171,18 @@ fn a_diagnosis_that_cannot_model_the_spans_does_not_refuse_the_recording() {
     let r = fit_report(&path, &[]);
     let (a_err, o_err) = errors(&r, &truth(&[]));
     assert!(a_err < 0.01 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
+    // The spans say why they were left out.
+    let said = r["diagnosis"]["spans"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|sp| {
+            sp["explanation"]
+                .as_str()
+                .unwrap()
+                .contains("modelled, it left the fit without a solution")
+        });
+    assert!(said, "{}", r["diagnosis"]["spans"]);
 }
 
 /// Passes by a magnet of 4.3 and 3.1 µT at their peaks, without the attitude (the scalar method): the robust fit's

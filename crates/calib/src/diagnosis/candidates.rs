@@ -415,19 +415,20 @@ pub(crate) fn candidates(
     );
 
     if s.has_time {
-        if let Ok(step) = offer.step {
-            push(
-                Effect::BiasStep {
-                    t_s: between(step.start),
-                    step_ut: [0.0; 3],
-                },
-                None,
-                None,
-                STEP_SCAN_PENALTY,
-                Some(scan_times(s, &step, false)),
-            );
-        } else if let Err(why) = offer.step {
-            refuse(EffectId::BiasStep, why);
+        match offer.step {
+            Ok(step) => {
+                push(
+                    Effect::BiasStep {
+                        t_s: between(step.start),
+                        step_ut: [0.0; 3],
+                    },
+                    None,
+                    None,
+                    STEP_SCAN_PENALTY,
+                    Some(scan_times(s, &step, false)),
+                );
+            }
+            Err(why) => refuse(EffectId::BiasStep, why),
         }
         push(
             Effect::BiasDrift {

@@ -79,9 +79,18 @@ pub(crate) struct Span {
     pub kind: SpanKind,
     /// Whether the sensor turned during it.
     pub turned: bool,
-    /// Whether modelling it was declined: with its samples kept, the clean held-out samples fitted worse, or not
-    /// noticeably better (the no-harm guard).
-    pub declined: bool,
+    /// Why modelling it was declined, if it was.
+    pub declined: Option<Declined>,
+}
+
+/// Why a span that could be modelled is left out instead.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Declined {
+    /// With its samples kept, the clean held-out samples fitted worse, or not noticeably better (the no-harm guard).
+    NoGain,
+    /// Its effect, with the others, left the fit without a solution (a field in the room while the sensor hardly
+    /// turned is nearly the offset).
+    Undetermined,
 }
 
 impl Span {
@@ -93,7 +102,7 @@ impl Span {
     /// large offset only through a linearisation that no longer holds): such spans are left out.
     pub fn modelled(&self) -> bool {
         self.turned
-            && !self.declined
+            && self.declined.is_none()
             && matches!(
                 self.kind,
                 SpanKind::SensorFixed {
@@ -420,7 +429,7 @@ fn classify(
         rms_ut,
         kind,
         turned,
-        declined: false,
+        declined: None,
     }
 }
 

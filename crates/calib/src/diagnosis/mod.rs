@@ -56,7 +56,7 @@ use crate::noise::NoiseFloor;
 use crate::robust::{self, RobustProblem};
 use candidates::{Candidate, Offer, ScanTimes};
 use fitted::{SYM, coefficient, linear_of, linear_se, not_excited, params_of};
-use gross::{Residual, Span};
+use gross::{Declined, Residual, Span};
 use samples::Samples;
 use select::{Selection, SetAside, select};
 use stats::{Batches, BlockStats, Problem, Rows};
@@ -369,7 +369,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
         setup.scale(&base_residual)
     };
     let mut span_residual = Cow::Borrowed(base_residual.as_slice());
-    let mut left_out: Vec<(usize, usize)> = Vec::new();
+    let mut left_out: Vec<(usize, usize, Declined)> = Vec::new();
     let mut rejected = Vec::new();
     let mut round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
     for _ in 1..ROUNDS {
@@ -382,7 +382,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                     .spans
                     .iter()
                     .filter(|s| s.modelled())
-                    .map(|s| (s.start, s.end)),
+                    .map(|s| (s.start, s.end, Declined::NoGain)),
             );
             round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
             continue;
@@ -412,7 +412,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
                 .spans
                 .iter()
                 .filter(|s| s.modelled())
-                .map(|s| (s.start, s.end)),
+                .map(|s| (s.start, s.end, Declined::NoGain)),
         );
         round = setup.round_or_declined(&span_residual, &kept, scale, &mut left_out)?;
         setup.guard(&mut round, &mut rejected);
@@ -573,11 +573,15 @@ impl<'a> Setup<'a> {
         residual: &[[f64; 3]],
         kept: &[bool],
         scale: f64,
-        left_out: &mut Vec<(usize, usize)>,
+        left_out: &mut Vec<(usize, usize, Declined)>,
     ) -> Result<Round, FitError> {
         match self.round(residual, kept, scale, left_out) {
             Err(FitError::Singular(_)) => {
-                left_out.extend(robust::excluded_runs(kept));
+                left_out.extend(
+                    robust::excluded_runs(kept)
+                        .into_iter()
+                        .map(|(a, b)| (a, b, Declined::Undetermined)),
+                );
                 self.round(residual, kept, scale, left_out)
             }
             other => other,
@@ -591,7 +595,7 @@ impl<'a> Setup<'a> {
         residual: &[[f64; 3]],
         kept: &[bool],
         scale: f64,
-        left_out: &[(usize, usize)],
+        left_out: &[(usize, usize, Declined)],
     ) -> Result<Round, FitError> {
         let s = self.samples;
         let n = s.len();
@@ -618,11 +622,11 @@ impl<'a> Setup<'a> {
         for span in &mut spans {
             clean[span.start..span.end].fill(false);
             included[span.start..span.end].fill(false);
-            if left_out
+            if let Some(&(_, _, why)) = left_out
                 .iter()
-                .any(|&(a, b)| a < span.end && span.start < b)
+                .find(|&&(a, b, _)| a < span.end && span.start < b)
             {
-                span.declined = true;
+                span.declined = Some(why);
             }
             if !span.modelled() || !s.has_time {
                 continue;
@@ -1514,14 +1518,20 @@ impl Setup<'_> {
             }
             | SpanKind::RoomFixed {
                 field_ned_ut: offset_ut,
-            } if sp.declined => format!(
-                "{when}: a field of {:.1} µT fixed to the {} — left out of the calibration: with its samples kept and \
-                 modelled, the clean part fitted no better on held-out data",
+            } if sp.declined.is_some() => format!(
+                "{when}: a field of {:.1} µT fixed to the {} — left out of the calibration: {}",
                 frames::norm(offset_ut),
                 if matches!(sp.kind, SpanKind::RoomFixed { .. }) {
                     "room"
                 } else {
                     "sensor"
+                },
+                match sp.declined {
+                    Some(Declined::Undetermined) => {
+                        "modelled, it left the fit without a solution"
+                    }
+                    _ =>
+                        "with its samples kept and modelled, the clean part fitted no better on held-out data",
                 }
             ),
             SpanKind::SensorFixed {
