@@ -290,35 +290,32 @@ impl RobustProblem for ScalarProblem<'_> {
     }
 
     fn covered(&self, fit: &ScalarFit, kept: &[bool]) -> f64 {
-        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
-        let b = Vector3::from(fit.b_ut);
-        sphere_fraction(
-            self.raw_ut
-                .iter()
-                .zip(kept)
-                .filter(|(m, k)| **k && m.iter().all(|v| v.is_finite()))
-                .map(|(m, _)| (a * Vector3::from(*m) + b).into()),
-            DIRECTION_CELLS,
-        )
+        self.directions_covered(fit, |i| kept[i])
     }
 
     /// The share of the sphere of directions the readings cover as seen from a fit's centre: from a wrong centre
     /// (a huge sphere through a band of the readings and a still stretch, as a seed on a cap of the recording can
     /// make) they lie in a cap.
     fn support(&self, fit: &ScalarFit) -> f64 {
+        self.directions_covered(fit, |_| true)
+    }
+}
+
+impl ScalarProblem<'_> {
+    /// The share of the sphere of directions the finite readings `keep` selects cover, calibrated by `fit`.
+    fn directions_covered(&self, fit: &ScalarFit, keep: impl Fn(usize) -> bool) -> f64 {
         let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
         let b = Vector3::from(fit.b_ut);
         sphere_fraction(
             self.raw_ut
                 .iter()
-                .filter(|m| m.iter().all(|v| v.is_finite()))
-                .map(|m| (a * Vector3::from(*m) + b).into()),
+                .enumerate()
+                .filter(|(i, m)| keep(*i) && m.iter().all(|v| v.is_finite()))
+                .map(|(_, m)| (a * Vector3::from(*m) + b).into()),
             DIRECTION_CELLS,
         )
     }
-}
 
-impl ScalarProblem<'_> {
     fn fit_with(
         &self,
         weights: &[f64],
