@@ -122,9 +122,9 @@ fn offset(r: &Value) -> [f64; 3] {
     magcal_calib::scalar::centre(&a, [b[0], b[1], b[2]])
 }
 
-/// The truth: the fit of the undisturbed recording by the same options.
-fn truth(args: &[&str]) -> ([[f64; 3]; 3], [f64; 3]) {
-    let r = fit_report(&real(BROAD_02), args);
+/// The truth: the fit of the undisturbed recording `rec` (A and the offset).
+fn truth(rec: &Path) -> ([[f64; 3]; 3], [f64; 3]) {
+    let r = fit_report(rec, &[]);
     (matrix(&r["calibration"]["A"]), offset(&r))
 }
 
@@ -169,7 +169,7 @@ fn a_diagnosis_that_cannot_model_the_spans_does_not_refuse_the_recording() {
         String::from_utf8_lossy(&out.stderr)
     );
     let r = fit_report(&path, &[]);
-    let (a_err, o_err) = errors(&r, &truth(&[]));
+    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
     assert!(a_err < 0.01 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
     // The spans say why they were left out.
     let said = r["diagnosis"]["spans"]
@@ -207,10 +207,7 @@ fn a_shifted_window_holding_most_of_the_turning_is_not_left_out() {
     ];
     let path = with_added(BROAD_02, dir.path(), "passes.csv", &added, true);
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
-    let truth = {
-        let r = fit_report(&bare, &[]);
-        (matrix(&r["calibration"]["A"]), offset(&r))
-    };
+    let truth = truth(&bare);
     for args in [&[][..], &["--no-diagnose"][..]] {
         let r = fit_report(&path, args);
         assert_eq!(r["method"], "scalar");
@@ -249,10 +246,7 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
     ];
     let path = with_added(BROAD_02, dir.path(), "boards.csv", &added, true);
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
-    let truth = {
-        let r = fit_report(&bare, &[]);
-        (matrix(&r["calibration"]["A"]), offset(&r))
-    };
+    let truth = truth(&bare);
     let r = fit_report(&path, &[]);
     let ids: Vec<&str> = r["diagnosis"]["effects"]
         .as_array()
