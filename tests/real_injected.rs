@@ -274,6 +274,15 @@ fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() 
     let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
     let r = fit_report(&path, &[]);
     assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+    // The readings the fit kept are in µT: the stretches on the other offset are no unit.
+    let warnings = r["warnings"].as_array().expect("the report's warnings");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.to_string().contains("another offset"))
+            && !warnings.iter().any(|w| w.to_string().contains("not in µT")),
+        "{warnings:?}"
+    );
     // Without the magnet, nothing of the sort.
     let r = fit_report(&real(BROAD_02), &[]);
     assert_ne!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);

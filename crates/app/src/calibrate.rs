@@ -514,7 +514,13 @@ pub fn calibrate(
         ));
         noise = noise.scaled(residual_rms_ut / floor_now);
     }
-    warnings.extend(checks::check(&model, &fit, &field, &rec.mag_ut)?);
+    warnings.extend(checks::check(
+        &model,
+        &fit,
+        &field,
+        &rec.mag_ut,
+        &robust.kept,
+    )?);
     let noise_floor_ut = match &fit {
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
         Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),

@@ -35,12 +35,14 @@ const SCALES: [(&str, f64); 9] = [
     ("nanotesla", 0.001),
 ];
 
-/// Checks a fitted model; refuses what cannot be a calibration and returns the warnings for the rest.
+/// Checks a fitted model (of the readings `raw_ut` it `kept`); refuses what cannot be a calibration and returns the
+/// warnings for the rest.
 pub fn check(
     model: &Model,
     fit: &Fit,
     field: &ReferenceField,
     raw_ut: &[[f64; 3]],
+    kept: &[bool],
 ) -> Result<Vec<String>, FitError> {
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let sv = a.singular_values();
@@ -75,12 +77,15 @@ pub fn check(
             hi
         ));
     }
-    // The raw readings' radius about their centre: what the sensor's units make of the Earth's field.
+    // The radius about their centre of the raw readings the fit kept (a field on the board for half of a recording
+    // is no unit): what the sensor's units make of the Earth's field.
     let c = centre(&model.a, model.b_ut);
     let mut radii: Vec<f64> = raw_ut
         .iter()
+        .zip(kept)
         .step_by((raw_ut.len() / 10_000).max(1))
-        .map(|m| frames::norm(frames::sub(*m, c)))
+        .filter(|(_, k)| **k)
+        .map(|(m, _)| frames::norm(frames::sub(*m, c)))
         .filter(|r| r.is_finite())
         .collect();
     let raw_radius = median(&mut radii);
