@@ -8,25 +8,17 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{fit_report, floats, magcal_fit, matrix, real};
+use magcal_calib::effects::{Context, Effect, WorldContext};
 use magcal_calib::frames;
 use serde_json::Value;
 
 const BROAD_02: &str = "broad/broad_02_undisturbed_slow_rotation.csv";
 
-/// A field added to the readings (one in the room seen through the attitude: rows without one get none).
+/// A field added to the readings: one of the catalogue's effects (a field in the room is seen through the attitude:
+/// rows without one get none), or a pass by a magnet.
 enum Added {
-    /// Fixed in the room, NED, µT, from `t0_s` to `t1_s`.
-    Room {
-        t0_s: f64,
-        t1_s: f64,
-        ned_ut: [f64; 3],
-    },
-    /// Fixed to the sensor (something on the board), sensor axes, µT, from `t0_s` to `t1_s`.
-    Board {
-        t0_s: f64,
-        t1_s: f64,
-        sensor_ut: [f64; 3],
-    },
+    /// An effect as the simulator adds it (`Effect::Disturbance`, `Effect::BiasWindow`).
+    Effect(Effect),
     /// A pass by a magnet: `peak_ned_ut` (room axes) at `tc_s`, falling as `(1 + ((t − tc)/w)²)^(−3/2)`.
     Pass {
         tc_s: f64,
@@ -38,34 +30,24 @@ enum Added {
 impl Added {
     /// The field in sensor axes at time `t` with attitude `q` (sensor to NED), if any.
     fn at(&self, t: f64, q: Option<[f64; 4]>) -> [f64; 3] {
-        if let Added::Board {
-            t0_s,
-            t1_s,
-            sensor_ut,
-        } = *self
-        {
-            return if (t0_s..=t1_s).contains(&t) {
-                sensor_ut
-            } else {
-                [0.0; 3]
-            };
-        }
-        let Some(q) = q else {
-            return [0.0; 3];
-        };
         match *self {
-            Added::Room { t0_s, t1_s, ned_ut } if (t0_s..=t1_s).contains(&t) => {
-                frames::expected_sensor_field(q, ned_ut)
+            Added::Effect(e) => {
+                let mut ctx = Context::body(t, f64::NAN, &[], [0.0; 3]);
+                ctx.world = q.map(|q| WorldContext {
+                    sensor_to_ned: frames::quat_to_matrix(q),
+                    field_ned_ut: [0.0; 3],
+                    position_m: [0.0; 3],
+                });
+                e.perturbation_ut(&ctx)
             }
-            Added::Room { .. } | Added::Board { .. } => [0.0; 3],
             Added::Pass {
                 tc_s,
                 w_s,
                 peak_ned_ut,
-            } => {
+            } => q.map_or([0.0; 3], |q| {
                 let share = (1.0 + ((t - tc_s) / w_s).powi(2)).powf(-1.5);
                 frames::expected_sensor_field(q, frames::scale(peak_ned_ut, share))
-            }
+            }),
         }
     }
 }
@@ -145,21 +127,21 @@ fn errors(r: &Value, truth: &([[f64; 3]; 3], [f64; 3])) -> (f64, f64) {
 fn a_diagnosis_that_cannot_model_the_spans_does_not_refuse_the_recording() {
     let dir = tempfile::tempdir().unwrap();
     let added = [
-        Added::Room {
+        Added::Effect(Effect::Disturbance {
             t0_s: 73.414,
             t1_s: 76.381,
-            ned_ut: [16.85, 28.48, 21.71],
-        },
-        Added::Room {
+            field_ned_ut: [16.85, 28.48, 21.71],
+        }),
+        Added::Effect(Effect::Disturbance {
             t0_s: 156.75,
             t1_s: 158.712,
-            ned_ut: [27.01, -19.37, -108.67],
-        },
-        Added::Room {
+            field_ned_ut: [27.01, -19.37, -108.67],
+        }),
+        Added::Effect(Effect::Disturbance {
             t0_s: 20.596,
             t1_s: 64.743,
-            ned_ut: [1.54, 0.41, 8.51],
-        },
+            field_ned_ut: [1.54, 0.41, 8.51],
+        }),
     ];
     let path = with_added(BROAD_02, dir.path(), "rooms.csv", &added, false);
     let out = magcal_fit(&[path.to_str().unwrap()]);
@@ -228,21 +210,21 @@ fn a_shifted_window_holding_most_of_the_turning_is_not_left_out() {
 fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() {
     let dir = tempfile::tempdir().unwrap();
     let added = [
-        Added::Board {
+        Added::Effect(Effect::BiasWindow {
             t0_s: 44.998,
             t1_s: 101.259,
-            sensor_ut: [64.07, -3.3, -35.85],
-        },
-        Added::Board {
+            offset_ut: [64.07, -3.3, -35.85],
+        }),
+        Added::Effect(Effect::BiasWindow {
             t0_s: 15.027,
             t1_s: 23.564,
-            sensor_ut: [39.46, 61.46, -87.41],
-        },
-        Added::Board {
+            offset_ut: [39.46, 61.46, -87.41],
+        }),
+        Added::Effect(Effect::BiasWindow {
             t0_s: 78.643,
             t1_s: 106.699,
-            sensor_ut: [7.69, 7.11, -10.86],
-        },
+            offset_ut: [7.69, 7.11, -10.86],
+        }),
     ];
     let path = with_added(BROAD_02, dir.path(), "boards.csv", &added, true);
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
@@ -266,11 +248,11 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
 #[test]
 fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() {
     let dir = tempfile::tempdir().unwrap();
-    let added = [Added::Board {
+    let added = [Added::Effect(Effect::BiasWindow {
         t0_s: 49.911,
         t1_s: 140.099,
-        sensor_ut: [-100.71, -269.24, 85.84],
-    }];
+        offset_ut: [-100.71, -269.24, 85.84],
+    })];
     let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
     let r = fit_report(&path, &[]);
     assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);

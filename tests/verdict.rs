@@ -179,15 +179,11 @@ fn a_declination_the_diagnosis_finds_off_is_said_in_what_to_do() {
     let dir = tempfile::tempdir().unwrap();
     let rec = simulate(dir.path(), "tumble.csv", &["--duration", "120"]);
     // The bench's field (magcal-sim's default, in the file's metadata) turned by 10.9° about the vertical.
-    let text = std::fs::read_to_string(&rec).unwrap();
-    let line = text
-        .lines()
-        .find(|l| l.starts_with("# field_ned_ut:"))
-        .unwrap();
-    let f: Vec<f64> = line["# field_ned_ut:".len()..]
-        .split(',')
-        .map(|v| v.trim().parse().unwrap())
-        .collect();
+    let f = magcal_recording::Recording::read(&rec)
+        .unwrap()
+        .meta
+        .field_ned_ut
+        .expect("magcal-sim writes its field");
     let turn = 10.9_f64.to_radians();
     let (n, e) = (
         f[0] * turn.cos() - f[1] * turn.sin(),

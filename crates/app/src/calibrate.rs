@@ -629,6 +629,11 @@ fn sensor_fixed_spans(d: &Diagnosis) -> Vec<(&diagnosis::GrossSpan, f64)> {
         .collect()
 }
 
+/// The share of a recording's rows in `fixed` spans.
+fn share_of(fixed: &[(&diagnosis::GrossSpan, f64)], rec: &Recording) -> f64 {
+    fixed.iter().map(|(s, _)| s.samples).sum::<usize>() as f64 / rec.len().max(1) as f64
+}
+
 /// Spans within this share of the recording's duration of its start and of its end make the recording begin and
 /// end in their state.
 const BOOKEND_SHARE: f64 = 0.1;
@@ -639,7 +644,6 @@ const BOOKEND_SHARE: f64 = 0.1;
 /// calibration 300 µT off, graded usable).
 pub fn calibrated_state_in_between(d: &Diagnosis, rec: &Recording) -> bool {
     let fixed = sensor_fixed_spans(d);
-    let samples: usize = fixed.iter().map(|(s, _)| s.samples).sum();
     let (Some(t), Some(first), Some(last)) = (rec.t_s.as_ref(), fixed.first(), fixed.last()) else {
         return false;
     };
@@ -647,7 +651,7 @@ pub fn calibrated_state_in_between(d: &Diagnosis, rec: &Recording) -> bool {
         return false;
     };
     let margin = BOOKEND_SHARE * (t1 - t0);
-    samples as f64 >= OTHER_STATE_SHARE * rec.len() as f64
+    share_of(&fixed, rec) >= OTHER_STATE_SHARE
         && first.0.t0_s <= t0 + margin
         && last.0.t1_s >= t1 - margin
 }
@@ -658,8 +662,7 @@ pub fn calibrated_state_in_between(d: &Diagnosis, rec: &Recording) -> bool {
 /// likely not the sensor's own when the recording began and ended in the other.
 fn other_offset_state(d: &Diagnosis, rec: &Recording) -> Option<String> {
     let fixed = sensor_fixed_spans(d);
-    let samples: usize = fixed.iter().map(|(s, _)| s.samples).sum();
-    let share = samples as f64 / rec.len().max(1) as f64;
+    let share = share_of(&fixed, rec);
     if share < OTHER_STATE_SHARE {
         return None;
     }
