@@ -1106,8 +1106,20 @@ impl Setup<'_> {
             .unwrap_or(round.sel.base_cv);
         // The final linear part is the base fit's moved by what the effects change in this problem's least squares:
         // without effects it is the base fit itself (whose scalar solver has a shape prior and direction weights the
-        // linearised problem does not).
-        let (ext_a, ext_b) = {
+        // linearised problem does not). In the vector method, when this problem holds every row the base fit kept
+        // and more — a modelled span over rows the robust fit kept (a field on the board that the reference's own
+        // error hid in places) — its fit is the base fit's least squares with those rows explained, and is the final
+        // one: moved from the base fit by the difference to the clean rows' fit, it took the rows' pull back in.
+        let holds_base_rows = || {
+            self.samples
+                .kept
+                .iter()
+                .zip(&round.included)
+                .all(|(k, inc)| !k || *inc)
+        };
+        let (ext_a, ext_b) = if vector && last.columns.len() > linear.len() && holds_base_rows() {
+            linear_of(&last, vector, base, self.raw_mean)
+        } else {
             let (a1, b1) = linear_of(&last, vector, base, self.raw_mean);
             let (a0, b0) = linear_of(&base12, vector, base, self.raw_mean);
             let a: Mat3 = std::array::from_fn(|j| {
