@@ -303,3 +303,39 @@ fn a_field_on_the_board_gross_only_in_places_is_one_window() {
     let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
     assert!(a_err < 0.01 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
 }
+
+/// The same 5.6 µT on the board without the quaternions (the scalar method): the window scan finds it exactly, but
+/// the sensor turned most while it was there — the samples left would cover 44 % of the directions against 92 % —
+/// so it stays in the fit, which lands 5 µT off, graded usable at 4° with nothing said. It is not silent now: a
+/// warning says when the magnitude sat apart and that the calibration mixes the two states. The undisturbed
+/// recording gets no such warning.
+#[test]
+fn a_window_kept_for_its_directions_is_said_to_mix_two_states() {
+    let dir = tempfile::tempdir().unwrap();
+    let added = [Added::Effect(Effect::BiasWindow {
+        t0_s: 103.912,
+        t1_s: 157.026,
+        offset_ut: [4.78, -2.59, 1.33],
+    })];
+    let path = with_added(BROAD_02, dir.path(), "body.csv", &added, true);
+    let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
+    let mixes = |r: &Value| {
+        r["warnings"]
+            .as_array()
+            .expect("the report's warnings")
+            .iter()
+            .filter(|w| w.to_string().contains("mixes the two states"))
+            .map(|w| w.to_string())
+            .collect::<Vec<_>>()
+    };
+    let r = fit_report(&path, &[]);
+    assert_eq!(r["method"], "scalar");
+    let said = mixes(&r);
+    assert!(
+        said.len() == 1 && said[0].contains("103.9–157.0 s"),
+        "{}",
+        r["warnings"]
+    );
+    assert_ne!(r["verdict"]["grade"], "good", "{}", r["verdict"]);
+    assert!(mixes(&fit_report(&bare, &[])).is_empty());
+}

@@ -463,6 +463,7 @@ pub fn calibrate(
                 rec.t_s.as_deref(),
             )
             .map_err(|e| in_microtesla(e, &rec.mag_ut))?;
+            warnings.extend(mixed_states(&r.mixed, rec));
             let s = r.fit;
             notes.push(format!(
                 "rotation not observable: {}",
@@ -611,6 +612,30 @@ fn units_unread(meta: &Metadata) -> Option<String> {
              convert the recording to µT, or read every figure here as {unit} labelled µT"
         )
     })
+}
+
+/// A warning when the scalar fit kept windows in which the magnitude sat apart from the rest (a field on the board
+/// or in the room for that time, found by the window scan) because without them the recording would cover too few
+/// directions: the calibration mixes two states, and nothing in its figures says by how much (5.6 µT on the board of
+/// the physical BROAD 02 recording for the 53 s in which it turned most: the offset 5 µT off, graded usable at 4°).
+fn mixed_states(windows: &[(usize, usize)], rec: &Recording) -> Option<String> {
+    let t = rec.t_s.as_ref()?;
+    if windows.is_empty() {
+        return None;
+    }
+    let rows: usize = windows.iter().map(|(a, b)| b - a).sum();
+    let when: Vec<String> = windows
+        .iter()
+        .map(|&(a, b)| format!("{:.1}–{:.1} s", t[a], t[b - 1]))
+        .collect();
+    Some(format!(
+        "for {:.0} % of the recording ({}) the field's magnitude sat apart from the rest: a field on the board or in \
+         the room for that time. Those readings hold most of the directions the sensor turned through, so they could \
+         not be left out, and the calibration mixes the two states: it may be off by as much as they differ, which \
+         the figures above do not include. Record again with nothing magnetic on or near the sensor",
+        100.0 * rows as f64 / rec.len().max(1) as f64,
+        when.join(", "),
+    ))
 }
 
 /// Spans fixed to the sensor covering at least this share of a recording make it a recording of two states.

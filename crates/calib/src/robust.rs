@@ -34,7 +34,8 @@
 //!    the field's direction `u` (which averages out over a turning window), often too little to be gross; windows of
 //!    up to a quarter of the recording where the signed residual moves so — up to a half, inside the recording, when
 //!    the evidence is ten times as strong — are found by a scan ([`shifted_windows`]) and excluded too, and the
-//!    rest fitted again, unless the rest would cover less than half the directions ([`SHIFT_KEEP_COVERAGE`]).
+//!    rest fitted again, unless the rest would cover less than half the directions ([`SHIFT_KEEP_COVERAGE`]): then
+//!    they stay in, and are reported ([`Robust::mixed`]): the fit mixes two states there.
 
 use crate::FitError;
 use crate::chunks;
@@ -136,6 +137,9 @@ pub struct Robust<F> {
     pub sigma_ut: f64,
     /// Each sample's residual size under the fit, µT (NaN where unusable).
     pub residual_ut: Vec<f64>,
+    /// Shifted windows ([`RobustProblem::shifted`]) left in the fit because the samples left would cover less than
+    /// [`SHIFT_KEEP_COVERAGE`] of the directions, as sample ranges `[start, end)`: the fit mixes two states there.
+    pub mixed: Vec<(usize, usize)>,
 }
 
 impl<F> Robust<F> {
@@ -197,6 +201,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             kept: vec![true; n],
             sigma_ut,
             residual_ut,
+            mixed: Vec::new(),
         });
     };
     // Reweight from the best seed on (at most [`REWEIGHT_SAMPLES`] of) all samples, then exclude the gross spans of
@@ -251,6 +256,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     }
     // Windows shifted too little to be gross (a field fixed in the room or to the sensor, in the magnitude) go too,
     // when the samples are in time order; the fit without them replaces the last one if it can be made.
+    let mut mixed = Vec::new();
     if t_s.is_some() {
         for _ in 0..SPAN_PASSES {
             let fit = final_fit.as_ref().expect("at least one pass");
@@ -259,7 +265,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
                 break;
             }
             let mut k = kept.clone();
-            for (a, b) in windows {
+            for &(a, b) in &windows {
                 k[a..b].fill(false);
             }
 
@@ -269,6 +275,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             // Windows that hold most of the directions are where the recording calibrates: what is left of it,
             // and the shift it shows against them, are those of a partial recording.
             if problem.covered(&f, &k) < SHIFT_KEEP_COVERAGE * problem.covered(&f, &kept) {
+                mixed = windows;
                 break;
             }
             refresh(problem, &f, &mut residual_ut);
@@ -286,6 +293,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
         kept,
         sigma_ut,
         residual_ut,
+        mixed,
     })
 }
 
