@@ -339,3 +339,26 @@ fn a_window_kept_for_its_directions_is_said_to_mix_two_states() {
     assert_ne!(r["verdict"]["grade"], "good", "{}", r["verdict"]);
     assert!(mixes(&fit_report(&bare, &[])).is_empty());
 }
+
+/// 300 µT on the board for the middle 90 s, without the quaternions: the scalar method cannot calibrate it, and said
+/// so as a "planar rotation" — "the sensor turned about that axis only; also tip the sensor" — though the sensor had
+/// turned through every direction. The refusal now says that the readings spread over more than turning in the
+/// field can take them: two centres, something magnetic on the board. (A genuinely planar recording, a turntable's,
+/// is refused as before, without it: `tests/scalar_ellipsoids.rs`.)
+#[test]
+fn a_refusal_for_want_of_directions_says_when_the_readings_sit_on_two_centres() {
+    let dir = tempfile::tempdir().unwrap();
+    let added = [Added::Effect(Effect::BiasWindow {
+        t0_s: 49.911,
+        t1_s: 140.099,
+        offset_ut: [-100.71, -269.24, 85.84],
+    })];
+    let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, true);
+    let out = magcal_fit(&[path.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("two centres") && err.contains("The fit itself says: planar rotation"),
+        "{err}"
+    );
+}

@@ -92,7 +92,7 @@ fn a_planar_rotation_is_refused_naming_the_axis_and_how_to_rotate() {
         assert!(!out.status.success());
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(
-            err.contains("planar rotation") && err.contains("≈ +Z"),
+            err.contains("planar rotation") && err.contains("≈ +Z") && !err.contains("two centres"),
             "{err}"
         );
         assert!(

@@ -301,14 +301,71 @@ pub enum CalibrateError {
         /// The readings' median magnitude, in their units.
         median: f64,
     },
+    /// The fit failed for want of directions, while the readings spread further than turning in the field can take
+    /// them: two states (something magnetic on the board for part of the recording), or another unit.
+    #[error(
+        "the readings spread over {spread_ut:.0} µT along sensor axis {axis}, more than turning in a field of \
+         {field_ut:.1} µT can take them (about twice the field): most likely something magnetic was on or near the \
+         sensor for part of the recording, and the readings sit on two centres — remove it and record again (or the \
+         readings are not in µT). The fit itself says: {fit}"
+    )]
+    TwoCentres {
+        /// Why the fit failed.
+        fit: FitError,
+        /// The readings' spread (1st to 99th percentile) along `axis`, µT.
+        spread_ut: f64,
+        /// The sensor axis with the largest spread.
+        axis: char,
+        /// The field's magnitude, µT.
+        field_ut: f64,
+    },
     /// The fit failed.
     #[error(transparent)]
     Fit(#[from] FitError),
 }
 
+/// The spread a reading can have by turning in a field, in units of the field: twice it, and a gain of up to this.
+const TURNING_SPREAD_GAIN: f64 = 1.5;
+
 /// `e`, or [`CalibrateError::NotMicrotesla`] when the readings hardly vary because they are all near zero (below a
-/// tenth of the Earth's weakest field).
-fn in_microtesla(e: FitError, raw_ut: &[[f64; 3]]) -> CalibrateError {
+/// tenth of the Earth's weakest field), or [`CalibrateError::TwoCentres`] when the fit failed for want of directions
+/// while the readings spread over more than turning in a field of `field_ut` can take them
+/// (`2·`[`TURNING_SPREAD_GAIN`] times it): a fit refused as a "planar rotation" of the physical BROAD 02 recording
+/// with 300 µT on its board for the middle 90 s told the user to turn the sensor more.
+fn in_microtesla(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> CalibrateError {
+    let wants_directions = matches!(
+        e,
+        FitError::Coverage(CoverageError::Planar { .. } | CoverageError::OneDirection { .. })
+            | FitError::Undetermined { .. }
+    );
+    if let (true, Some(field_ut)) = (wants_directions, field_ut) {
+        let spreads: [f64; 3] = std::array::from_fn(|k| {
+            let mut v: Vec<f64> = raw_ut
+                .iter()
+                .step_by((raw_ut.len() / 10_000).max(1))
+                .map(|m| m[k])
+                .filter(|x| x.is_finite())
+                .collect();
+            v.sort_by(f64::total_cmp);
+            let at = |p: f64| v.get((p * (v.len().max(1) - 1) as f64).round() as usize);
+            match (at(0.01), at(0.99)) {
+                (Some(lo), Some(hi)) => hi - lo,
+                _ => 0.0,
+            }
+        });
+        let k = (0..3)
+            .max_by(|&i, &j| spreads[i].total_cmp(&spreads[j]))
+            .expect("three axes");
+        if spreads[k] > 2.0 * TURNING_SPREAD_GAIN * field_ut {
+            return CalibrateError::TwoCentres {
+                fit: e,
+                spread_ut: spreads[k],
+                axis: ['X', 'Y', 'Z'][k],
+                field_ut,
+            };
+        }
+        return e.into();
+    }
     if !matches!(e, FitError::Coverage(CoverageError::Still { .. })) {
         return e.into();
     }
@@ -444,7 +501,7 @@ pub fn calibrate(
                 },
                 rec.t_s.as_deref(),
             )
-            .map_err(|e| in_microtesla(e, &rec.mag_ut))?;
+            .map_err(|e| in_microtesla(e, &rec.mag_ut, field.magnitude()))?;
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
@@ -462,7 +519,7 @@ pub fn calibrate(
                 },
                 rec.t_s.as_deref(),
             )
-            .map_err(|e| in_microtesla(e, &rec.mag_ut))?;
+            .map_err(|e| in_microtesla(e, &rec.mag_ut, field.magnitude()))?;
             warnings.extend(mixed_states(&r.mixed, rec));
             let s = r.fit;
             notes.push(format!(
