@@ -270,7 +270,7 @@ fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() 
     assert_ne!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
 }
 
-/// 5.6 µT on the board for 53 s (103.9–157.0 s, a third of the recording): beside the reference's own error (0.9 µT)
+/// 5.6 µT on the board for 53 s (103.9–157.0 s, 28 % of the recording): beside the reference's own error (0.9 µT)
 /// it is gross only in places, and the robust fit kept the stretches between — the diagnosis modelled seven windows
 /// and the calibration was A 0.08 off, graded usable. Spans that one constant explains with the stretches between
 /// are now one window, its edges located again, and the vector method's final fit is the diagnosis' own when it

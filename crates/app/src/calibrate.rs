@@ -327,12 +327,12 @@ pub enum CalibrateError {
 /// The spread a reading can have by turning in a field, in units of the field: twice it, and a gain of up to this.
 const TURNING_SPREAD_GAIN: f64 = 1.5;
 
-/// `e`, or [`CalibrateError::NotMicrotesla`] when the readings hardly vary because they are all near zero (below a
-/// tenth of the Earth's weakest field), or [`CalibrateError::TwoCentres`] when the fit failed for want of directions
-/// while the readings spread over more than turning in a field of `field_ut` can take them
-/// (`2·`[`TURNING_SPREAD_GAIN`] times it): a fit refused as a "planar rotation" of the physical BROAD 02 recording
-/// with 300 µT on its board for the middle 90 s told the user to turn the sensor more.
-fn in_microtesla(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> CalibrateError {
+/// Why a fit was refused, in the user's terms: `e`, or [`CalibrateError::NotMicrotesla`] when the readings hardly
+/// vary because they are all near zero (below a tenth of the Earth's weakest field), or [`CalibrateError::TwoCentres`]
+/// when the fit failed for want of directions while the readings spread over more than turning in a field of
+/// `field_ut` can take them (`2·`[`TURNING_SPREAD_GAIN`] times it): a fit refused as a "planar rotation" of the
+/// physical BROAD 02 recording with 300 µT on its board for the middle 90 s told the user to turn the sensor more.
+fn refusal(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> CalibrateError {
     let wants_directions = matches!(
         e,
         FitError::Coverage(CoverageError::Planar { .. } | CoverageError::OneDirection { .. })
@@ -501,7 +501,7 @@ pub fn calibrate(
                 },
                 rec.t_s.as_deref(),
             )
-            .map_err(|e| in_microtesla(e, &rec.mag_ut, field.magnitude()))?;
+            .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
@@ -519,7 +519,7 @@ pub fn calibrate(
                 },
                 rec.t_s.as_deref(),
             )
-            .map_err(|e| in_microtesla(e, &rec.mag_ut, field.magnitude()))?;
+            .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
             warnings.extend(mixed_states(&r.mixed, rec));
             let s = r.fit;
             notes.push(format!(
