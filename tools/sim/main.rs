@@ -6,7 +6,7 @@ use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use magcal_app::cli::parse_floats;
 use magcal_app::effect_spec::{self, Defaults};
-use magcal_app::files::write_atomic;
+use magcal_app::truth::TruthFile;
 use magcal_calib::effects::EffectId;
 use magcal_sim::study;
 use magcal_sim::{
@@ -207,16 +207,8 @@ fn main() -> anyhow::Result<()> {
             .iter()
             .map(|e| effect_spec::format(e, &names))
             .collect();
-        let text = format!(
-            "# magcal-sim truth for {}\nseed = {}\nA = {:?}\nb_ut = {:?}\nnoise_ut = {:?}\neffects = {:?}\n",
-            args.out.display(),
-            args.seed,
-            s.sensor.a,
-            s.sensor.b_ut,
-            s.noise_ut,
-            effects
-        );
-        write_atomic(path, text.as_bytes())
+        TruthFile::of_scenario(&s, effects)
+            .write(path)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     eprintln!(

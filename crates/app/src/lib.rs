@@ -21,6 +21,7 @@ pub mod record;
 pub mod report;
 pub mod seed;
 pub mod summary;
+pub mod truth;
 pub mod uncertainty;
 pub mod verdict;
 pub mod writeback;

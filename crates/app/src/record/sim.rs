@@ -2,18 +2,16 @@
 //! a curious user) can rebuild the truth a fit should find.
 
 use std::cell::RefCell;
-use std::path::Path;
 use std::rc::Rc;
 
 use magcal_driver::{AnyMagnetometer, ChipKind};
 use magcal_mockhw::{Fault, SimChip, VirtualClock};
 use magcal_sim::bench::{Bench, BenchConfig};
 use magcal_sim::{ChipModel, SensorTruth, TemperatureProfile, stream_rng};
-use serde::{Deserialize, Serialize};
 
 use super::clock::SimClock;
 use super::source::{ChipSource, SourceError};
-use crate::files::write_atomic;
+pub use crate::truth::{TRUTH_FORMAT, TruthFile};
 
 /// The world field of the simulated bench, NED, µT (a mid-latitude field of 49.45 µT).
 pub const FIELD_NED_UT: [f64; 3] = [19.8, 1.2, 45.3];
@@ -86,29 +84,6 @@ pub fn open(
     Ok(source.with_bench(bench))
 }
 
-/// The format line of a truth file.
-pub const TRUTH_FORMAT: &str = "magcal-sim-truth v1";
-
-/// What a fit of a `sim` recording should find (`magcal-record --truth PATH`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TruthFile {
-    /// Always [`TRUTH_FORMAT`].
-    pub format: String,
-    /// The simulated chip.
-    pub chip: String,
-    /// The seed the sensor was drawn from.
-    pub seed: u64,
-    /// The bench's world field, NED, µT.
-    pub field_ned_ut: [f64; 3],
-    /// True `A` of `B = A·raw + b` (reference axes: for the cube routine, the jig's).
-    #[serde(rename = "A")]
-    pub a: [[f64; 3]; 3],
-    /// True `b`, µT.
-    pub b_ut: [f64; 3],
-    /// The hard-iron offset in the sensor's raw axes, `−A⁻¹·b`, µT.
-    pub offset_ut: [f64; 3],
-}
-
 impl TruthFile {
     /// The truth of `sim:CHIP` with `seed`.
     pub fn of(chip: ChipKind, seed: u64) -> TruthFile {
@@ -122,29 +97,9 @@ impl TruthFile {
             a: s.a,
             b_ut: s.b_ut,
             offset_ut: magcal_calib::scalar::centre(&s.a, s.b_ut),
+            noise_ut: config.noise_ut,
+            effects: Vec::new(),
         }
-    }
-
-    /// Writes it as TOML, atomically.
-    pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        let text = toml::to_string(self).map_err(std::io::Error::other)?;
-        write_atomic(path, text.as_bytes())
-    }
-
-    /// Reads one back.
-    pub fn read(path: &Path) -> anyhow::Result<TruthFile> {
-        use anyhow::Context as _;
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let t: TruthFile =
-            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
-        anyhow::ensure!(
-            t.format == TRUTH_FORMAT,
-            "{}: format {:?}, expected {TRUTH_FORMAT:?}",
-            path.display(),
-            t.format
-        );
-        Ok(t)
     }
 }
 
