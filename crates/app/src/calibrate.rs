@@ -686,10 +686,10 @@ fn mixed_states(windows: &[(usize, usize)], rec: &Recording) -> Option<String> {
         .map(|&(a, b)| format!("{:.1}–{:.1} s", t[a], t[b - 1]))
         .collect();
     Some(format!(
-        "for {:.0} % of the recording ({}) the field's magnitude sat apart from the rest: a field on the board or in \
-         the room for that time. Those readings hold most of the directions the sensor turned through, so they could \
-         not be left out, and the calibration mixes the two states: it may be off by as much as they differ, which \
-         the figures above do not include. Record again with nothing magnetic on or near the sensor",
+        "for {:.0} % of the recording ({}) the field's magnitude sat apart from the rest: most likely a field on the \
+         board or in the room for that time. Those readings hold most of the directions the sensor turned through, so \
+         they could not be left out, and the calibration mixes the two states: it may be off by as much as they \
+         differ, which the figures above do not include. Record again with nothing magnetic on or near the sensor",
         100.0 * rows as f64 / rec.len().max(1) as f64,
         when.join(", "),
     ))
