@@ -9,7 +9,8 @@
 //!    changing as the sensor moves (a magnet nearby: left out), or unexplained (left out).
 //! 4. **Candidates** ([`candidates`]): every effect of the catalogue ([`crate::effects`]) the recording can observe,
 //!    its regressors computed by the effect's own definition (the one the simulator injects), plus the modelled
-//!    spans' effects. Effects the recording cannot observe are untestable, with the reason; candidates the base
+//!    spans' effects. A timing lag too large for `time_lag`'s first-order term is found coarsely first and the
+//!    field linearised there ([`timing`], when [`Samples`] are gathered). Effects the recording cannot observe are untestable, with the reason; candidates the base
 //!    model absorbs are reported as absorbed.
 //! 5. **Selection** ([`select`]): a Wald test with a BIC penalty, blocked cross-validation on the clean samples, a
 //!    share of the residual it must explain, and for local effects a size above the reference's own error; greedy,
@@ -37,6 +38,7 @@ mod samples;
 pub(crate) mod scan;
 mod select;
 mod stats;
+mod timing;
 
 use std::borrow::Cow;
 
@@ -1106,18 +1108,13 @@ impl Setup<'_> {
             .unwrap_or(round.sel.base_cv);
         // The final linear part is the base fit's moved by what the effects change in this problem's least squares:
         // without effects it is the base fit itself (whose scalar solver has a shape prior and direction weights the
-        // linearised problem does not). In the vector method, when this problem holds every row the base fit kept
-        // and more — a modelled span over rows the robust fit kept (a field on the board that the reference's own
-        // error hid in places) — its fit is the base fit's least squares with those rows explained, and is the final
-        // one: moved from the base fit by the difference to the clean rows' fit, it took the rows' pull back in.
-        let holds_base_rows = || {
-            self.samples
-                .kept
-                .iter()
-                .zip(&round.included)
-                .all(|(k, inc)| !k || *inc)
-        };
-        let (ext_a, ext_b) = if vector && last.columns.len() > linear.len() && holds_base_rows() {
+        // linearised problem does not). In the vector method with effects, this problem's fit is the base fit's
+        // least squares with the effects modelled, on the rows it includes, and is the final one: moved from the
+        // base fit by the difference to the clean rows' fit, it took back in the pull of rows the robust fit kept and
+        // this problem explains (a field on the board that the reference's own error hid in places) or leaves out
+        // (it once did so for want of one row: a gross sample the diagnosis left out put A 0.058 off on BROAD 02
+        // with 5.6 µT on its board).
+        let (ext_a, ext_b) = if vector && last.columns.len() > linear.len() {
             linear_of(&last, vector, base, self.raw_mean)
         } else {
             let (a1, b1) = linear_of(&last, vector, base, self.raw_mean);

@@ -7,7 +7,7 @@ use crate::effects::{Context, WorldContext};
 use crate::frames::{self, Mat3};
 use crate::model::{Inputs, Model};
 
-use super::{DiagnosisInput, Reference};
+use super::{DiagnosisInput, Reference, timing};
 
 /// Per-sample data, for the rows the diagnosis uses.
 pub(crate) struct Samples<'a> {
@@ -114,6 +114,10 @@ impl<'a> Samples<'a> {
                 && input.currents.iter().all(|(_, c)| c[i].is_finite())
         };
         let index: Vec<usize> = (0..n).filter(|&i| usable(i)).collect();
+        let kept: Vec<bool> = index
+            .iter()
+            .map(|&i| input.kept.is_none_or(|k| k[i]))
+            .collect();
         // The recording's own columns when every row is usable.
         fn pick<'c, T: Copy>(column: &'c [T], index: &[usize]) -> Cow<'c, [T]> {
             if index.len() == column.len() {
@@ -123,7 +127,7 @@ impl<'a> Samples<'a> {
             }
         }
         let raw = pick(input.raw_ut, &index);
-        let field: Vec<[f64; 3]> = match &expected {
+        let mut field: Vec<[f64; 3]> = match &expected {
             Some(e) => index.iter().map(|&i| e[i]).collect(),
             None => raw.iter().map(|m| base.apply(*m, &Inputs::NONE)).collect(),
         };
@@ -132,7 +136,15 @@ impl<'a> Samples<'a> {
             None => Cow::Owned(vec![0.0; index.len()]),
         };
         let rate = match (&expected, input.t_s) {
-            (Some(_), Some(_)) => field_rate(&field, &t, &index),
+            (Some(_), Some(_)) => {
+                let links = links(&t, &index);
+                let mut rate = field_rate(&field, &t, &links);
+                let lag0_s = timing::coarse_lag_s(&raw, &field, &rate, &t, &links, base);
+                if lag0_s != 0.0 {
+                    timing::linearise_at(&mut field, &mut rate, &t, &links, lag0_s);
+                }
+                rate
+            }
             _ => vec![[0.0; 3]; index.len()],
         };
         let (quat, field_ned_ut) = match input.reference {
@@ -145,10 +157,7 @@ impl<'a> Samples<'a> {
             currents.extend(input.currents.iter().map(|(_, c)| c[i]));
         }
         Samples {
-            kept: index
-                .iter()
-                .map(|&i| input.kept.is_none_or(|k| k[i]))
-                .collect(),
+            kept,
             left_out: n - index.len(),
             temp: match input.temp_c {
                 Some(tc) => pick(tc, &index),
@@ -169,28 +178,31 @@ impl<'a> Samples<'a> {
     }
 }
 
-/// Central differences of the field over time; one-sided at the ends and at gaps (consecutive usable rows that are
-/// not consecutive in the recording, or more than five typical steps apart), zero where neither side is usable.
-fn field_rate(field: &[[f64; 3]], t: &[f64], index: &[usize]) -> Vec<[f64; 3]> {
-    let n = field.len();
-    let mut steps: Vec<f64> = t
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .filter(|d| *d > 0.0)
-        .collect();
-    let typical = if steps.is_empty() {
-        f64::INFINITY
+/// Per sample but the last, whether it and the next are consecutive rows of the recording, in time order and at
+/// most five typical steps apart (the field may be differenced and interpolated between them).
+fn links(t: &[f64], index: &[usize]) -> Vec<bool> {
+    let typical = timing::typical_step(t);
+    let typical = if typical > 0.0 {
+        typical
     } else {
-        let mid = steps.len() / 2;
-        *steps.select_nth_unstable_by(mid, f64::total_cmp).1
+        f64::INFINITY
     };
-    let linked = |a: usize, b: usize| {
-        index[b] == index[a] + 1 && t[b] - t[a] > 0.0 && t[b] - t[a] <= 5.0 * typical
-    };
+    (0..index.len().saturating_sub(1))
+        .map(|a| {
+            let dt = t[a + 1] - t[a];
+            index[a + 1] == index[a] + 1 && dt > 0.0 && dt <= 5.0 * typical
+        })
+        .collect()
+}
+
+/// Central differences of the field over time; one-sided at the ends and at gaps (samples not [`links`]ed), zero
+/// where neither side is usable.
+fn field_rate(field: &[[f64; 3]], t: &[f64], links: &timing::Links) -> Vec<[f64; 3]> {
+    let n = field.len();
     (0..n)
         .map(|i| {
-            let prev = i > 0 && linked(i - 1, i);
-            let next = i + 1 < n && linked(i, i + 1);
+            let prev = i > 0 && links[i - 1];
+            let next = i + 1 < n && links[i];
             let (a, b) = match (prev, next) {
                 (true, true) => (i - 1, i + 1),
                 (true, false) => (i - 1, i),
