@@ -9,17 +9,21 @@
 //! `Ḃ(t − θ₀)`, so that `time_lag` at `θ` models `B(t − θ)` exactly at `θ = θ₀` and to first order in `θ − θ₀`
 //! around it (at `θ₀ = 0` nothing changes).
 
+use rayon::prelude::*;
+
 use crate::frames;
 use crate::model::Model;
 
 /// The largest offset looked for, s.
 const MAX_LAG_S: f64 = 0.5;
-/// The coarse grid has at most this many steps each way (and steps no finer than the sampling).
-const GRID_STEPS: usize = 200;
-/// Fine steps in each coarse step around the best.
+/// The coarse grid's step, s (or the sampling's, if longer): the misfit grows smoothly away from the lag.
+const COARSE_STEP_S: f64 = 0.01;
+/// Fine steps in each coarse step around the best (the first-order term does the rest).
 const FINE_STEPS: usize = 10;
+/// Samples the field's median speed is taken over, at most.
+const SPEED_SAMPLES: usize = 1 << 16;
 /// Samples the criterion is taken over, at most.
-const CRITERION_SAMPLES: usize = 20_000;
+const CRITERION_SAMPLES: usize = 5_000;
 /// The offset is used only when it lowers the criterion by at least this share: the first-order term handles the
 /// rest (a lag of a sample or two on a bench turned slowly lowers it by a few per cent).
 const MIN_GAIN: f64 = 0.1;
@@ -43,14 +47,18 @@ pub(crate) fn coarse_lag_s(
     base: &Model,
 ) -> f64 {
     let n = field.len();
-    let speed: Vec<f64> = rate.iter().map(|r| frames::norm(*r)).collect();
-    let moving_above = crate::robust::median(&speed);
+    let speed = |j: usize| frames::norm(rate[j]);
+    let spread: Vec<f64> = (0..n)
+        .step_by(n.div_ceil(SPEED_SAMPLES).max(1))
+        .map(speed)
+        .collect();
+    let moving_above = crate::robust::median(&spread);
     if moving_above.is_nan() || moving_above <= 0.0 {
         return 0.0;
     }
-    let moving: Vec<usize> = (0..n).filter(|&j| speed[j] > moving_above).collect();
-    let stride = moving.len().div_ceil(CRITERION_SAMPLES).max(1);
-    let picked: Vec<usize> = moving.into_iter().step_by(stride).collect();
+    let moving = || (0..n).filter(|&j| speed(j) > moving_above);
+    let stride = moving().count().div_ceil(CRITERION_SAMPLES).max(1);
+    let picked: Vec<usize> = moving().step_by(stride).collect();
     let calibrated: Vec<[f64; 3]> = picked
         .iter()
         .map(|&j| frames::add(frames::mat_vec(&base.a, raw[j]), base.b_ut))
@@ -62,7 +70,8 @@ pub(crate) fn coarse_lag_s(
             .iter()
             .zip(&calibrated)
             .filter_map(|(&j, c)| {
-                interpolate(field, t, links, t[j] - lag).map(|f| frames::norm(frames::sub(*c, f)))
+                interpolate(field, t, links, t[j] - lag, j)
+                    .map(|f| frames::norm(frames::sub(*c, f)))
             })
             .collect();
         // Too few samples for the shift: not a candidate.
@@ -76,15 +85,23 @@ pub(crate) fn coarse_lag_s(
     if dt.is_nan() || dt <= 0.0 {
         return 0.0;
     }
-    let step = dt.max(MAX_LAG_S / GRID_STEPS as f64);
+    let step = dt.max(COARSE_STEP_S);
     let steps = (MAX_LAG_S / step) as i64;
-    let best_of = |grid: &mut dyn Iterator<Item = f64>| {
-        grid.map(|lag| (criterion(lag), lag))
+    // The grid's lags, fitted on all threads, the best kept (the first of equals).
+    let best_of = |grid: Vec<f64>| {
+        grid.par_iter()
+            .map(|&lag| (criterion(lag), lag))
+            .collect::<Vec<_>>()
+            .into_iter()
             .fold((f64::INFINITY, 0.0), |m, c| if c.0 < m.0 { c } else { m })
     };
-    let (_, coarse) = best_of(&mut (-steps..=steps).map(|k| k as f64 * step));
+    let (_, coarse) = best_of((-steps..=steps).map(|k| k as f64 * step).collect());
     let fine = FINE_STEPS as i64;
-    let (best, lag) = best_of(&mut (-fine..=fine).map(|k| coarse + k as f64 * step / fine as f64));
+    let (best, lag) = best_of(
+        (-fine..=fine)
+            .map(|k| coarse + k as f64 * step / fine as f64)
+            .collect(),
+    );
     if best < (1.0 - MIN_GAIN) * criterion(0.0) {
         lag
     } else {
@@ -101,26 +118,36 @@ pub(crate) fn linearise_at(
     links: &Links,
     lag_s: f64,
 ) {
-    let shifted: Vec<Option<([f64; 3], [f64; 3])>> = (0..field.len())
-        .map(|j| {
-            let u = t[j] - lag_s;
-            Some((
-                interpolate(field, t, links, u)?,
-                interpolate(rate, t, links, u)?,
-            ))
-        })
-        .collect();
-    for (j, s) in shifted.into_iter().enumerate() {
-        if let Some((f, r)) = s {
+    // In place: a sample is replaced after those it is interpolated from (earlier ones for a positive lag, later
+    // ones for a negative) are read, and before they are replaced.
+    let n = field.len();
+    let order: Box<dyn Iterator<Item = usize>> = if lag_s > 0.0 {
+        Box::new((0..n).rev())
+    } else {
+        Box::new(0..n)
+    };
+    for j in order {
+        let u = t[j] - lag_s;
+        if let (Some(f), Some(r)) = (
+            interpolate(field, t, links, u, j),
+            interpolate(rate, t, links, u, j),
+        ) {
             field[j] = frames::add(f, frames::scale(r, lag_s));
             rate[j] = r;
         }
     }
 }
 
-/// `series` at time `u`, linear between the two linked samples around it (`None` outside them).
-fn interpolate(series: &[[f64; 3]], t: &[f64], links: &Links, u: f64) -> Option<[f64; 3]> {
-    let k = t.partition_point(|&x| x <= u);
+/// `series` at time `u`, linear between the two linked samples around it (`None` outside them); the search for
+/// them starts at sample `near` (a lag away from `u`: a few steps).
+fn interpolate(
+    series: &[[f64; 3]],
+    t: &[f64],
+    links: &Links,
+    u: f64,
+    near: usize,
+) -> Option<[f64; 3]> {
+    let k = partition_near(t, u, near);
     if k == 0 || k >= t.len() {
         return None;
     }
@@ -132,6 +159,44 @@ fn interpolate(series: &[[f64; 3]], t: &[f64], links: &Links, u: f64) -> Option<
     Some(std::array::from_fn(|c| {
         series[a][c] + w * (series[b][c] - series[a][c])
     }))
+}
+
+/// How many of the (ordered) times `t` are at most `u`, found by steps doubling away from index `near`.
+fn partition_near(t: &[f64], u: f64, near: usize) -> usize {
+    let n = t.len();
+    if n == 0 {
+        return 0;
+    }
+    let near = near.min(n - 1);
+    // The answer lies in lo..=hi: every time before lo is at most u, every one from hi on is above it.
+    let (lo, hi) = if t[near] <= u {
+        let (mut lo, mut step) = (near + 1, 1);
+        loop {
+            let probe = near + step;
+            if probe >= n {
+                break (lo, n);
+            }
+            if t[probe] > u {
+                break (lo, probe);
+            }
+            lo = probe + 1;
+            step *= 2;
+        }
+    } else {
+        let (mut hi, mut step) = (near, 1);
+        loop {
+            if step > near {
+                break (0, hi);
+            }
+            let probe = near - step;
+            if t[probe] <= u {
+                break (probe + 1, hi);
+            }
+            hi = probe;
+            step *= 2;
+        }
+    };
+    lo + t[lo..hi].partition_point(|&x| x <= u)
 }
 
 /// The median step between consecutive times (NaN without two increasing ones).
@@ -189,6 +254,22 @@ mod tests {
             })
             .fold(0.0, f64::max);
         assert!(worst < 0.01, "{worst} µT");
+    }
+
+    #[test]
+    fn the_search_from_near_a_time_finds_what_a_binary_search_does() {
+        let t: Vec<f64> = (0..200).map(|i| f64::from(i / 3) * 0.5).collect();
+        for near in [0, 1, 57, 100, 198, 199, 500] {
+            for k in -4..140 {
+                let u = f64::from(k) * 0.25;
+                assert_eq!(
+                    partition_near(&t, u, near),
+                    t.partition_point(|&x| x <= u),
+                    "u {u}, near {near}"
+                );
+            }
+        }
+        assert_eq!(partition_near(&[], 1.0, 0), 0);
     }
 
     #[test]
