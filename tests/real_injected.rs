@@ -413,3 +413,51 @@ fn readings_late_by_tens_of_milliseconds_are_a_time_lag_not_disturbances() {
     let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
     assert!(a_err < 0.005 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
 }
+
+/// The same 49 ms on broad 33, where a magnet sat on the board for 56 s: the lag bent the base fit's gains (A 0.19
+/// off), the guard then refused the lag itself ("the gains would move by 5.1 % from the base fit's") and the final
+/// model stayed 0.12 off in A. A timing effect corrects the reference, not the sensor: the gains are now judged
+/// against the base fit with it, and the calibration lands where the recording as it was puts it (the issue's
+/// tolerances: A within 0.065 of I, offset within 2.9 µT of 0).
+#[test]
+fn a_late_reference_and_a_magnet_on_the_board_are_both_modelled() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = with_reference_ahead(
+        "broad/broad_33_disturbed_attached_magnet_2cm.csv",
+        dir.path(),
+        "ahead.csv",
+        7,
+    );
+    let r = fit_report(&path, &[]);
+    let effects = r["diagnosis"]["effects"].as_array().unwrap();
+    let window = effects.iter().find(|e| e["id"] == "bias_window");
+    let window = window.unwrap_or_else(|| panic!("{effects:?}"));
+    let (t0, t1) = (
+        window["params"]["t0_s"].as_f64().unwrap(),
+        window["params"]["t1_s"].as_f64().unwrap(),
+    );
+    // Attached by hand around 40–42 s, taken off around 98.6 s (as tests/real_disturbed.rs has it).
+    assert!(
+        (39.0..=44.0).contains(&t0) && (96.6..=100.6).contains(&t1),
+        "{t0}–{t1} s"
+    );
+    let lags: Vec<f64> = effects
+        .iter()
+        .filter_map(|e| match e["id"].as_str() {
+            Some("time_lag") => Some(vec![e["params"]["lag_s"].as_f64().unwrap()]),
+            Some("rate_coupling") => Some(floats(&e["params"]["lag_axis_s"])),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    assert!(
+        !lags.is_empty() && lags.iter().all(|l| (l - 0.065).abs() < 0.006),
+        "{lags:?} s"
+    );
+    let a = matrix(&r["calibration"]["A"]);
+    let a_err = (0..9)
+        .map(|i| (a[i / 3][i % 3] - f64::from(u8::from(i / 3 == i % 3))).abs())
+        .fold(0.0, f64::max);
+    let o = frames::norm(offset(&r));
+    assert!(a_err < 0.065 && o < 2.9, "A {a_err}, offset {o} µT");
+}

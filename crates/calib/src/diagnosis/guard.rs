@@ -7,7 +7,8 @@
 //!   respect to the field must stay well below one ([`MAX_CONTRACTION`]) at every sample, or the fixed-point
 //!   iteration diverges.
 //! - The extended model's gains (`A`'s singular values) stay within [`MAX_GAIN_CHANGE`] of the base fit's: an effect
-//!   that needs the gains bent by more is not the physics the data show.
+//!   that needs the gains bent by more is not the physics the data show. A timing effect corrects the reference,
+//!   not the sensor: with one chosen, the base fit the gains are held to is the one with it.
 //! - An effect that another explains about as well (ambiguous) and that lowers the held-out residual by less than
 //!   [`NOTICEABLE_GAIN`] is a guess between two physics for a residual nobody would notice: the calibration is not
 //!   bent to it (on simulated disturbed benches such an effect fitted a magnet's tails and fitted a clean recording

@@ -355,7 +355,28 @@ impl Diagnosis {
 
 /// Diagnoses a recording against its base fit `base` (the linear model of the robust fit, [`crate::robust`]).
 pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, FitError> {
-    let samples = Samples::gather(input, base);
+    // The field linearised at a coarse lag is the reference only with the lag modelled: if the diagnosis ends
+    // without a timing effect, it is made again on the reference as recorded.
+    let (d, lag0_s) = diagnose_at(input, base, true)?;
+    let timed = d
+        .effects
+        .iter()
+        .any(|e| e.effect.id().frame() == Frame::Timing);
+    if lag0_s == 0.0 || timed {
+        return Ok(d);
+    }
+    Ok(diagnose_at(input, base, false)?.0)
+}
+
+/// [`diagnose`], with the field linearised at the coarse lag if `linearise` (see [`timing`]); and that lag (0 if
+/// none).
+fn diagnose_at(
+    input: &DiagnosisInput<'_>,
+    base: &Model,
+    linearise: bool,
+) -> Result<(Diagnosis, f64), FitError> {
+    let samples = Samples::gather(input, base, linearise);
+    let lag0_s = samples.lag0_s;
     if samples.len() < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
             needed: MIN_SAMPLES,
@@ -424,7 +445,7 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     diagnosis.residuals.direction = setup.unit;
     diagnosis.residuals.rows = samples.rows;
     diagnosis.residuals.t_s = samples.t.into_owned();
-    Ok(diagnosis)
+    Ok((diagnosis, lag0_s))
 }
 
 /// Why no step is offered when the recording is too short to scan for one.
@@ -957,6 +978,22 @@ impl<'a> Setup<'a> {
                 && let Some(&last) = chosen.last()
             {
                 let (a, _) = linear_of(&round.sel.last, self.vector, &self.base, self.raw_mean);
+                // A timing effect corrects the reference, not the sensor: the gains are judged against the base
+                // fit with it (a lag of 64 ms bends the base fit's gains by more than the rule allows).
+                let timing: Vec<usize> = chosen
+                    .iter()
+                    .filter(|&&c| round.cands[c].id().frame() == Frame::Timing)
+                    .flat_map(|&c| round.cands[c].columns())
+                    .collect();
+                let a_base = if timing.is_empty() {
+                    a_base
+                } else {
+                    let columns: Vec<usize> = linear.iter().copied().chain(timing).collect();
+                    match round.problem.solve_on(Rows::Clean, &columns, None, true) {
+                        Some(fit) => linear_of(&fit, self.vector, &self.base, self.raw_mean).0,
+                        None => a_base,
+                    }
+                };
                 let change = guard::gain_change(&a, &a_base);
                 if change > guard::MAX_GAIN_CHANGE {
                     drop = Some((last, guard::gains_why(change)));

@@ -36,6 +36,8 @@ pub(crate) struct Samples<'a> {
     pub left_out: usize,
     /// Kept by the robust base fit (not grossly off).
     pub kept: Vec<bool>,
+    /// The lag the field and its rate are linearised at ([`timing`]), s; 0 when not.
+    pub lag0_s: f64,
 }
 
 /// The attitudes (sensor → NED) of consecutive samples, worked out from the quaternions when asked for.
@@ -93,8 +95,9 @@ impl<'a> Samples<'a> {
         }
     }
 
-    /// Gathers the usable rows. `base` calibrates readings for the scalar method's field estimate.
-    pub fn gather(input: &DiagnosisInput<'a>, base: &Model) -> Samples<'a> {
+    /// Gathers the usable rows. `base` calibrates readings for the scalar method's field estimate (and finds the
+    /// coarse lag); the field is linearised at that lag if `linearise`.
+    pub fn gather(input: &DiagnosisInput<'a>, base: &Model, linearise: bool) -> Samples<'a> {
         let n = input.raw_ut.len();
         let expected: Option<Vec<[f64; 3]>> = match &input.reference {
             Reference::Attitude { quat, field_ned_ut } => Some(
@@ -135,11 +138,14 @@ impl<'a> Samples<'a> {
             Some(t) => pick(t, &index),
             None => Cow::Owned(vec![0.0; index.len()]),
         };
+        let mut lag0_s = 0.0;
         let rate = match (&expected, input.t_s) {
             (Some(_), Some(_)) => {
                 let links = links(&t, &index);
                 let mut rate = field_rate(&field, &t, &links);
-                let lag0_s = timing::coarse_lag_s(&raw, &field, &rate, &t, &links, base);
+                if linearise {
+                    lag0_s = timing::coarse_lag_s(&raw, &field, &rate, &t, &links, base);
+                }
                 if lag0_s != 0.0 {
                     timing::linearise_at(&mut field, &mut rate, &t, &links, lag0_s);
                 }
@@ -158,6 +164,7 @@ impl<'a> Samples<'a> {
         }
         Samples {
             kept,
+            lag0_s,
             left_out: n - index.len(),
             temp: match input.temp_c {
                 Some(tc) => pick(tc, &index),
