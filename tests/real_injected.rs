@@ -412,6 +412,20 @@ fn readings_late_by_tens_of_milliseconds_are_a_time_lag_not_disturbances() {
     assert_eq!(d["spans"].as_array().unwrap().len(), 0, "{}", d["spans"]);
     let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
     assert!(a_err < 0.005 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
+    // The summary counts the rows the final model used, and says what the base fit left out.
+    let out = magcal_fit(&[path.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let head = stdout.lines().next().unwrap();
+    let used = d["samples_used"].as_u64().unwrap();
+    let base_used = r["samples"]["used"].as_u64().unwrap();
+    assert!(used > base_used + 1000, "{used} against {base_used}");
+    assert!(
+        head.contains(&format!(", {used} of "))
+            && head.contains(&format!(
+                "the base fit, without the effects the diagnosis found, used {base_used}"
+            )),
+        "{head}"
+    );
 }
 
 /// The same 49 ms on broad 33, where a magnet sat on the board for 56 s: the lag bent the base fit's gains (A 0.19

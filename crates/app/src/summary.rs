@@ -154,10 +154,19 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         _ => "scalar calibration (ellipsoid fit: the field's magnitude only)",
     };
     let s = &cal.samples;
+    // The vector method's final model is the diagnosis' own fit when it models an effect: on the rows it used,
+    // which may hold many the base fit left out (those a timing lag or a field on the board explains).
+    let final_rows = cal
+        .diagnosis
+        .as_ref()
+        .filter(|d| cal.method() == Method::Vector && !d.effects.is_empty())
+        .map(|d| d.samples_used)
+        .filter(|&n| n != s.used);
     let _ = write!(
         out,
         "{recording}: {method}, {} of {} samples",
-        s.used, s.total
+        final_rows.unwrap_or(s.used),
+        s.total
     );
     if s.missing_reference > 0 {
         let _ = write!(
@@ -166,8 +175,18 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
             s.missing_reference
         );
     }
-    if s.excluded > 0 {
-        let _ = write!(out, " ({} grossly off, excluded)", s.excluded);
+    match final_rows {
+        Some(_) => {
+            let _ = write!(
+                out,
+                " (the base fit, without the effects the diagnosis found, used {} and left out {} as grossly off)",
+                s.used, s.excluded
+            );
+        }
+        None if s.excluded > 0 => {
+            let _ = write!(out, " ({} grossly off, excluded)", s.excluded);
+        }
+        None => {}
     }
     out.push('\n');
     match &assessment.heading {
