@@ -117,10 +117,6 @@ impl<'a> Samples<'a> {
                 && input.currents.iter().all(|(_, c)| c[i].is_finite())
         };
         let index: Vec<usize> = (0..n).filter(|&i| usable(i)).collect();
-        let kept: Vec<bool> = index
-            .iter()
-            .map(|&i| input.kept.is_none_or(|k| k[i]))
-            .collect();
         // The recording's own columns when every row is usable.
         fn pick<'c, T: Copy>(column: &'c [T], index: &[usize]) -> Cow<'c, [T]> {
             if index.len() == column.len() {
@@ -163,7 +159,10 @@ impl<'a> Samples<'a> {
             currents.extend(input.currents.iter().map(|(_, c)| c[i]));
         }
         Samples {
-            kept,
+            kept: index
+                .iter()
+                .map(|&i| input.kept.is_none_or(|k| k[i]))
+                .collect(),
             lag0_s,
             left_out: n - index.len(),
             temp: match input.temp_c {

@@ -1,9 +1,9 @@
 //! A timing offset between the magnetometer and the attitude reference too large for a first-order term.
 //!
-//! The `time_lag` effect models the reference read `θ` late as `−θ·Ḃ`: exact to first order, which is what a lag of
-//! a sample or two needs. While the sensor turns at ω, the field turns by ω·θ in the lag, and the second-order
-//! term, `(ω·θ)²/2` of the field, is already 5 µT at 0.5 rad (about 65 ms on a bench turned at 7 rad/s, the BROAD
-//! 02 recording's fastest): the residual left where the sensor turns fast then looks like a string of disturbances.
+//! The `time_lag` effect models readings `θ` late against the reference as `−θ·Ḃ`: exact to first order, which is
+//! what a lag of a sample or two needs. While the sensor turns at ω, the field turns by ω·θ in the lag, and the
+//! second-order term, `(ω·θ)²/2` of the field, is already 4–5 µT at 0.45 rad (64 ms on a bench turned at 7 rad/s,
+//! BROAD 02's fastest): the residual left where the sensor turns fast then looks like a string of disturbances.
 //! So the lag is first found coarsely — the shift of the reference that fits the base model best where the sensor
 //! turns — and the effect is linearised there: the field becomes `B(t − θ₀) + θ₀·Ḃ(t − θ₀)` and its rate
 //! `Ḃ(t − θ₀)`, so that `time_lag` at `θ` models `B(t − θ)` exactly at `θ = θ₀` and to first order in `θ − θ₀`
@@ -63,8 +63,8 @@ pub(crate) fn coarse_lag_s(
         .iter()
         .map(|&j| frames::add(frames::mat_vec(&base.a, raw[j]), base.b_ut))
         .collect();
-    // The median misfit of the picked samples against the field `lag` earlier (those it cannot be interpolated
-    // for left out).
+    // The misfit's lower quartile over the picked samples against the field `lag` earlier (those it cannot be
+    // interpolated for left out).
     let criterion = |lag: f64| {
         let e: Vec<f64> = picked
             .iter()
