@@ -223,7 +223,10 @@ mod tests {
         )
     }
 
-    fn bench(lag_s: f64) -> (Vec<f64>, Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    /// Per sample: time, the reference's field and its rate, and the reading.
+    type Bench = (Vec<f64>, Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<[f64; 3]>);
+
+    fn bench(lag_s: f64) -> Bench {
         let t: Vec<f64> = (0..3000).map(|i| i as f64 * 0.01).collect();
         let (field, rate) = t.iter().map(|&t| turning(t)).unzip();
         // The magnetometer reads the field `lag_s` earlier than the reference gives it.
