@@ -1,7 +1,7 @@
 //! From a recording to a fitted calibration: pick the method, build the expected field, check, fit, measure.
 
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
-use magcal_calib::directions::recorded_fraction;
+use magcal_calib::directions::fraction_of;
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
 use rayon::prelude::*;
@@ -453,7 +453,9 @@ pub fn noise_measurable(floor_ut: f64, residual_ut: f64) -> bool {
     !(floor_ut > 0.0 && residual_ut < UNMEASURED_NOISE_BOUND * floor_ut)
 }
 
-/// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out.
+/// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out. The coverage figure is the
+/// recorder's ([`magcal_calib::directions`], the same for the same rows) over the rows the calibration used: rows
+/// without a reference or in a state left out add no directions.
 pub fn calibrate(
     rec: &Recording,
     method: Method,
@@ -489,25 +491,28 @@ pub fn calibrate(
     };
     warnings.extend(units_unread(&rec.meta));
     let mut notes = Vec::new();
-    let (fit, mut noise, used, robust) = match method {
+    let (fit, mut noise, used, robust, rows_coverage) = match method {
         Method::Vector => {
             let expected = expected_field(rec, &field)?;
             let noise = noise::estimate(&rec.mag_ut, Some(&expected));
-            let r = robust::fit(
-                &VectorProblem {
-                    raw_ut: Cow::Borrowed(&rec.mag_ut),
-                    expected_ut: expected,
-                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-                },
-                rec.t_s.as_deref(),
-            )
-            .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+            let problem = VectorProblem {
+                raw_ut: Cow::Borrowed(&rec.mag_ut),
+                expected_ut: expected,
+                raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+            };
+            let r = robust::fit(&problem, rec.t_s.as_deref())
+                .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+            // The rows the fit used: kept, with a reference.
+            let e = &problem.expected_ut;
+            let rows_coverage = fraction_of(e.len(), |i| {
+                (r.kept[i] && e[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
+            });
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
                 RobustSummary::of(r.kept, r.sigma_ut, rec, false),
             );
-            (fit, noise, n, kept)
+            (fit, noise, n, kept, rows_coverage)
         }
         _ => {
             let noise = noise::estimate(&rec.mag_ut, None);
@@ -534,12 +539,15 @@ pub fn calibrate(
                 ));
             }
             warnings.extend(s.warning());
+            let rows_coverage =
+                fraction_of(rec.mag_ut.len(), |i| r.kept[i].then_some(rec.mag_ut[i]));
             let n = s.n;
             (
                 Fit::Scalar(s),
                 noise,
                 n,
                 RobustSummary::of(r.kept, r.sigma_ut, rec, true),
+                rows_coverage,
             )
         }
     };
@@ -590,7 +598,7 @@ pub fn calibrate(
         residual_rms_ut,
         noise_floor_ut,
         noise_measured,
-        sphere_coverage: 0.0,
+        sphere_coverage: rows_coverage,
         samples: SampleCounts {
             total: rec.len(),
             used,
@@ -603,8 +611,6 @@ pub fn calibrate(
         diagnosis: None,
         diagnosis_failed: None,
     };
-    // The recorder's definition of coverage, so both give the same figure for the same rows.
-    cal.sphere_coverage = recorded_fraction(&rec.mag_ut);
     if diagnose {
         if used < diagnosis::MIN_SAMPLES {
             cal.notes.push(format!(
@@ -618,6 +624,11 @@ pub fn calibrate(
             match diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model) {
                 Ok(first) => {
                     let d = around_spans(rec, &cal, first)?;
+                    // The rows the final model used.
+                    let r = &d.residuals;
+                    cal.sphere_coverage = fraction_of(r.rows.len(), |k| {
+                        (!r.excluded[k]).then(|| rec.mag_ut[r.rows[k]])
+                    });
                     cal.warnings.extend(other_offset_state(&d, rec));
                     cal.diagnosis = Some(d);
                 }

@@ -242,10 +242,16 @@ impl DirectionCoverage {
 /// The coverage of a recording's raw readings, in their order: [`DirectionCoverage`] over them, finished. A
 /// recording of more than [`RECORDED_READINGS`] is thinned evenly to that many.
 pub fn recorded_fraction(raw_ut: &[[f64; 3]]) -> f64 {
-    let stride = raw_ut.len().div_ceil(RECORDED_READINGS).max(1);
+    fraction_of(raw_ut.len(), |i| Some(raw_ut[i]))
+}
+
+/// [`recorded_fraction`] of `n` rows in their order, row `i` giving `reading(i)` (µT; `None` for a row left out:
+/// the directions a fit's own rows cover).
+pub fn fraction_of(n: usize, reading: impl Fn(usize) -> Option<[f64; 3]>) -> f64 {
+    let stride = n.div_ceil(RECORDED_READINGS).max(1);
     let mut coverage = DirectionCoverage::new();
-    for m in raw_ut.iter().step_by(stride) {
-        coverage.add(*m);
+    for m in (0..n).step_by(stride).filter_map(reading) {
+        coverage.add(m);
     }
     coverage.finish();
     coverage.fraction()
