@@ -365,6 +365,8 @@ pub fn diagnose(input: &DiagnosisInput<'_>, base: &Model) -> Result<Diagnosis, F
     if lag0_s == 0.0 || timed {
         return Ok(d);
     }
+    // Its per-sample vectors go before the next are made.
+    drop(d);
     Ok(diagnose_at(input, base, false)?.0)
 }
 
