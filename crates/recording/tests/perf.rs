@@ -160,28 +160,33 @@ fn pathological_headers_read_in_linear_time_and_bounded_memory() {
         for n in [what_size(what) / 4, what_size(what)] {
             let path = dir.path().join("big.csv");
             let bytes = write_pathological(&path, what, n);
-            let out = std::process::Command::new(std::env::current_exe().unwrap())
-                .args([
-                    "--exact",
-                    "child_reads_one_file",
-                    "--ignored",
-                    "--nocapture",
-                ])
-                .env("MAGCAL_PERF_FILE", &path)
-                .output()
-                .unwrap();
-            let stdout = String::from_utf8_lossy(&out.stdout);
-            let line = stdout
-                .lines()
-                .find_map(|l| l.strip_prefix("CHILD "))
-                .unwrap_or_else(|| panic!("no result: {stdout}"));
-            let mut parts = line.splitn(3, ' ');
-            let seconds: f64 = parts.next().unwrap().parse().unwrap();
-            let peak_mib: f64 = parts.next().unwrap().parse().unwrap();
+            // The best of three runs: one alone on a busy machine can take twice as long (CI once measured 0.017 s
+            // at n and 0.208 s at 4n, against 0.013–0.027 and 0.124–0.147 s in six runs alone).
+            let (mut seconds, mut peak_mib, mut rows) = (f64::INFINITY, 0.0f64, String::new());
+            for _ in 0..3 {
+                let out = std::process::Command::new(std::env::current_exe().unwrap())
+                    .args([
+                        "--exact",
+                        "child_reads_one_file",
+                        "--ignored",
+                        "--nocapture",
+                    ])
+                    .env("MAGCAL_PERF_FILE", &path)
+                    .output()
+                    .unwrap();
+                let stdout = String::from_utf8_lossy(&out.stdout);
+                let line = stdout
+                    .lines()
+                    .find_map(|l| l.strip_prefix("CHILD "))
+                    .unwrap_or_else(|| panic!("no result: {stdout}"));
+                let mut parts = line.splitn(3, ' ');
+                seconds = seconds.min(parts.next().unwrap().parse().unwrap());
+                peak_mib = peak_mib.max(parts.next().unwrap().parse().unwrap());
+                rows = parts.next().unwrap().to_owned();
+            }
             let file_mib = bytes as f64 / (1 << 20) as f64;
             println!(
-                "{n} {what}: {file_mib:.1} MiB read in {seconds:.3} s, peak {peak_mib:.0} MiB ({})",
-                parts.next().unwrap()
+                "{n} {what}: {file_mib:.1} MiB read in {seconds:.3} s (best of 3), peak {peak_mib:.0} MiB ({rows})"
             );
             assert!(
                 peak_mib < 40.0 + 6.0 * file_mib,
