@@ -7,7 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::fit_report;
+use common::{effect_ids, fit_report};
 use magcal_app::effect_spec::{self, Defaults};
 use magcal_app::params::ParamsFile;
 use magcal_calib::Inputs;
@@ -165,12 +165,7 @@ fn each_concealed_effect_is_diagnosed_with_its_parameters() {
         let truth = truth(&name, &rec);
         let report = fit_report(&path, &[]);
         let d = &report["diagnosis"];
-        let ids: Vec<&str> = d["effects"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|e| e["id"].as_str().unwrap())
-            .collect();
+        let ids = effect_ids(&report);
         let Some(effect) = truth.effects.first() else {
             assert_eq!(d["verdict"], "consistent", "{name}: {ids:?}");
             assert!(ids.is_empty());

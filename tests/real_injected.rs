@@ -7,7 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{fit_report, floats, magcal_fit, matrix, real};
+use common::{effect_ids, fit_report, floats, magcal_fit, matrix, real};
 use magcal_calib::effects::{Context, Effect, WorldContext};
 use magcal_calib::frames;
 use serde_json::Value;
@@ -230,12 +230,7 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
     let truth = truth(&bare);
     let r = fit_report(&path, &[]);
-    let ids: Vec<&str> = r["diagnosis"]["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["id"].as_str().unwrap())
-        .collect();
+    let ids = effect_ids(&r);
     assert!(!ids.contains(&"bias_step"), "{ids:?}");
     let (a_err, o_err) = errors(&r, &truth);
     assert!(a_err < 0.02 && o_err < 0.5, "A {a_err}, offset {o_err} µT");
@@ -400,12 +395,7 @@ fn readings_late_by_tens_of_milliseconds_are_a_time_lag_not_disturbances() {
     let path = with_reference_ahead(BROAD_02, dir.path(), "ahead.csv", 7);
     let r = fit_report(&path, &[]);
     let d = &r["diagnosis"];
-    let ids: Vec<&str> = d["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| e["id"].as_str().unwrap())
-        .collect();
+    let ids = effect_ids(&r);
     assert_eq!(ids, ["time_lag"], "{}", d["effects"]);
     let lag_s = d["effects"][0]["params"]["lag_s"].as_f64().unwrap();
     assert!((lag_s - 0.0638).abs() < 0.003, "{lag_s} s");

@@ -114,3 +114,13 @@ pub fn for_each_seed(seeds: u64, f: impl Fn(u64) + Sync) {
         }
     });
 }
+
+/// The ids of the effects a `magcal-fit` report's diagnosis found, in its order.
+pub fn effect_ids(report: &serde_json::Value) -> Vec<&str> {
+    report["diagnosis"]["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["id"].as_str().unwrap())
+        .collect()
+}
