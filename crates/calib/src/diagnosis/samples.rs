@@ -137,10 +137,11 @@ impl<'a> Samples<'a> {
         let mut lag0_s = 0.0;
         let rate = match (&expected, input.t_s) {
             (Some(_), Some(_)) => {
-                let links = links(&t, &index);
+                let step_s = timing::typical_step(&t);
+                let links = links(&t, &index, step_s);
                 let mut rate = field_rate(&field, &t, &links);
                 if linearise {
-                    lag0_s = timing::coarse_lag_s(&raw, &field, &rate, &t, &links, base);
+                    lag0_s = timing::coarse_lag_s(&raw, &field, &rate, &t, step_s, &links, base);
                 }
                 if lag0_s != 0.0 {
                     timing::linearise_at(&mut field, &mut rate, &t, &links, lag0_s);
@@ -186,13 +187,9 @@ impl<'a> Samples<'a> {
 
 /// Per sample but the last, whether it and the next are consecutive rows of the recording, in time order and at
 /// most five typical steps apart (the field may be differenced and interpolated between them).
-fn links(t: &[f64], index: &[usize]) -> Vec<bool> {
-    let typical = timing::typical_step(t);
-    let typical = if typical > 0.0 {
-        typical
-    } else {
-        f64::INFINITY
-    };
+/// `step_s` is the typical step ([`timing::typical_step`]; without one, no gap is too long).
+fn links(t: &[f64], index: &[usize], step_s: f64) -> Vec<bool> {
+    let typical = if step_s > 0.0 { step_s } else { f64::INFINITY };
     (0..index.len().saturating_sub(1))
         .map(|a| {
             let dt = t[a + 1] - t[a];

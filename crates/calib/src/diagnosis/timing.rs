@@ -34,7 +34,7 @@ const CRITERION_QUANTILE: f64 = 0.25;
 pub(crate) type Links = [bool];
 
 /// The coarse offset θ₀ (s; 0 when none helps by [`MIN_GAIN`]) at which `field` (the reference per sample, at
-/// times `t`) fits the base model's readings `raw` best where the field moves fastest: by the lower quartile of the
+/// times `t`, whose typical step is `step_s`: [`typical_step`]) fits the base model's readings `raw` best where the field moves fastest: by the lower quartile of the
 /// misfit there, which a magnet on the board for a third of the turning does not reach (its median did: 146 ms
 /// on BROAD 33, whose lag is 16 ms), nor the samples the base fit excluded for the lag itself (over the samples it
 /// kept, a lag of 83 ms was found at 44).
@@ -43,6 +43,7 @@ pub(crate) fn coarse_lag_s(
     field: &[[f64; 3]],
     rate: &[[f64; 3]],
     t: &[f64],
+    step_s: f64,
     links: &Links,
     base: &Model,
 ) -> f64 {
@@ -81,11 +82,10 @@ pub(crate) fn coarse_lag_s(
             crate::robust::quantile(&e, CRITERION_QUANTILE)
         }
     };
-    let dt = typical_step(t);
-    if dt.is_nan() || dt <= 0.0 {
+    if step_s.is_nan() || step_s <= 0.0 {
         return 0.0;
     }
-    let step = dt.max(COARSE_STEP_S);
+    let step = step_s.max(COARSE_STEP_S);
     let steps = (MAX_LAG_S / step) as i64;
     // The grid's lags, fitted on all threads, the best kept (the first of equals).
     let best_of = |grid: Vec<f64>| {
@@ -243,6 +243,7 @@ mod tests {
             &field,
             &rate,
             &t,
+            typical_step(&t),
             &links,
             &Model::linear(frames::IDENTITY, [0.0; 3]),
         );
@@ -285,6 +286,7 @@ mod tests {
                 &field,
                 &rate,
                 &t,
+                typical_step(&t),
                 &links,
                 &Model::linear(frames::IDENTITY, [0.0; 3])
             ),
