@@ -169,6 +169,33 @@ fn exports_go_to_stdout_with_the_summary_on_stderr() {
 }
 
 #[test]
+fn a_reader_that_goes_away_ends_the_summary_not_the_fit() {
+    // `magcal-fit rec.csv --out params.toml | head -3`: the reader closes the pipe before the summary is written.
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(dir.path(), "r.csv", &["--duration", "40", "--seed", "6"]);
+    let params = dir.path().join("params.toml");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
+        .arg(&rec)
+        .arg("--out")
+        .arg(&params)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(
+        std::fs::read_to_string(&params)
+            .unwrap()
+            .contains("[calibration]"),
+        "the parameters were not written"
+    );
+}
+
+#[test]
 fn no_output_ever_overwrites_the_input_and_nothing_is_written_when_one_would() {
     let dir = tempfile::tempdir().unwrap();
     let rec = simulate(dir.path(), "rec.csv", &["--duration", "30", "--seed", "2"]);

@@ -63,6 +63,25 @@ fn an_existing_recording_is_never_replaced_without_force() {
 }
 
 #[test]
+fn a_reader_that_goes_away_does_not_stop_the_recording() {
+    // `magcal-record … | head`: progress lines and the summary have no reader; the recording goes on to its end.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.csv");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
+        .args(["--routine", "free", "--out", path.to_str().unwrap()])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("panicked"), "{}", stderr(&out));
+    assert!(Recording::read(&path).unwrap().len() > 1000);
+}
+
+#[test]
 fn a_second_recorder_on_the_same_file_is_refused_and_the_first_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("rec.csv");

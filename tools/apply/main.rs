@@ -12,6 +12,7 @@ use magcal_app::files::{check_file_output, check_outputs};
 use magcal_app::params::ParamsFile;
 use magcal_app::summary::check_summary;
 use magcal_app::verdict::Grade;
+use magcal_app::{say, sayln};
 use magcal_recording::Recording;
 
 /// Check a calibration on another recording: apply a parameters file (magcal-fit --out) and say how well it fits.
@@ -66,7 +67,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         == Some(args.recording.file_name());
     let c = check(&params, &rec, &field, fitted_on_it)
         .with_context(|| format!("{name}: cannot apply {}", args.params.display()))?;
-    print!("{}", check_summary(&c, &params, &field, &name));
+    say!("{}", check_summary(&c, &params, &field, &name))?;
     if let Some(path) = &args.out {
         let bad = c
             .calibrated_ut
@@ -87,7 +88,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         ));
         out.write(path)
             .with_context(|| format!("writing {}", path.display()))?;
-        println!("wrote {}", path.display());
+        sayln!("wrote {}", path.display())?;
     }
     let grade = c.verdict.grade;
     if let Some(required) = args.require

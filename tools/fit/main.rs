@@ -149,11 +149,12 @@ fn run(args: Args) -> anyhow::Result<()> {
     let say = |text: &str| {
         if export_to_stdout {
             eprint!("{text}");
+            Ok(())
         } else {
-            print!("{text}");
+            magcal_app::say!("{text}")
         }
     };
-    say(&summary(&cal, &assessment, &name));
+    say(&summary(&cal, &assessment, &name))?;
     if let Some(path) = &args.report {
         let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
         Report::new(&cal, &name, &channels)
@@ -188,7 +189,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             bail!("{name}: not exported: {why}");
         }
         for warning in warnings(&target, format) {
-            say(&format!("  WARNING: {warning}\n"));
+            say(&format!("  WARNING: {warning}\n"))?;
         }
         let text = export(&target, format, found);
         match &args.export_out {
@@ -202,7 +203,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             bail!("{name}: not written to {device}: {why}");
         }
         for line in write_back_calibration(device, &cal)? {
-            say(&format!("{line}\n"));
+            say(&format!("{line}\n"))?;
         }
     }
     let where_to = match (&args.write_to, args.export) {
@@ -216,6 +217,6 @@ fn run(args: Args) -> anyhow::Result<()> {
     say(&format!(
         "\n{}",
         how_to_apply(where_to, args.out.as_deref(), found)
-    ));
+    ))?;
     Ok(())
 }

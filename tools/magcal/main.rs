@@ -17,6 +17,7 @@ use magcal_app::record::{
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::verdict::assess;
+use magcal_app::{say, sayln};
 use magcal_recording::Recording;
 
 /// The bench calibration workflow in one command: record the magnetometer through a routine, fit the calibration
@@ -91,14 +92,14 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
     let mut source = device::open(&args.device, &open)?;
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
-    println!(
+    sayln!(
         "magcal: recording {} ({} routine) to {}",
         args.device,
         routine.name(),
         rec_path.display()
-    );
+    )?;
     let recorded = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
-    println!(
+    sayln!(
         "recorded {} samples in {:.1} s of device time{}",
         recorded.samples,
         recorded.duration_s,
@@ -107,7 +108,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             Stop::MaxDuration => " (longest duration reached)",
             Stop::Coverage | Stop::AllPoses => "",
         }
-    );
+    )?;
     let short = recorded.shortfall(&opts);
     if recorded.stop == Stop::Interrupted {
         match short {
@@ -132,7 +133,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     let cal = calibrate(&rec, Method::Auto, field, true)
         .with_context(|| format!("{name}: cannot calibrate"))?;
     let assessment = assess(&cal, &rec, false);
-    print!("\n{}", summary(&cal, &assessment, &name));
+    say!("\n{}", summary(&cal, &assessment, &name))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
     let report_path = args.out_dir.join("report.json");
     Report::new(&cal, &name, &channels)
@@ -143,14 +144,14 @@ fn run(args: Args) -> anyhow::Result<()> {
         .write(&params_path)
         .with_context(|| format!("writing {}", params_path.display()))?;
     if let DeviceSpec::Sim { chip } = args.device {
-        println!("{}", truth_check(&cal, &TruthFile::of(chip, args.sim_seed)));
+        sayln!("{}", truth_check(&cal, &TruthFile::of(chip, args.sim_seed)))?;
     }
-    println!(
+    sayln!(
         "wrote {}, {}, {}",
         rec_path.display(),
         params_path.display(),
         report_path.display()
-    );
+    )?;
     Ok(())
 }
 

@@ -27,6 +27,6 @@ fn main() -> anyhow::Result<()> {
         seed: args.seed,
         ..SeedExperiment::default()
     };
-    print!("{}", table(&run(&exp)?));
+    magcal_app::say!("{}", table(&run(&exp)?))?;
     Ok(())
 }

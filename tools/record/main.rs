@@ -12,6 +12,7 @@ use magcal_app::record::{
     RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record,
     sim_field_note, ui,
 };
+use magcal_app::sayln;
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
 ///
@@ -193,20 +194,20 @@ fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
-    println!("recording {spec} to {}", args.out.display());
+    sayln!("recording {spec} to {}", args.out.display())?;
     let summary = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
-    print_summary(&summary, &opts);
+    print_summary(&summary, &opts)?;
     Ok(())
 }
 
-fn print_summary(s: &RecordSummary, opts: &RecordOptions) {
+fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()> {
     let why = match s.stop {
         Stop::Coverage => "coverage target reached",
         Stop::AllPoses => "all 24 poses taken",
         Stop::Interrupted => "interrupted",
         Stop::MaxDuration => "longest duration reached",
     };
-    println!(
+    sayln!(
         "recorded {} samples in {:.1} s to {} ({why}); coverage {:.0} % of the sphere{}",
         s.samples,
         s.duration_s,
@@ -217,31 +218,31 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) {
         } else {
             String::new()
         }
-    );
+    )?;
     if s.saturated > 0 {
-        println!("saturated samples (not recorded): {}", s.saturated);
+        sayln!("saturated samples (not recorded): {}", s.saturated)?;
     }
     if s.disturbed > 0 {
-        println!(
+        sayln!(
             "samples whose field magnitude departed from the rest's (a magnet or iron nearby? recorded, kept out of \
              the coverage map): {}",
             s.disturbed
-        );
+        )?;
     }
     if !s.clock_restarts.is_empty() {
-        println!(
+        sayln!(
             "the device's clock restarted {} times; the file's metadata lists the segments",
             s.clock_restarts.len()
-        );
+        )?;
     }
     if let Some(g) = &s.garbage {
-        println!("garbage lines skipped: {} ({g})", g.total());
+        sayln!("garbage lines skipped: {} ({g})", g.total())?;
     }
     match s.shortfall(opts) {
-        Some(short) => println!(
+        Some(short) => sayln!(
             "{short}; magcal-fit {} says what it lacks",
             s.path.display()
         ),
-        None => println!("next: magcal-fit {}", s.path.display()),
+        None => sayln!("next: magcal-fit {}", s.path.display()),
     }
 }

@@ -1,5 +1,6 @@
-//! Command-line pieces the tools share: lists of numbers, the world-field options, Ctrl-C, the exit.
+//! Command-line pieces the tools share: lists of numbers, the world-field options, Ctrl-C, standard output, the exit.
 
+use std::io::{self, Write};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -82,6 +83,32 @@ pub fn interrupt_flag(tool: &'static str) -> anyhow::Result<Arc<AtomicBool>> {
     })
     .map_err(|e| anyhow::anyhow!("installing the Ctrl-C handler: {e}"))?;
     Ok(interrupt)
+}
+
+/// Writes to standard output. A reader that went away (`magcal-fit rec.csv | head -3`) ends the output, not the tool:
+/// the recording goes on and the files asked for are still written, where `print!` would panic. Other failures (a
+/// full disk behind a redirection) are errors.
+pub fn say(text: std::fmt::Arguments<'_>) -> io::Result<()> {
+    match io::stdout().lock().write_fmt(text) {
+        Err(e) if e.kind() == io::ErrorKind::BrokenPipe => Ok(()),
+        written => written,
+    }
+}
+
+/// `print!` through [`say`]: `say!("{x}")?`.
+#[macro_export]
+macro_rules! say {
+    ($($arg:tt)*) => {
+        $crate::cli::say(format_args!($($arg)*))
+    };
+}
+
+/// `println!` through [`say`]: `sayln!("{x}")?`.
+#[macro_export]
+macro_rules! sayln {
+    ($($arg:tt)*) => {
+        $crate::cli::say(format_args!("{}\n", format_args!($($arg)*)))
+    };
 }
 
 /// The process exit for a tool's result: the error chain on stderr, prefixed with the tool's name.

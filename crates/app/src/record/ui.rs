@@ -229,7 +229,7 @@ impl PlainUi {
 
 impl Ui for PlainUi {
     fn message(&mut self, text: &str) {
-        println!("{text}");
+        show(text);
     }
 
     fn progress(&mut self, p: &Progress<'_>) {
@@ -252,7 +252,7 @@ impl Ui for PlainUi {
         if due {
             self.next_line_s = p.t_s.floor() + 1.0;
             self.pending = None;
-            println!("{line}");
+            show(&line);
         } else {
             self.pending = Some(line);
         }
@@ -264,9 +264,15 @@ impl Ui for PlainUi {
 
     fn finish(&mut self) {
         if let Some(line) = self.pending.take() {
-            println!("{line}");
+            show(&line);
         }
     }
+}
+
+/// A line on standard output. One that cannot be written is not worth stopping a recording for: the file holds the
+/// samples, and the summary at the end reports a failing output.
+fn show(line: &str) {
+    let _ = crate::sayln!("{line}");
 }
 
 /// The live display when standard output is a terminal, plain lines otherwise. Unattended (`auto`), nothing
