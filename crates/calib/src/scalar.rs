@@ -33,6 +33,7 @@ use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe, spher
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 use crate::robust::{self, RobustProblem, quantile};
+use crate::vector::TIME_BLOCKS;
 
 /// What the scalar method cannot see, in words for reports.
 pub const ROTATION_NOTE: &str = "the scalar method constrains only |B|, and a rotation of the calibrated field leaves \
@@ -69,8 +70,6 @@ const MAX_ROUNDS: usize = 8;
 const DIRECTION_CELLS: usize = 100;
 /// The bulk seed's fences, in interquartile ranges beyond the quartiles (Tukey's far out).
 const BULK_FENCE: f64 = 3.0;
-/// Blocks of consecutive samples (of time, in a recording) for the cluster-robust covariance over time.
-const TIME_BLOCKS: usize = 32;
 /// Fewest samples the fit takes.
 pub const MIN_SAMPLES: usize = 12;
 
