@@ -170,29 +170,37 @@ fn exports_go_to_stdout_with_the_summary_on_stderr() {
 
 #[test]
 fn a_reader_that_goes_away_ends_the_summary_not_the_fit() {
-    // `magcal-fit rec.csv --out params.toml | head -3`: the reader closes the pipe before the summary is written.
+    // `magcal-fit rec.csv --out params.toml | head -3`: the reader closes the pipe before the summary is written; and
+    // with `2>&1 | head`, standard error too, before the plots' lines.
     let dir = tempfile::tempdir().unwrap();
     let rec = simulate(dir.path(), "r.csv", &["--duration", "40", "--seed", "6"]);
-    let params = dir.path().join("params.toml");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
-        .arg(&rec)
-        .arg("--out")
-        .arg(&params)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    drop(child.stdout.take());
-    let out = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(
-        std::fs::read_to_string(&params)
-            .unwrap()
-            .contains("[calibration]"),
-        "the parameters were not written"
-    );
+    for close_stderr in [false, true] {
+        let params = dir.path().join(format!("params-{close_stderr}.toml"));
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
+            .arg(&rec)
+            .arg("--out")
+            .arg(&params)
+            .arg("--plots")
+            .arg(dir.path().join("plots"))
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        if close_stderr {
+            drop(child.stderr.take());
+        }
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{close_stderr}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            std::fs::read_to_string(&params)
+                .unwrap()
+                .contains("[calibration]"),
+            "{close_stderr}: the parameters were not written"
+        );
+    }
 }
 
 #[test]

@@ -276,6 +276,26 @@ fn an_effect_the_bench_cannot_show_is_refused_by_the_simulator() {
     assert!(ok.status.success());
 }
 
+/// A run too long for memory, or a rate or length that is no number, is refused with the flag named: it aborted on
+/// the allocation (or looped on NaN) before.
+#[test]
+fn the_simulator_refuses_runs_it_cannot_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("t.csv");
+    for (args, says) in [
+        (&["--duration", "1e9"][..], "at most 2e7"),
+        (&["--rate", "1e7"][..], "at most 2e7"),
+        (&["--rate", "0"][..], "--rate must be"),
+        (&["--duration", "nan"][..], "--duration must be"),
+    ] {
+        let out = magcal_sim(args, &rec);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+        assert!(!rec.exists());
+    }
+}
+
 /// Defect 5: quaternions without a world field fall back to the scalar method with a warning that says how to give it.
 #[test]
 fn quaternions_without_a_field_say_how_to_give_it() {

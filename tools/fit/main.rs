@@ -19,6 +19,7 @@ use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::verdict::{Grade, assess, target_model};
 use magcal_app::writeback::write_back_calibration;
+use magcal_app::{say, tell, tellln};
 
 /// Fit a magnetometer calibration to a recording, say how far off a compass would be before and after, and write it out.
 ///
@@ -137,7 +138,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         Err(e) => {
             // A refused fit still shows its readings: a recording that did not turn enough is plain to see.
             if let Some(dir) = &args.plots {
-                eprintln!("wrote {}", write_readings_plot(dir, &rec)?.display());
+                tellln!("wrote {}", write_readings_plot(dir, &rec)?.display());
             }
             return Err(e).with_context(|| format!("{name}: cannot calibrate"));
         }
@@ -148,10 +149,10 @@ fn run(args: Args) -> anyhow::Result<()> {
     let export_to_stdout = args.export.is_some() && args.export_out.is_none();
     let say = |text: &str| {
         if export_to_stdout {
-            eprint!("{text}");
+            tell!("{text}");
             Ok(())
         } else {
-            magcal_app::say!("{text}")
+            say!("{text}")
         }
     };
     say(&summary(&cal, &assessment, &name))?;
@@ -163,7 +164,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(dir) = &args.plots {
         for path in write_plots(dir, &cal, &rec, &assessment)? {
-            eprintln!("wrote {}", path.display());
+            tellln!("wrote {}", path.display());
         }
     }
     let grade = assessment.verdict.grade;

@@ -17,7 +17,7 @@ use magcal_app::record::{
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::verdict::assess;
-use magcal_app::{say, sayln};
+use magcal_app::{say, sayln, tellln};
 use magcal_recording::Recording;
 
 /// The bench calibration workflow in one command: record the magnetometer through a routine, fit the calibration
@@ -80,7 +80,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&args.device, args.sim_seed, opts.meta);
     if let Some(note) = sim_field_note(&args.device, &opts.meta) {
-        eprintln!("{note}");
+        tellln!("{note}");
     }
     let open = OpenOptions {
         sim_seed: args.sim_seed,
@@ -88,7 +88,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     };
     let interrupt = interrupt_flag("magcal")?;
     if let Some(note) = args.device.unit_note() {
-        eprintln!("{note}");
+        tellln!("{note}");
     }
     let mut source = device::open(&args.device, &open)?;
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
@@ -123,7 +123,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(short) = short {
-        eprintln!("warning: {short}");
+        tellln!("warning: {short}");
     }
 
     // Fit.

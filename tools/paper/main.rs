@@ -1,6 +1,7 @@
 //! `magcal-paper`: the seed paper's experiment, simulated, printed in the form of its table.
 
 use clap::Parser;
+use magcal_app::say;
 use magcal_app::seed::{SeedExperiment, run, table};
 
 /// Simulate the seed paper's experiment (a sensor whose distortion is the inverse of the paper's a, b, mounted a few
@@ -27,6 +28,6 @@ fn main() -> anyhow::Result<()> {
         seed: args.seed,
         ..SeedExperiment::default()
     };
-    magcal_app::say!("{}", table(&run(&exp)?))?;
+    say!("{}", table(&run(&exp)?))?;
     Ok(())
 }

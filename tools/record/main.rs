@@ -12,7 +12,7 @@ use magcal_app::record::{
     RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record,
     sim_field_note, ui,
 };
-use magcal_app::sayln;
+use magcal_app::{sayln, tellln};
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.
 ///
@@ -160,7 +160,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     if let Some(note) = sim_field_note(&spec, &opts.meta) {
-        eprintln!("{note}");
+        tellln!("{note}");
     }
     if let DeviceSpec::Sim { chip } = spec {
         if let Some(path) = &args.truth {
@@ -169,7 +169,7 @@ fn run(args: Args) -> anyhow::Result<()> {
                 .with_context(|| format!("writing the truth {}", path.display()))?;
         }
     } else if opts.meta.field_ned_ut.is_none() && opts.meta.location.is_none() {
-        eprintln!(
+        tellln!(
             "note: no --field-ned or --location/--date: the fit will need the local field (magcal-fit --field-ned \
              or --location/--date){}",
             if routine == Routine::Cube24 {
@@ -181,13 +181,13 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
     let interrupt = interrupt_flag("magcal-record")?;
     if let Some(note) = spec.unit_note() {
-        eprintln!("{note}");
+        tellln!("{note}");
     }
     let mut source = device::open(&spec, &open)?;
     if let Some(rate_hz) = source.rate_hz()
         && (rate_hz - args.rate).abs() > 0.01 * args.rate
     {
-        eprintln!(
+        tellln!(
             "note: asked for {} Hz; the nearest the {} offers is {rate_hz} Hz",
             args.rate,
             source.sensor()

@@ -1,11 +1,13 @@
 //! `magcal-sim`: write a simulated magcal-recording v1 file.
 
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
-use magcal_app::cli::parse_floats;
+use magcal_app::cli::{exit, parse_floats};
 use magcal_app::effect_spec::{self, Defaults};
+use magcal_app::tellln;
 use magcal_app::truth::TruthFile;
 use magcal_calib::effects::EffectId;
 use magcal_sim::study;
@@ -113,8 +115,25 @@ fn parse_current(s: &str) -> Result<CurrentProfile, String> {
     })
 }
 
-fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
+/// Most samples one run simulates: about 2 GB of memory while it runs.
+const MAX_SAMPLES: f64 = 2e7;
+
+fn main() -> ExitCode {
+    exit("magcal-sim", run(Args::parse()))
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    if !(args.duration > 0.0 && args.duration.is_finite()) {
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            args.duration
+        );
+    }
+    if let Some(r) = args.rate
+        && !(r > 0.0 && r.is_finite())
+    {
+        bail!("--rate must be a positive number of Hz, got {r}");
+    }
     let Some(chip) = ChipModel::by_name(&args.chip) else {
         bail!(
             "unknown chip {:?}: use one of lis3mdl, lis2mdl, qmc5883l, hmc5883l, mmc5983ma",
@@ -139,6 +158,15 @@ fn main() -> anyhow::Result<()> {
     let mut s = Scenario::new(&chip, trajectory, args.seed);
     if let Some(r) = args.rate {
         s.sample_rate_hz = r;
+    }
+    let samples = args.duration * s.sample_rate_hz;
+    if samples > MAX_SAMPLES {
+        bail!(
+            "--duration {} s at {} Hz is {samples:.3e} samples: at most {MAX_SAMPLES:.0e} are simulated at once \
+             (shorten the run or lower the rate)",
+            args.duration,
+            s.sample_rate_hz
+        );
     }
     if let Some(f) = args.field_ned {
         s.field_ned_ut = f;
@@ -211,7 +239,7 @@ fn main() -> anyhow::Result<()> {
             .write(path)
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    eprintln!(
+    tellln!(
         "wrote {} samples to {}",
         run.recording.len(),
         args.out.display()

@@ -77,7 +77,9 @@ pub fn interrupt_flag(tool: &'static str) -> anyhow::Result<Arc<AtomicBool>> {
     ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::Relaxed) {
             crate::record::tty::restore();
-            eprintln!("{tool}: interrupted again: stopping now (the file keeps what was written)");
+            crate::tellln!(
+                "{tool}: interrupted again: stopping now (the file keeps what was written)"
+            );
             std::process::exit(130);
         }
     })
@@ -111,12 +113,35 @@ macro_rules! sayln {
     };
 }
 
+/// Writes to standard error, where notes, warnings and errors go. Nothing is left to tell a failure to, so it is
+/// ignored: a closed standard error (`magcal-fit … 2>&1 | head`) must not stop the tool before its files are written,
+/// where `eprint!` would panic.
+pub fn tell(text: std::fmt::Arguments<'_>) {
+    let _ = io::stderr().lock().write_fmt(text);
+}
+
+/// `eprint!` through [`tell`].
+#[macro_export]
+macro_rules! tell {
+    ($($arg:tt)*) => {
+        $crate::cli::tell(format_args!($($arg)*))
+    };
+}
+
+/// `eprintln!` through [`tell`].
+#[macro_export]
+macro_rules! tellln {
+    ($($arg:tt)*) => {
+        $crate::cli::tell(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
 /// The process exit for a tool's result: the error chain on stderr, prefixed with the tool's name.
 pub fn exit(tool: &str, result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("{tool}: error: {e:#}");
+            crate::tellln!("{tool}: error: {e:#}");
             ExitCode::FAILURE
         }
     }
