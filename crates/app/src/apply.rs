@@ -8,6 +8,7 @@
 //! [`crate::verdict`], with this recording's residual and noise (the parameters' own uncertainty is not in a
 //! parameters file, so it is not included).
 
+use magcal_calib::coverage::Coverage;
 use magcal_calib::effects::EffectId;
 use magcal_calib::noise;
 use magcal_calib::{Inputs, Model, frames};
@@ -292,6 +293,9 @@ pub fn check(
                     .to_owned(),
         };
     }
+    if let Some(flat) = hardly_turns(&calibrated_ut, &rec.mag_ut) {
+        verdict = flat;
+    }
     if verdict.grade == Grade::Good && !warnings.is_empty() {
         verdict = Verdict {
             grade: Grade::Usable,
@@ -317,6 +321,51 @@ pub fn check(
         heading,
         verdict,
         warnings,
+    })
+}
+
+/// A calibrated field that varies by less than this share of its magnitude hardly turned: its magnitude says nothing
+/// of `A` (a sensor turned level through a few headings varies by a third of it).
+const STILL_SHARE: f64 = 0.05;
+/// Raw readings that vary by more than this share of their mean magnitude turned.
+const TURNED_SHARE: f64 = 0.2;
+
+/// The verdict when the calibrated readings hardly turn ([`STILL_SHARE`]): a constant vector fits any magnitude, so
+/// the recording checks nothing — the sensor did not turn, or the parameters flatten readings that did (another
+/// sensor's, or fitted in other units).
+fn hardly_turns(calibrated_ut: &[[f64; 3]], raw: &[[f64; 3]]) -> Option<Verdict> {
+    let finite = |v: &&[f64; 3]| v.iter().all(|x| x.is_finite());
+    let spread_and_size = |rows: &[[f64; 3]]| {
+        let rows: Vec<[f64; 3]> = rows.iter().filter(finite).copied().collect();
+        let size = rows.iter().map(|v| frames::norm(*v)).sum::<f64>() / rows.len().max(1) as f64;
+        (Coverage::of(&rows).spread_ut[0], size)
+    };
+    let (spread_ut, size_ut) = spread_and_size(calibrated_ut);
+    if !(spread_ut < STILL_SHARE * size_ut) {
+        return None;
+    }
+    let (raw_spread, raw_size) = spread_and_size(raw);
+    let (reason, todo) = if raw_spread > TURNED_SHARE * raw_size {
+        (
+            format!(
+                "the calibrated field hardly turns ({spread_ut:.2} µT of spread against {size_ut:.1} µT) where the \
+                 raw readings do ({raw_spread:.3} against {raw_size:.3}): the parameters flatten the readings"
+            ),
+            "use parameters fitted on this sensor, in the recording's units".to_owned(),
+        )
+    } else {
+        (
+            format!(
+                "the calibrated field hardly turns ({spread_ut:.2} µT of spread against {size_ut:.1} µT): the sensor \
+                 was not turned, so the recording cannot check the parameters"
+            ),
+            "record again turning the sensor through many directions".to_owned(),
+        )
+    };
+    Some(Verdict {
+        grade: Grade::Redo,
+        reason,
+        todo,
     })
 }
 
@@ -454,5 +503,43 @@ mod tests {
         let c = check(&params, &other, &field, false).unwrap();
         assert!(c.residual_rms_ut > 10.0 * c.noise_floor_ut, "{c:?}");
         assert_eq!(c.verdict.grade, Grade::Redo);
+
+        // Parameters fitted in nT (gains of 0.001) map these readings to about b, a constant vector: its magnitude is
+        // the recording's own mean, checked against no field (it was graded usable).
+        let flat = ParamsFile::new(
+            "vector",
+            &Model::linear(
+                [[1e-3, 0.0, 0.0], [0.0, 1e-3, 0.0], [0.0, 0.0, 1e-3]],
+                [-4.4, 29.3, 24.7],
+            ),
+            &[],
+        );
+        let c = check(&flat, &second, &ReferenceField::Unknown, false).unwrap();
+        assert_eq!(c.verdict.grade, Grade::Redo, "{:?}", c.verdict);
+        assert!(c.verdict.reason.contains("flatten"), "{:?}", c.verdict);
+    }
+
+    /// A sensor that was not turned checks nothing of `A`: any parameters fit its constant magnitude.
+    #[test]
+    fn a_recording_that_did_not_turn_cannot_check_parameters() {
+        let chip = ChipModel::by_name("lis3mdl").unwrap();
+        let mut s = Scenario::new(
+            &chip,
+            Trajectory::Tumble {
+                duration_s: 30.0,
+                rate_rad_s: 0.0,
+            },
+            3,
+        );
+        s.sensor = SensorTruth::mounted(
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            [5.0; 3],
+            [0.0; 3],
+        );
+        let still = simulate(&s).unwrap().recording;
+        let params = ParamsFile::new("vector", &Model::linear(s.sensor.a, s.sensor.b_ut), &[]);
+        let c = check(&params, &still, &ReferenceField::Unknown, false).unwrap();
+        assert_eq!(c.verdict.grade, Grade::Redo, "{:?}", c.verdict);
+        assert!(c.verdict.reason.contains("not turned"), "{:?}", c.verdict);
     }
 }
