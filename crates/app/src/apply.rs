@@ -341,7 +341,7 @@ fn hardly_turns(calibrated_ut: &[[f64; 3]], raw: &[[f64; 3]]) -> Option<Verdict>
         (Coverage::of(&rows).spread_ut[0], size)
     };
     let (spread_ut, size_ut) = spread_and_size(calibrated_ut);
-    if !(spread_ut < STILL_SHARE * size_ut) {
+    if spread_ut.is_nan() || spread_ut >= STILL_SHARE * size_ut {
         return None;
     }
     let (raw_spread, raw_size) = spread_and_size(raw);
