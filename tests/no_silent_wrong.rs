@@ -612,6 +612,24 @@ fn a_reference_in_another_convention_is_named_as_such() {
             && !summary.contains("gains differ"),
         "{summary}"
     );
+    // With the diagnosis: the verdict says the reference disagrees (it said "the fit itself is uncertain" at 96 % of
+    // the directions), no heading figure passes 180°, and the diagnosis does not call the residual the reference's
+    // own error ("consistent").
+    let out = magcal_fit(&[rec.to_str().unwrap()]);
+    assert!(out.status.success());
+    let summary = String::from_utf8_lossy(&out.stdout);
+    let verdict = summary.lines().find(|l| l.starts_with("verdict:")).unwrap();
+    assert!(
+        verdict.contains("the readings and the attitude reference disagree by"),
+        "{summary}"
+    );
+    assert!(summary.contains("diagnosis: not judged"), "{summary}");
+    for degrees in summary
+        .split('°')
+        .filter_map(|s| s.rsplit(' ').next()?.parse::<f64>().ok())
+    {
+        assert!(degrees <= 180.0, "{summary}");
+    }
 }
 
 /// Defect 12: a reference column that does not turn (the world field written as `rx,ry,rz`) was refused as "the noise

@@ -194,9 +194,11 @@ pub fn heading_errors(input: &HeadingInput<'_>) -> HeadingErrors {
                 let sigma = input
                     .uncertainty
                     .map_or(0.0, |u| u.se_along_ut(raw, across));
-                parameters_deg = parameters_deg.max((sigma / h).to_degrees());
+                parameters_deg = parameters_deg.max((sigma / h).to_degrees().min(MAX_ERROR_DEG));
                 left_deg.push(
-                    ((sigma * sigma + unexplained_ut * unexplained_ut).sqrt() / h).to_degrees(),
+                    ((sigma * sigma + unexplained_ut * unexplained_ut).sqrt() / h)
+                        .to_degrees()
+                        .min(MAX_ERROR_DEG),
                 );
             }
             before = before.max(Stats::of(&before_deg));

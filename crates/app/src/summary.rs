@@ -290,7 +290,8 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         let _ = writeln!(out, "  note: {note}");
     }
     if let Some(d) = &cal.diagnosis {
-        out += &diagnosis(d, matches!(cal.fit, Fit::Scalar(_)));
+        let reference_off = crate::checks::reference_off(&cal.fit, &cal.field).is_some();
+        out += &diagnosis(d, matches!(cal.fit, Fit::Scalar(_)), reference_off);
     }
     out
 }
@@ -319,11 +320,18 @@ fn spans_fate(spans: &[GrossSpan]) -> String {
 }
 
 /// The diagnosis in a few lines (`scalar`: the scalar method, which has no attitude reference whose error the residual
-/// could be).
-fn diagnosis(d: &Diagnosis, scalar: bool) -> String {
+/// could be; `reference_off`: the reference disagrees with the readings by a good part of the field, which the
+/// WARNING above says).
+fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
     let mut out = String::new();
     let reference = if d.reference_floor_ut <= 0.5 * d.noise_floor_ut {
         String::new()
+    } else if reference_off {
+        format!(
+            " (the residual beyond the sensor's noise, {:.2} µT, is no error a reference has in magcal's convention: \
+             see the WARNING above)",
+            d.reference_floor_ut
+        )
     } else if scalar {
         format!(
             " (the residual beyond the sensor's noise, {:.2} µT, is left unexplained: the field's own variation where \
@@ -337,6 +345,11 @@ fn diagnosis(d: &Diagnosis, scalar: bool) -> String {
         )
     };
     let verdict = match d.verdict {
+        Finding::Consistent if reference_off => {
+            format!(
+                "not judged: the reference is off, so the residual cannot show what is left out{reference}"
+            )
+        }
         Finding::Consistent => {
             format!("consistent: nothing this recording can show is left out{reference}")
         }

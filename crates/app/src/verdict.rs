@@ -361,8 +361,18 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
     };
     // A reference in another convention: its warning says what to try, not more recording.
-    if verdict.grade != Grade::Good && crate::checks::reference_off(&cal.fit, &cal.field).is_some()
+    if verdict.grade != Grade::Good
+        && let Some((rms_ut, field_ut)) = crate::checks::reference_off(&cal.fit, &cal.field)
     {
+        let left_deg = match &chosen {
+            Ok(h) => h.left.worst_deg,
+            Err(lower_bound_deg) => *lower_bound_deg,
+        };
+        verdict.reason = format!(
+            "{} of heading error left: the readings and the attitude reference disagree by {:.0} % of the field",
+            fmt_deg(left_deg),
+            100.0 * rms_ut / field_ut
+        );
         "check the attitude reference's convention and timing: the WARNING below says what to try"
             .clone_into(&mut verdict.todo);
     }
