@@ -632,6 +632,30 @@ fn a_reference_in_another_convention_is_named_as_such() {
     }
 }
 
+/// Time in milliseconds under a `sample_rate_hz` in Hz (found 2026-11-27): a 20 ms lag was reported as 19.9 s, graded
+/// good, with no word. Now a warning names the column, its step and the metadata's interval.
+#[test]
+fn time_in_milliseconds_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = tumble(dir.path());
+    let rec = write(
+        dir.path(),
+        "ms.csv",
+        &map_columns(&text, &["t"], |t| 1000.0 * t),
+    );
+    let out = magcal_fit(&[rec.to_str().unwrap()]);
+    assert!(out.status.success());
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("WARNING: the time column `t` steps by 12.5")
+            && summary.contains("divide it by 1000")
+            && !summary.contains("GOOD"),
+        "{summary}"
+    );
+    let seconds = magcal_fit(&[write(dir.path(), "s.csv", &text).to_str().unwrap()]);
+    assert!(!String::from_utf8_lossy(&seconds.stdout).contains("time column"));
+}
+
 /// Defect 12: a reference column that does not turn (the world field written as `rx,ry,rz`) was refused as "the noise
 /// is as large as the rotation"; readings in gauss were refused as "the sensor was not rotated".
 #[test]

@@ -490,6 +490,7 @@ pub fn calibrate(
         m => m,
     };
     warnings.extend(units_unread(&rec.meta));
+    warnings.extend(time_unit_mismatch(rec));
     let mut notes = Vec::new();
     let (fit, mut noise, used, robust, rows_coverage) = match method {
         Method::Vector => {
@@ -678,6 +679,29 @@ fn units_unread(meta: &Metadata) -> Option<String> {
         format!(
             "the metadata says `units: {unit}`, but magcal reads every field and reading as µT (the format's unit): \
              convert the recording to µT, or read every figure here as {unit} labelled µT"
+        )
+    })
+}
+
+/// A mean time step this many times larger or smaller than the metadata's sample interval is no jitter: the time
+/// column is in another unit (ms), or the rate is wrong.
+const TIME_STEP_MISMATCH: f64 = 3.0;
+
+/// A warning when the time column's mean step (over the whole recording: host timestamps come in bursts, so the
+/// median step is no rate) disagrees with the metadata's `sample_rate_hz` by more than [`TIME_STEP_MISMATCH`]: time
+/// in milliseconds read as seconds made a 20 ms lag one of 19.9 s, graded good.
+fn time_unit_mismatch(rec: &Recording) -> Option<String> {
+    let rate_hz = rec.meta.sample_rate_hz?;
+    let t = rec.t_s.as_deref()?;
+    let (first, last) = (t.first()?, t.last()?);
+    let step = (last - first) / (t.len() - 1).max(1) as f64;
+    let ratio = step * rate_hz;
+    (ratio > TIME_STEP_MISMATCH || ratio < 1.0 / TIME_STEP_MISMATCH).then(|| {
+        format!(
+            "the time column `t` steps by {step:.4} a sample on average, but the metadata's sample_rate_hz \
+             ({rate_hz} Hz) means {:.4} s: `t` must be in seconds (in milliseconds, divide it by 1000), or the rate \
+             is wrong. Every time, span and lag here is in the column's units",
+            1.0 / rate_hz
         )
     })
 }
