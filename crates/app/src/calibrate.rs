@@ -696,7 +696,7 @@ fn time_unit_mismatch(rec: &Recording) -> Option<String> {
     let (first, last) = (t.first()?, t.last()?);
     let step = (last - first) / (t.len() - 1).max(1) as f64;
     let ratio = step * rate_hz;
-    (ratio > TIME_STEP_MISMATCH || ratio < 1.0 / TIME_STEP_MISMATCH).then(|| {
+    (!(1.0 / TIME_STEP_MISMATCH..=TIME_STEP_MISMATCH).contains(&ratio)).then(|| {
         format!(
             "the time column `t` steps by {step:.4} a sample on average, but the metadata's sample_rate_hz \
              ({rate_hz} Hz) means {:.4} s: `t` must be in seconds (in milliseconds, divide it by 1000), or the rate \
