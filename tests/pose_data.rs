@@ -106,6 +106,15 @@ fn rows_in_random_order_recover_the_seed_papers_calibration() {
         floor <= 1.25 * rms && floor > 0.0,
         "floor {floor} vs residual {rms}"
     );
+    // The summary does not print that bound as the sensor's noise, nor a heading noise of nothing.
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--field-ned", "20,1,30"]);
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("the sensor's noise not measured")
+            && summary.contains("a single reading's noise: not measured")
+            && !summary.contains("(×1.00)"),
+        "{summary}"
+    );
 }
 
 /// A jig recording: 24 poses × `per_pose` samples of a random sensor, 0.05 µT noise, `rx,ry,rz` per sample.

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
+use magcal_app::calibrate::{Method, calibrate, drop_clipped, read_to_calibrate};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
@@ -129,11 +129,12 @@ fn run(args: Args) -> anyhow::Result<()> {
         bail!("--field-ut must be a positive number of µT, got {f}");
     }
     let field_args = args.field.field_args(args.field_ut);
-    let (rec, field) =
+    let (mut rec, field) =
         read_to_calibrate(&args.recording, args.method, !args.no_diagnose, |meta| {
             Ok(resolve(&field_args, meta)?)
         })?;
-    let cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
+    let clipped = drop_clipped(&mut rec);
+    let mut cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
         Ok(cal) => cal,
         Err(e) => {
             // A refused fit still shows its readings: a recording that did not turn enough is plain to see.
@@ -143,6 +144,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             return Err(e).with_context(|| format!("{name}: cannot calibrate"));
         }
     };
+    cal.warnings.extend(clipped);
     let assessment = assess(&cal, &rec, args.export.is_some() || args.write_to.is_some());
 
     // With the export on stdout, everything else goes to stderr.

@@ -9,6 +9,7 @@ use std::borrow::Cow;
 
 use magcal_calib::coverage::CoverageError;
 use magcal_calib::robust::{self, RobustProblem};
+use magcal_calib::saturation;
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Inputs, Model};
@@ -292,6 +293,16 @@ pub enum CalibrateError {
          recording's metadata); {0}"
     )]
     NoReference(&'static str),
+    /// Every reading is (nearly) zero: the sensor returned nothing but zeros.
+    #[error(
+        "every reading is zero (|m| below {ZERO_READING:e} in all {rows} rows): the sensor returned only zeros — \
+         it was not powered, not configured (never started measuring), or there is a wiring fault — and there is \
+         nothing to calibrate; check the sensor's power, configuration and wiring, and record again"
+    )]
+    AllZero {
+        /// Rows in the recording.
+        rows: usize,
+    },
     /// The readings hardly vary and lie near zero: another unit than µT.
     #[error(
         "the readings hardly vary and lie {median:.3} units from zero, where the Earth's field is 22–67 µT: they are \
@@ -324,15 +335,22 @@ pub enum CalibrateError {
     Fit(#[from] FitError),
 }
 
+/// A reading of a magnitude below this is zero: no sensor in any unit reads a field that small.
+const ZERO_READING: f64 = 1e-9;
+
 /// The spread a reading can have by turning in a field, in units of the field: twice it, and a gain of up to this.
 const TURNING_SPREAD_GAIN: f64 = 1.5;
 
-/// Why a fit was refused, in the user's terms: `e`, or [`CalibrateError::NotMicrotesla`] when the readings hardly
-/// vary because they are all near zero (below a tenth of the Earth's weakest field), or [`CalibrateError::TwoCentres`]
+/// Why a fit was refused, in the user's terms: [`CalibrateError::AllZero`] when every reading is zero (below
+/// [`ZERO_READING`]), `e`, or [`CalibrateError::NotMicrotesla`] when the readings hardly vary because they are all
+/// near zero (below a tenth of the Earth's weakest field), or [`CalibrateError::TwoCentres`]
 /// when the fit failed for want of directions while the readings spread over more than turning in a field of
 /// `field_ut` can take them (`2·`[`TURNING_SPREAD_GAIN`] times it): a fit refused as a "planar rotation" of the
 /// physical BROAD 02 recording with 300 µT on its board for the middle 90 s told the user to turn the sensor more.
 fn refusal(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> CalibrateError {
+    if !raw_ut.is_empty() && raw_ut.iter().all(|m| frames::norm(*m) < ZERO_READING) {
+        return CalibrateError::AllZero { rows: raw_ut.len() };
+    }
     let wants_directions = matches!(
         e,
         FitError::Coverage(CoverageError::Planar { .. } | CoverageError::OneDirection { .. })
@@ -441,6 +459,36 @@ pub fn read_to_calibrate(
     };
     let rec = Recording::read_with(path, options)?;
     Ok((rec, field))
+}
+
+/// Leaves out the rows of `rec` where an axis sits at its extreme while the sensor turns ([`saturation`]: the
+/// sensor's range clipped it), and says so; nothing when no axis is pinned.
+pub fn drop_clipped(rec: &mut Recording) -> Option<String> {
+    let pinned = saturation::pinned(&rec.mag_ut);
+    if pinned.is_empty() {
+        return None;
+    }
+    let clipped = saturation::rows_pinned(&rec.mag_ut, &pinned);
+    let n = clipped.iter().filter(|c| **c).count();
+    let share = 100.0 * n as f64 / rec.len() as f64;
+    rec.retain_rows(&clipped.iter().map(|c| !c).collect::<Vec<bool>>());
+    let axes: Vec<String> = pinned
+        .iter()
+        .map(|p| {
+            format!(
+                "m{} at {} ({} samples)",
+                ["x", "y", "z"][p.axis],
+                p.value,
+                p.samples
+            )
+        })
+        .collect();
+    Some(format!(
+        "{n} samples ({share:.1} %) left out as clipped: {} — one value, the axis's extreme, held while the other \
+         axes swept on. The sensor's range was too small for the field it saw there (a magnet near, or a range \
+         setting too sensitive): set a wider range or keep magnets away, and record again if those directions matter",
+        axes.join(", ")
+    ))
 }
 
 /// A noise floor from the readings' differences above the fit's residual by more than `1 / this` is not the noise:
@@ -1085,5 +1133,41 @@ mod tests {
         )
         .unwrap_err();
         assert!(err.to_string().contains("--field-ned"), "{err}");
+    }
+
+    #[test]
+    fn readings_all_zero_are_a_sensor_returning_zeros_not_another_unit() {
+        let still = |m: [f64; 3]| {
+            let rows: String = (0..400)
+                .map(|i| format!("{},{},{},{}\n", i as f64 * 0.01, m[0], m[1], m[2]))
+                .collect();
+            Recording::from_reader("rec.csv", format!("t,mx,my,mz\n{rows}").as_bytes()).unwrap()
+        };
+        let field = ReferenceField::Vector {
+            field_ned_ut: [20.0, 1.0, 45.0],
+            source: "test".into(),
+        };
+        for method in [Method::Scalar, Method::Auto] {
+            let err = calibrate(&still([0.0; 3]), method, field.clone(), false).unwrap_err();
+            assert!(
+                matches!(err, CalibrateError::AllZero { rows: 400 }),
+                "{err}"
+            );
+            let msg = err.to_string();
+            assert!(
+                msg.starts_with("every reading is zero (|m| below 1e-9 in all 400 rows): the sensor returned only zeros")
+                    && msg.contains("nothing to calibrate")
+                    && !msg.contains("gauss"),
+                "{msg}"
+            );
+            // Readings near zero but not zero: another unit, as before.
+            let err =
+                calibrate(&still([0.2, -0.1, 0.4]), method, field.clone(), false).unwrap_err();
+            assert!(matches!(err, CalibrateError::NotMicrotesla { .. }), "{err}");
+            assert!(
+                err.to_string().contains("multiply such readings by 100"),
+                "{err}"
+            );
+        }
     }
 }

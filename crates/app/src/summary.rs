@@ -31,8 +31,8 @@ pub fn fmt_se(value: f64, se: f64) -> String {
     format!("{value:.decimals$} ±{se:.decimals$}")
 }
 
-/// The heading figures in three lines.
-fn heading_lines(h: &HeadingErrors, scalar: bool) -> String {
+/// The heading figures in three lines (the last without a figure when the sensor's noise could not be measured).
+fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -58,11 +58,15 @@ fn heading_lines(h: &HeadingErrors, scalar: bool) -> String {
             ""
         },
     );
-    let _ = writeln!(
-        out,
-        "  a single reading's noise adds ±{} (averaging readings reduces it)",
-        fmt_deg(h.noise_deg)
-    );
+    if noise_measured {
+        let _ = writeln!(
+            out,
+            "  a single reading's noise adds ±{} (averaging readings reduces it)",
+            fmt_deg(h.noise_deg)
+        );
+    } else {
+        out += "  a single reading's noise: not measured (the rows change orientation from one to the next)\n";
+    }
     out
 }
 
@@ -110,13 +114,20 @@ pub fn check_summary(
         Against::Vector => "per axis",
         Against::Magnitude { .. } => "of |B|",
     };
+    let noise = if c.noise_floor_ut > 0.0 {
+        format!(
+            "the sensor's noise {:.3} µT (×{:.2})",
+            c.noise_floor_ut,
+            c.residual_rms_ut / c.noise_floor_ut
+        )
+    } else {
+        "the sensor's noise not measured (the rows change orientation from one to the next)"
+            .to_owned()
+    };
     let _ = writeln!(
         out,
-        "  residual RMS {:.3} µT {what} (the raw readings as they are: {:.3} µT), the sensor's noise {:.3} µT (×{:.2})",
-        c.residual_rms_ut,
-        c.raw_residual_rms_ut,
-        c.noise_floor_ut,
-        c.residual_rms_ut / c.noise_floor_ut
+        "  residual RMS {:.3} µT {what} (the raw readings as they are: {:.3} µT), {noise}",
+        c.residual_rms_ut, c.raw_residual_rms_ut,
     );
     if let Some(m) = &c.measured {
         let _ = writeln!(
@@ -129,7 +140,7 @@ pub fn check_summary(
         );
     }
     match &c.heading {
-        Some(h) => out += &heading_lines(h, c.against != Against::Vector),
+        Some(h) => out += &heading_lines(h, c.against != Against::Vector, c.noise_floor_ut > 0.0),
         None => {
             let _ = writeln!(
                 out,
@@ -190,7 +201,7 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
     }
     out.push('\n');
     match &assessment.heading {
-        Some(h) => out += &heading_lines(h, cal.method() == Method::Scalar),
+        Some(h) => out += &heading_lines(h, cal.method() == Method::Scalar, cal.noise_measured),
         None => {
             let _ = writeln!(
                 out,
@@ -269,11 +280,18 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
         None => (cal.residual_rms_ut, cal.noise_floor_ut),
     };
-    let _ = writeln!(
-        out,
-        "  residual RMS {rms:.3} µT {what}, the sensor's noise {floor:.3} µT (×{:.2})",
-        rms / floor
-    );
+    if cal.noise_measured {
+        let _ = writeln!(
+            out,
+            "  residual RMS {rms:.3} µT {what}, the sensor's noise {floor:.3} µT (×{:.2})",
+            rms / floor
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "  residual RMS {rms:.3} µT {what}, the sensor's noise not measured (the note below says why)"
+        );
+    }
     let cov = match &cal.fit {
         Fit::Vector(v) => v.coverage,
         Fit::Scalar(s) => s.coverage,

@@ -30,6 +30,8 @@ pub mod noise;
 #[cfg(feature = "std")]
 pub mod robust;
 #[cfg(feature = "std")]
+pub mod saturation;
+#[cfg(feature = "std")]
 pub mod scalar;
 #[cfg(feature = "std")]
 pub mod sphere;

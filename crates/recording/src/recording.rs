@@ -233,6 +233,32 @@ impl Recording {
         self.mag_ut.is_empty()
     }
 
+    /// Keeps the rows where `keep` holds (one flag per row), in order, in every column.
+    pub fn retain_rows(&mut self, keep: &[bool]) {
+        assert_eq!(keep.len(), self.len(), "one flag per row");
+        fn retain<T>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().expect("one flag per row"));
+        }
+        fn retain_some<T>(v: &mut Option<Vec<T>>, keep: &[bool]) {
+            if let Some(v) = v {
+                retain(v, keep);
+            }
+        }
+        retain(&mut self.mag_ut, keep);
+        retain_some(&mut self.t_s, keep);
+        retain_some(&mut self.temp_c, keep);
+        retain_some(&mut self.quat, keep);
+        retain_some(&mut self.ref_ut, keep);
+        retain_some(&mut self.gyro_rad_s, keep);
+        self.currents
+            .iter_mut()
+            .for_each(|c| retain(&mut c.values, keep));
+        self.extra
+            .iter_mut()
+            .for_each(|c| retain(&mut c.values, keep));
+    }
+
     /// Which channels the recording has.
     pub fn layout(&self) -> Layout {
         Layout {

@@ -358,6 +358,16 @@ fn built_in_memory_with_push() {
     rec.write(&path).unwrap();
     assert_close(&rec, &Recording::read(&path).unwrap());
 
+    // Every column keeps the same rows.
+    let mut odd = rec.clone();
+    odd.retain_rows(&(0..100).map(|i| i % 2 == 1).collect::<Vec<_>>());
+    assert_eq!(odd.len(), 50);
+    for (k, row) in odd.rows().enumerate() {
+        // (Debug: NaN marks the missing values, and NaN ≠ NaN.)
+        let want = rec.row(2 * k + 1).to_sample();
+        assert_eq!(format!("{:?}", row.to_sample()), format!("{want:?}"));
+    }
+
     assert!(
         Recording::new(
             Metadata::default(),
