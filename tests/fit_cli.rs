@@ -490,3 +490,80 @@ fn a_scalar_fit_never_blames_a_reference_it_does_not_have() {
     assert!(text.contains("left unexplained"), "{text}");
     assert!(!text.contains("reference's own error"), "{text}");
 }
+
+#[test]
+fn headers_cut_off_files_and_zero_readings_are_explained() {
+    let dir = tempfile::tempdir().unwrap();
+    let zeros: String = (0..300).map(|i| format!("{i},0,0,0\n")).collect();
+    let cases: [(&str, String, &str); 4] = [
+        (
+            "units.csv",
+            "t,mx_uT,my_uT,mz_uT\n0,1,2,3\n".to_owned(),
+            "units.csv:1: missing required column \"mx\" (mx, my and mz are required); the header line 1 was read \
+             as 4 columns: \"t\", \"mx_uT\", \"my_uT\", \"mz_uT\";",
+        ),
+        (
+            "spaces.csv",
+            "t mx my mz\n0 1 2 3\n".to_owned(),
+            "read as 1 column: \"t mx my mz\"; name the field columns mx, my and mz",
+        ),
+        (
+            "cut.csv",
+            "t,mx,my,mz\n0,1,2,3\n0.1,1,2".to_owned(),
+            "cut.csv:3: short row: 3 fields, the header has 4; the file ends in the middle of this line (cut off, \
+             e.g. a logger stopped while writing): remove this last line and the rest can be read",
+        ),
+        (
+            "zeros.csv",
+            format!("t,mx,my,mz\n{zeros}"),
+            "every reading is zero (|m| below 1e-9 in all 300 rows): the sensor returned only zeros",
+        ),
+    ];
+    for (name, text, says) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let out = magcal_fit(&[path.to_str().unwrap(), "--no-diagnose"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(says), "{name}: {err}");
+    }
+}
+
+#[test]
+fn a_recording_given_before_the_parameters_to_magcal_apply_is_named_as_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec.csv");
+    std::fs::write(&rec, "# magcal-recording v1\nt,mx,my,mz\n0,1,2,3\n").unwrap();
+    let params = dir.path().join("params.toml");
+    std::fs::write(&params, "format = \"magcal-params v1\"\n").unwrap();
+    let out = common::magcal_apply(&rec, &params, &[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains(
+                "rec.csv: looks like a recording, not a parameters file: the parameters come first (magcal-apply \
+                 PARAMS.toml RECORDING.csv)"
+            ),
+        "{err}"
+    );
+}
+
+#[test]
+fn magcal_refusing_an_existing_recording_names_its_own_options() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("recording.csv"), "precious\n").unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_magcal"))
+        .args(["--out-dir", dir.path().to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains(
+                "recording.csv exists: a recording is never replaced; choose another --out-dir, or add --force"
+            )
+            && !err.contains("--out,"),
+        "{err}"
+    );
+    let kept = std::fs::read_to_string(dir.path().join("recording.csv")).unwrap();
+    assert_eq!(kept, "precious\n");
+}

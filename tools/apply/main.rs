@@ -9,7 +9,7 @@ use magcal_app::apply::check;
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::field::resolve;
 use magcal_app::files::{check_file_output, check_outputs};
-use magcal_app::params::ParamsFile;
+use magcal_app::params::{ParamsError, ParamsFile};
 use magcal_app::summary::check_summary;
 use magcal_app::verdict::Grade;
 use magcal_app::{say, sayln};
@@ -48,6 +48,16 @@ fn main() -> ExitCode {
     exit("magcal-apply", run(Args::parse()))
 }
 
+/// A recording given where the parameters go, with the order of the arguments; other errors as they are.
+fn swapped_hint(e: ParamsError) -> anyhow::Error {
+    match e {
+        ParamsError::Recording { .. } => anyhow::anyhow!(
+            "{e}: the parameters come first (magcal-apply PARAMS.toml RECORDING.csv)"
+        ),
+        e => e.into(),
+    }
+}
+
 fn run(args: Args) -> anyhow::Result<()> {
     // Neither input is ever overwritten, before anything is read.
     if let Some(out) = &args.out {
@@ -55,7 +65,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         check_outputs(&args.recording, &[("--out", out)])?;
         check_outputs(&args.params, &[("--out", out)])?;
     }
-    let params = ParamsFile::read(&args.params)?;
+    let params = ParamsFile::read(&args.params).map_err(swapped_hint)?;
     let rec = Recording::read(&args.recording)?;
     let name = args.recording.display().to_string();
     let field = resolve(&args.field.field_args(args.field_ut), &rec.meta)?;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Calibration, Fit, Method, calibrate};
+use magcal_app::calibrate::{Calibration, Fit, Method, calibrate, drop_clipped};
 use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::field::resolve;
@@ -56,6 +56,9 @@ struct Args {
     sim_seed: u64,
 }
 
+/// The option that names magcal's output, said when a recording there is refused.
+const OUT_DIR: &str = "--out-dir";
+
 fn main() -> ExitCode {
     exit("magcal", run(Args::parse()))
 }
@@ -72,7 +75,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             args.out_dir.display()
         );
     }
-    check_out(&rec_path, args.force)?;
+    check_out(&rec_path, args.force).map_err(|e| e.for_option(OUT_DIR))?;
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;
 
@@ -98,7 +101,8 @@ fn run(args: Args) -> anyhow::Result<()> {
         routine.name(),
         rec_path.display()
     )?;
-    let recorded = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
+    let recorded = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)
+        .map_err(|e| e.for_option(OUT_DIR))?;
     sayln!(
         "recorded {} samples in {:.1} s of device time{}",
         recorded.samples,
@@ -127,11 +131,13 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
 
     // Fit.
-    let rec = Recording::read(&rec_path)?;
+    let mut rec = Recording::read(&rec_path)?;
+    let clipped = drop_clipped(&mut rec);
     let name = rec_path.display().to_string();
     let field = resolve(&args.field.field_args(None), &rec.meta)?;
-    let cal = calibrate(&rec, Method::Auto, field, true)
+    let mut cal = calibrate(&rec, Method::Auto, field, true)
         .with_context(|| format!("{name}: cannot calibrate"))?;
+    cal.warnings.extend(clipped);
     let assessment = assess(&cal, &rec, false);
     say!("\n{}", summary(&cal, &assessment, &name))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();

@@ -125,6 +125,33 @@ pub enum ParamsError {
         /// Why.
         why: String,
     },
+    /// Not TOML, and its start is that of a recording (a `# magcal-recording` line or a header naming `mx`).
+    #[error("{path}: looks like a recording, not a parameters file")]
+    Recording {
+        /// The file.
+        path: String,
+    },
+}
+
+/// Whether `text` starts as a recording does: with a `# magcal-recording` line, or with a header row (after any `#`
+/// lines) that names `mx` among fields separated by commas, `;` or tabs.
+fn looks_like_recording(text: &str) -> bool {
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let Some(first) = lines.next() else {
+        return false;
+    };
+    if first.starts_with("# magcal-recording") {
+        return true;
+    }
+    let header = std::iter::once(first)
+        .chain(lines)
+        .find(|l| !l.starts_with('#'));
+    let separators = [',', ';', '\t'];
+    header.is_some_and(|h| {
+        h.contains(separators)
+            && h.split(separators)
+                .any(|field| field.trim().eq_ignore_ascii_case("mx"))
+    })
 }
 
 impl Correction {
@@ -269,9 +296,15 @@ impl ParamsFile {
             path: name.clone(),
             source,
         })?;
-        let file: ParamsFile = toml::from_str(&text).map_err(|e| ParamsError::Format {
-            path: name.clone(),
-            why: e.to_string(),
+        let file: ParamsFile = toml::from_str(&text).map_err(|e| {
+            if looks_like_recording(&text) {
+                ParamsError::Recording { path: name.clone() }
+            } else {
+                ParamsError::Format {
+                    path: name.clone(),
+                    why: e.to_string(),
+                }
+            }
         })?;
         if file.format != FORMAT {
             return Err(ParamsError::Format {
@@ -372,6 +405,32 @@ mod tests {
             },
         );
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_recording_given_as_parameters_is_named_as_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rec.csv");
+        for text in [
+            "# magcal-recording v1\n# sensor: x\nt,mx,my,mz\n0,1,2,3\n",
+            "t,MX,my,mz\n0,1,2,3\n",
+            "# sensor: x\n\nt;mx;my;mz\n0;1;2;3\n",
+        ] {
+            std::fs::write(&path, text).unwrap();
+            let err = ParamsFile::read(&path).unwrap_err();
+            assert!(
+                matches!(err, ParamsError::Recording { .. }),
+                "{text:?}: {err}"
+            );
+            assert!(
+                err.to_string()
+                    .ends_with("rec.csv: looks like a recording, not a parameters file"),
+                "{err}"
+            );
+        }
+        std::fs::write(&path, "format = \"magcal-params v1\"\nmx my\n").unwrap();
+        let err = ParamsFile::read(&path).unwrap_err();
+        assert!(matches!(err, ParamsError::Format { .. }), "{err}");
     }
 
     #[test]

@@ -43,7 +43,26 @@ impl Split {
 }
 
 /// A problem at a 1-based line of the file, in a column if it is in one field.
-pub(crate) type LineProblem = (u64, Option<usize>, ReadErrorKind);
+#[derive(Debug)]
+pub(crate) struct LineProblem {
+    pub line: u64,
+    pub column: Option<usize>,
+    pub kind: ReadErrorKind,
+    /// A short row that is the file's last line and has no line end: the file was cut off while it was written.
+    pub cut_off: bool,
+}
+
+impl LineProblem {
+    /// A problem that is not a cut-off last row.
+    fn at(line: u64, column: Option<usize>, kind: ReadErrorKind) -> LineProblem {
+        LineProblem {
+            line,
+            column,
+            kind,
+            cut_off: false,
+        }
+    }
+}
 
 /// Everything the rows need to know of the header.
 #[derive(Clone, Copy)]
@@ -88,7 +107,7 @@ impl Rows<'_> {
         loop {
             let end = fill(&mut input, &mut block, want).map_err(Err)?;
             if memchr::memchr(b'"', &block).is_some() {
-                let rest = io::Cursor::new(block).chain(input).chain(&b"\n"[..]);
+                let rest = io::Cursor::new(block).chain(input);
                 return self.quoted(
                     &mut csv_reader(rest, self.separator),
                     (line - 1, false),
@@ -103,7 +122,8 @@ impl Rows<'_> {
                 memchr::memrchr(b'\n', &block).map_or(0, |i| i + 1)
             };
             let first = line == first_line;
-            line = self.parse_block(&block[..cut], line, out, &mut time, &mut pieces, split)?;
+            let parsed = self.parse_block(&block[..cut], line, out, &mut time, &mut pieces, split);
+            line = parsed.map_err(|e| e.map(|p| cut_off_at_end(p, line, &block, end)))?;
             if end {
                 return Ok(());
             }
@@ -229,10 +249,11 @@ impl Rows<'_> {
             && t_s < previous_s
         {
             let kind = ReadErrorKind::TimeBackwards { previous_s, t_s };
-            return Err((line + piece.first_line, self.time_column, kind));
+            let at = line + piece.first_line;
+            return Err(LineProblem::at(at, self.time_column, kind));
         }
         if let Some((at, (column, kind))) = piece.problem.take() {
-            return Err((line + at, column, kind));
+            return Err(LineProblem::at(line + at, column, kind));
         }
         if piece.time.previous_s.is_some() {
             time.previous_s = piece.time.previous_s;
@@ -245,7 +266,7 @@ impl Rows<'_> {
     /// a one-line header (so that the lines it names are those of a reader that started at the header).
     pub(crate) fn quoted<R: Read>(
         &self,
-        csv: &mut csv::Reader<R>,
+        csv: &mut csv::Reader<Terminated<R>>,
         (header_line, header_read): (u64, bool),
         out: &mut Recording,
         mut time: TimeLink,
@@ -265,7 +286,10 @@ impl Rows<'_> {
                     record.as_slice().iter().filter(|b| **b == b'\n').count() as u64;
                 let position = csv.position().line() + u64::from(!header_read);
                 let line = header_line + position.saturating_sub(2 + breaks_inside);
-                return Err(Ok((line, column, kind)));
+                let mut problem = LineProblem::at(line, column, kind);
+                problem.cut_off =
+                    is_short(&problem.kind) && last_without_line_end(csv, &mut record);
+                return Err(Ok(problem));
             }
             if let Some(rows) = &mut batch
                 && rows.mag_ut.len() >= QUOTED_BATCH_ROWS
@@ -286,16 +310,88 @@ impl Rows<'_> {
 /// Rows of a file with quotes parsed before they are appended, when the recording keeps other columns than the file.
 const QUOTED_BATCH_ROWS: usize = 1 << 14;
 
-/// A csv reader of rows separated by `separator` and ended by '\n' only (every line end is one by now). Give it input
-/// that ends with a '\n', so that every row does: its line count after a row is then one past the row's last line.
-pub(crate) fn csv_reader<R: Read>(input: R, separator: u8) -> csv::Reader<R> {
+/// Whether a problem is a short row (which, on the file's last line without a line end, is a file cut off).
+fn is_short(kind: &ReadErrorKind) -> bool {
+    matches!(kind, ReadErrorKind::ShortRow { .. })
+}
+
+/// `problem` of the block that starts at line `first_line`, marked cut off if it is a short row on the block's last
+/// line, the block is the file's `end` and does not end with a line end.
+fn cut_off_at_end(
+    mut problem: LineProblem,
+    first_line: u64,
+    block: &[u8],
+    end: bool,
+) -> LineProblem {
+    problem.cut_off = end
+        && is_short(&problem.kind)
+        && block.last().is_some_and(|b| *b != b'\n')
+        && problem.line == first_line + memchr::memchr_iter(b'\n', block).count() as u64;
+    problem
+}
+
+/// After a row of `csv`: whether it was the last and the input had no line end after it (the csv reader reads on
+/// into `record`).
+fn last_without_line_end<R: Read>(
+    csv: &mut csv::Reader<Terminated<R>>,
+    record: &mut ByteRecord,
+) -> bool {
+    matches!(csv.read_byte_record(record), Ok(false)) && !csv.get_ref().ended_with_line_end
+}
+
+/// The input followed by one '\n' (so that every row ends with one), noting whether the input's own last byte was
+/// one.
+pub(crate) struct Terminated<R> {
+    input: R,
+    /// The input's last byte so far was a '\n' (true for an empty input).
+    ended_with_line_end: bool,
+    /// The input has ended.
+    input_done: bool,
+    /// The added '\n' has been read.
+    done: bool,
+}
+
+impl<R: Read> Terminated<R> {
+    fn new(input: R) -> Terminated<R> {
+        Terminated {
+            input,
+            ended_with_line_end: true,
+            input_done: false,
+            done: false,
+        }
+    }
+}
+
+impl<R: Read> Read for Terminated<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if buf.is_empty() || self.done {
+            return Ok(0);
+        }
+        if !self.input_done {
+            let n = self.input.read(buf)?;
+            if n > 0 {
+                self.ended_with_line_end = buf[n - 1] == b'\n';
+                return Ok(n);
+            }
+            self.input_done = true;
+        }
+        buf[0] = b'\n';
+        self.done = true;
+        Ok(1)
+    }
+}
+
+/// A csv reader of `input` with a '\n' added ([`Terminated`]), rows separated by `separator` and ended by '\n' only
+/// (every line end is one by now): every row ends with a '\n', so that the reader's line count after a row is one
+/// past the row's last line.
+pub(crate) fn csv_reader<R: Read>(input: R, separator: u8) -> csv::Reader<Terminated<R>> {
     ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
         .delimiter(separator)
         .terminator(Terminator::Any(b'\n'))
         .buffer_capacity(256 << 10)
-        .from_reader(input)
+        .from_reader(Terminated::new(input))
 }
 
 /// Reads from `input` until `buf` holds at least `want` bytes or the input ends; returns whether it ended.

@@ -15,7 +15,8 @@ pub struct ColumnRef {
 /// the column.
 ///
 /// Displays as `name:line:column (colname): message`, `name:line: message` for line-level problems, or
-/// `name: message` for problems with the file as a whole.
+/// `name: message` for problems with the file as a whole; the message may end with a note of what the reader saw
+/// (`; …`).
 #[derive(Debug)]
 pub struct ReadError(Box<Inner>);
 
@@ -25,6 +26,8 @@ struct Inner {
     line: Option<u64>,
     column: Option<ColumnRef>,
     kind: ReadErrorKind,
+    /// What the reader adds to the kind's message where it knows more (the header as read, a file cut off).
+    note: Option<String>,
 }
 
 impl ReadError {
@@ -39,7 +42,14 @@ impl ReadError {
             line,
             column,
             kind,
+            note: None,
         }))
+    }
+
+    /// The error with `note` added to its message, if there is one.
+    pub(crate) fn with_note(mut self, note: Option<String>) -> ReadError {
+        self.0.note = note;
+        self
     }
 
     /// What went wrong (for matching on the kind of failure).
@@ -85,9 +95,40 @@ impl fmt::Display for ReadError {
                 write!(f, ":{} ({})", col.index, name.escape_debug())?;
             }
         }
-        write!(f, ": {}", self.kind())
+        write!(f, ": {}", self.kind())?;
+        if let Some(note) = &self.0.note {
+            write!(f, "; {note}")?;
+        }
+        Ok(())
     }
 }
+
+/// At most this many column names are quoted in [`header_as_read`].
+const HEADER_NAMES_SHOWN: usize = 8;
+
+/// A note for [`ReadErrorKind::MissingColumn`]: the columns the header line was split into (at most
+/// [`HEADER_NAMES_SHOWN`], each a short escaped excerpt), and how the columns should be named and separated.
+pub(crate) fn header_as_read(line: u64, names: &[String]) -> String {
+    let n = names.len();
+    let mut shown: Vec<String> = names
+        .iter()
+        .take(HEADER_NAMES_SHOWN)
+        .map(|name| format!("{:?}", excerpt(name)))
+        .collect();
+    if n > HEADER_NAMES_SHOWN {
+        shown.push(format!("… ({} more)", n - HEADER_NAMES_SHOWN));
+    }
+    let columns = if n == 1 { "column" } else { "columns" };
+    format!(
+        "the header line {line} was read as {n} {columns}: {}; name the field columns mx, my and mz (no units in \
+         the name) and separate the columns with commas (or ';' or tabs)",
+        shown.join(", ")
+    )
+}
+
+/// A note for a [`ReadErrorKind::ShortRow`] that is the file's last line and has no line end.
+pub(crate) const CUT_OFF: &str = "the file ends in the middle of this line (cut off, e.g. a logger stopped while \
+                                  writing): remove this last line and the rest can be read";
 
 impl std::error::Error for ReadError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {

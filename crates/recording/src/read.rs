@@ -10,7 +10,7 @@ use std::path::Path;
 use csv::ByteRecord;
 
 use crate::blocks::{Rows, Split, csv_reader};
-use crate::error::{ColumnRef, ReadError, ReadErrorKind, excerpt};
+use crate::error::{CUT_OFF, ColumnRef, ReadError, ReadErrorKind, excerpt, header_as_read};
 use crate::layout::{Header, MAG, Role};
 use crate::limits;
 use crate::line_ends::LineEnds;
@@ -152,7 +152,7 @@ pub(crate) fn read_split<R: Read>(
     // on, as it would any file with quotes; otherwise it reads the header line alone and the rows are read in blocks.
     let quoted = header_text.contains(&b'"') || split.sequential;
     let (mut csv, mut input): (_, Option<Box<dyn Read>>) = if quoted {
-        let all = io::Cursor::new(header_text).chain(input).chain(&b"\n"[..]);
+        let all = io::Cursor::new(header_text).chain(input);
         (csv_reader(Box::new(all) as Box<dyn Read>, separator), None)
     } else {
         let header = Box::new(io::Cursor::new(header_text)) as Box<dyn Read>;
@@ -181,12 +181,15 @@ pub(crate) fn read_split<R: Read>(
         names.push(text.to_owned());
     }
     let header = Header::parse(&names).map_err(|(column, kind)| {
+        let note = matches!(kind, ReadErrorKind::MissingColumn(_))
+            .then(|| header_as_read(header_line, &names));
         ReadError::new(
             name,
             Some(header_line),
             column.map(|i| column_ref(&names, i)),
             kind,
         )
+        .with_note(note)
     })?;
 
     let mut out = Recording::empty(meta, &header.layout);
@@ -223,9 +226,11 @@ pub(crate) fn read_split<R: Read>(
     };
     match read {
         Ok(()) => {}
-        Err(Ok((line, column, kind))) => {
-            let column = column.map(|i| column_ref(&names, i));
-            return Err(ReadError::new(name, Some(line), column, kind));
+        Err(Ok(problem)) => {
+            let column = problem.column.map(|i| column_ref(&names, i));
+            let note = problem.cut_off.then(|| CUT_OFF.to_owned());
+            let error = ReadError::new(name, Some(problem.line), column, problem.kind);
+            return Err(error.with_note(note));
         }
         Err(Err(e)) => return Err(io_error(e)),
     }
@@ -368,6 +373,33 @@ mod tests {
         assert_eq!(column_count(b"mx,my,mz", b','), 3);
         assert_eq!(column_count(b"mx,\"a,b\",mz,\"say \"\"x,y\"\"\"", b','), 4);
         assert_eq!(column_count(b"mx;my;mz,x", b';'), 3);
+    }
+
+    /// The message of reading `text`.
+    fn message(text: &[u8]) -> String {
+        Recording::from_reader("rec.csv", text)
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn a_missing_field_column_names_the_columns_the_header_was_read_as() {
+        let msg = message(b"# a: b\nt,mx_uT,my_uT,mz_uT\n0,1,2,3\n");
+        assert_eq!(
+            msg,
+            "rec.csv:2: missing required column \"mx\" (mx, my and mz are required); the header line 2 was read as 4 \
+             columns: \"t\", \"mx_uT\", \"my_uT\", \"mz_uT\"; name the field columns mx, my and mz (no units in \
+             the name) and separate the columns with commas (or ';' or tabs)"
+        );
+        let msg = message(b"t mx my mz\n0 1 2 3\n");
+        assert!(msg.contains("read as 1 column: \"t mx my mz\";"), "{msg}");
+        let wide: Vec<String> = (0..500).map(|i| format!("c{i}")).collect();
+        let msg = message(format!("{}\n1\n", wide.join(",")).as_bytes());
+        assert!(
+            msg.contains("500 columns: \"c0\", ") && msg.contains("\"c7\", … (492 more);"),
+            "{msg}"
+        );
+        assert!(msg.len() < 400, "{} bytes of message", msg.len());
     }
 
     #[test]

@@ -147,6 +147,9 @@ impl RecordOptions {
     }
 }
 
+/// The option that names the recording in magcal-record, said in [`RecordError::Exists`] and [`RecordError::Busy`].
+const OUT_OPTION: &str = "--out";
+
 /// Checks, before the device is opened, that `path` can take a new recording: it does not exist, or `force` says
 /// to replace it; and no recorder is writing it now.
 pub fn check_out(path: &Path, force: bool) -> Result<(), RecordError> {
@@ -162,11 +165,13 @@ pub fn check_out(path: &Path, force: bool) -> Result<(), RecordError> {
     if let Err(std::fs::TryLockError::WouldBlock) = file.try_lock() {
         return Err(RecordError::Busy {
             path: path.to_owned(),
+            option: OUT_OPTION,
         });
     }
     if !force {
         return Err(RecordError::Exists {
             path: path.to_owned(),
+            option: OUT_OPTION,
         });
     }
     Ok(())
@@ -246,23 +251,27 @@ impl RecordSummary {
 pub enum RecordError {
     /// The file exists, and replacing it was not asked for: nothing was recorded, the file is untouched.
     #[error(
-        "{} exists: a recording is never replaced; choose another output (--out, or magcal's --out-dir), or add \
-         --force to replace it (nothing was recorded)",
+        "{} exists: a recording is never replaced; choose another {option}, or add --force to replace it (nothing \
+         was recorded)",
         path.display()
     )]
     Exists {
         /// The path.
         path: PathBuf,
+        /// The option that names the output (`--out`; see [`RecordError::for_option`]).
+        option: &'static str,
     },
     /// Another process holds the file's lock (another recorder is writing it): nothing was recorded.
     #[error(
-        "{} is being written by another recorder (it holds the file's lock): choose another --out (nothing was \
+        "{} is being written by another recorder (it holds the file's lock): choose another {option} (nothing was \
          recorded)",
         path.display()
     )]
     Busy {
         /// The path.
         path: PathBuf,
+        /// The option that names the output (`--out`; see [`RecordError::for_option`]).
+        option: &'static str,
     },
     /// The file could not be created: nothing was recorded.
     #[error("cannot create the recording {}: {io}; nothing was recorded", path.display())]
@@ -321,6 +330,19 @@ pub enum RecordError {
         /// Rows in the file.
         kept: u64,
     },
+}
+
+impl RecordError {
+    /// The error with `option` as the option to choose another output with, for a tool whose output is named by
+    /// another option than magcal-record's `--out` (magcal's `--out-dir`).
+    pub fn for_option(mut self, option: &'static str) -> RecordError {
+        if let RecordError::Exists { option: o, .. } | RecordError::Busy { option: o, .. } =
+            &mut self
+        {
+            *o = option;
+        }
+        self
+    }
 }
 
 /// Identical consecutive readings that mean the outputs are stuck: this many, or two seconds' worth if more.
@@ -552,9 +574,11 @@ pub fn record(
         .map_err(|source| match source.kind() {
             std::io::ErrorKind::AlreadyExists => RecordError::Exists {
                 path: opts.out.clone(),
+                option: OUT_OPTION,
             },
             std::io::ErrorKind::WouldBlock => RecordError::Busy {
                 path: opts.out.clone(),
+                option: OUT_OPTION,
             },
             // A folder that is not there is named: the system's "No such file" does not say which.
             std::io::ErrorKind::NotFound => RecordError::Create {
@@ -1028,6 +1052,32 @@ mod tests {
             check_out(dir.path(), true),
             Err(RecordError::Create { .. })
         ));
+    }
+
+    #[test]
+    fn a_refusal_names_the_option_of_the_tool() {
+        let path = PathBuf::from("out/recording.csv");
+        let exists = RecordError::Exists {
+            path: path.clone(),
+            option: OUT_OPTION,
+        };
+        assert_eq!(
+            exists.to_string(),
+            "out/recording.csv exists: a recording is never replaced; choose another --out, or add --force to \
+             replace it (nothing was recorded)"
+        );
+        let exists = exists.for_option("--out-dir").to_string();
+        assert!(
+            exists.contains("choose another --out-dir, or add --force")
+                && !exists.contains("--out,"),
+            "{exists}"
+        );
+        let busy = RecordError::Busy {
+            path,
+            option: OUT_OPTION,
+        };
+        let busy = busy.for_option("--out-dir").to_string();
+        assert!(busy.contains("choose another --out-dir (nothing"), "{busy}");
     }
 
     #[test]

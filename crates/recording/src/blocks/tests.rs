@@ -293,3 +293,34 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_short_last_row_without_a_line_end_is_said_to_be_cut_off_by_every_reader() {
+    let cut = crate::error::CUT_OFF;
+    let header = "# magcal-recording v1\nt,mx,my,mz,note\n";
+    let rows: String = (0..300).map(|i| format!("{i},1,2,3,n\n")).collect();
+    for (tail, cut_off) in [
+        ("300,1,", true),
+        ("300,1,2,3,\"a\"\n301,1", true),
+        ("300,1,\n", false),
+        ("300,1,\r", false),
+        ("300,1,\n \n", false),
+        ("300,1,\n301,1,2,3,n", false),
+    ] {
+        let text = format!("{header}{rows}{tail}");
+        assert_same(text.as_bytes());
+        let said = outcome(text.as_bytes(), SEQUENTIAL);
+        assert!(said.starts_with("error rec.csv:"), "{tail:?}: {said}");
+        assert!(said.contains("short row"), "{tail:?}: {said}");
+        assert_eq!(said.contains(cut), cut_off, "{tail:?}: {said}");
+    }
+    // A quote in the header: the csv reader reads it all.
+    let text = b"t,mx,my,\"mz\"\n0,1,2,3\n0.1,1";
+    let said = outcome(text, Split::DEFAULT);
+    assert!(
+        said.contains(&format!(
+            "rec.csv:3: short row: 2 fields, the header has 4; {cut} at"
+        )),
+        "{said}"
+    );
+}
