@@ -286,6 +286,69 @@ fn no_output_ever_overwrites_the_input_and_nothing_is_written_when_one_would() {
     assert!(report.exists());
 }
 
+/// A recording is never replaced by an output (found 2026-11-27: `--out other.csv` replaced another recording, as
+/// did magcal-apply's and magcal-sim's `--out`); a tool's own kind of recording may be made again: magcal-sim's
+/// simulated ones, magcal-apply's calibrated copies.
+#[test]
+fn outputs_never_replace_a_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = simulate(dir.path(), "rec.csv", &["--duration", "30", "--seed", "2"]);
+    let real = dir.path().join("real.csv");
+    std::fs::write(
+        &real,
+        "# magcal-recording v1\n# sensor: lis3mdl\nt,mx,my,mz\n0,1,2,3\n",
+    )
+    .unwrap();
+    let logger = dir.path().join("logger.csv");
+    std::fs::write(&logger, "time;MX;MY;MZ\n0;1;2;3\n").unwrap();
+    let before = |p: &std::path::Path| std::fs::read(p).unwrap();
+    let (real_bytes, logger_bytes) = (before(&real), before(&logger));
+    let params = dir.path().join("p.toml");
+    assert!(
+        magcal_fit(&[rec.to_str().unwrap(), "--out", params.to_str().unwrap()])
+            .status
+            .success()
+    );
+    for target in [&real, &logger] {
+        let t = target.to_str().unwrap();
+        for options in [
+            vec!["--out", t],
+            vec!["--report", t],
+            vec!["--export", "json", "--export-out", t],
+        ] {
+            let mut args = vec![rec.to_str().unwrap()];
+            args.extend(&options);
+            let out = magcal_fit(&args);
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                !out.status.success() && err.contains("holds a recording"),
+                "{options:?}: {err}"
+            );
+        }
+        let out = common::magcal_apply(&params, &rec, &["--out", t]);
+        assert!(!out.status.success(), "magcal-apply --out {t}");
+        let out = common::magcal_sim(&["--duration", "10"], target);
+        assert!(!out.status.success(), "magcal-sim --out {t}");
+    }
+    assert_eq!(before(&real), real_bytes);
+    assert_eq!(before(&logger), logger_bytes);
+    // Its own kind again: a simulated recording over a simulated one, a calibrated copy over one.
+    assert!(
+        common::magcal_sim(&["--duration", "10"], &rec)
+            .status
+            .success()
+    );
+    let copy = dir.path().join("calibrated.csv");
+    for _ in 0..2 {
+        let out = common::magcal_apply(&params, &rec, &["--out", copy.to_str().unwrap()]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}
+
 /// The named lines of an effect left out, as the export and the terminal print them.
 fn named(kind: &str, effect: &serde_json::Value) -> String {
     format!(

@@ -100,13 +100,14 @@ fn check_paths(args: &Args) -> anyhow::Result<()> {
     ];
     for (flag, path) in named {
         if let Some(path) = path {
-            if flag != "--plots" {
-                check_file_output(flag, path)?;
-            }
             outputs.push((flag, path));
         }
     }
+    // The input first: an output naming it is refused as such.
     check_outputs(&args.recording, &outputs)?;
+    for &(flag, path) in outputs.iter().filter(|(flag, _)| *flag != "--plots") {
+        check_file_output(flag, path)?;
+    }
     if let Some(dir) = &args.plots
         && dir.exists()
         && !dir.is_dir()

@@ -1,6 +1,6 @@
 //! Output files: written atomically (a temporary file in the same directory, synced, then renamed over the target,
 //! so a reader sees the old file or the new one, never half of one, and an error leaves the old one untouched), with
-//! the usual permissions, and never over the input they were made from.
+//! the usual permissions, and never over the input they were made from nor over a recording.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -75,6 +75,18 @@ pub enum OutputConflict {
         /// The output path as given.
         output: PathBuf,
     },
+    /// The output would replace a recording.
+    #[error(
+        "{flag} {} holds a recording: an output never replaces one (readings cannot be recorded again); nothing was \
+         written (choose another path)",
+        output.display()
+    )]
+    IsRecording {
+        /// The option that names the output.
+        flag: String,
+        /// The output path as given.
+        output: PathBuf,
+    },
     /// Two outputs name the same file.
     #[error(
         "{first} and {second} both name {}: one would overwrite the other; nothing was written",
@@ -91,9 +103,24 @@ pub enum OutputConflict {
 }
 
 /// Checks, before anything is written, that the file an option (`flag`) names can be made: its folder exists and is
-/// a folder, and it is not itself a folder (otherwise the work would be done and then lost on the write, with only
-/// the system's word for why).
+/// a folder, it is not itself a folder (otherwise the work would be done and then lost on the write, with only the
+/// system's word for why), and it is no recording (parameters, reports and exports never replace one).
 pub fn check_file_output(flag: &str, path: &Path) -> Result<(), OutputConflict> {
+    check_output(flag, path, None)
+}
+
+/// [`check_file_output`] for an output that is itself a recording, which may replace a recording whose metadata has
+/// the key `remakes` (`simulated` for magcal-sim, `calibrated_with` for magcal-apply's calibrated copy): one the tool
+/// made before, and can make again.
+pub fn check_recording_output(
+    flag: &str,
+    path: &Path,
+    remakes: &str,
+) -> Result<(), OutputConflict> {
+    check_output(flag, path, Some(remakes))
+}
+
+fn check_output(flag: &str, path: &Path, remakes: Option<&str>) -> Result<(), OutputConflict> {
     let folder = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -112,7 +139,61 @@ pub fn check_file_output(flag: &str, path: &Path) -> Result<(), OutputConflict> 
             output: path.to_owned(),
         });
     }
+    if holds_recording(path, remakes) {
+        return Err(OutputConflict::IsRecording {
+            flag: flag.to_owned(),
+            output: path.to_owned(),
+        });
+    }
     Ok(())
+}
+
+/// Bytes of a file's start read to tell whether it is a recording: the metadata block and the header.
+const RECORDING_PROBE_BYTES: u64 = 64 << 10;
+
+/// Whether `path` holds a recording ([`looks_like_recording`]) whose metadata lacks the key `remakes`.
+fn holds_recording(path: &Path, remakes: Option<&str>) -> bool {
+    use std::io::Read as _;
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut start = Vec::new();
+    if file
+        .take(RECORDING_PROBE_BYTES)
+        .read_to_end(&mut start)
+        .is_err()
+    {
+        return false;
+    }
+    let text = String::from_utf8_lossy(&start);
+    let remade = remakes.is_some_and(|key| {
+        text.lines()
+            .take_while(|l| l.starts_with('#'))
+            .filter_map(|l| l.trim_start_matches('#').trim_start().split_once(':'))
+            .any(|(k, _)| k.trim() == key)
+    });
+    looks_like_recording(&text) && !remade
+}
+
+/// Whether `text` starts as a recording does: with a `# magcal-recording` line, or with a header row (after any `#`
+/// lines) that names `mx` among fields separated by commas, `;` or tabs.
+pub fn looks_like_recording(text: &str) -> bool {
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let Some(first) = lines.next() else {
+        return false;
+    };
+    if first.starts_with("# magcal-recording") {
+        return true;
+    }
+    let header = std::iter::once(first)
+        .chain(lines)
+        .find(|l| !l.starts_with('#'));
+    let separators = [',', ';', '\t'];
+    header.is_some_and(|h| {
+        h.contains(separators)
+            && h.split(separators)
+                .any(|field| field.trim().eq_ignore_ascii_case("mx"))
+    })
 }
 
 /// Where `path` leads: the file itself if it exists (links followed), else its directory's real path joined with

@@ -133,27 +133,6 @@ pub enum ParamsError {
     },
 }
 
-/// Whether `text` starts as a recording does: with a `# magcal-recording` line, or with a header row (after any `#`
-/// lines) that names `mx` among fields separated by commas, `;` or tabs.
-fn looks_like_recording(text: &str) -> bool {
-    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
-    let Some(first) = lines.next() else {
-        return false;
-    };
-    if first.starts_with("# magcal-recording") {
-        return true;
-    }
-    let header = std::iter::once(first)
-        .chain(lines)
-        .find(|l| !l.starts_with('#'));
-    let separators = [',', ';', '\t'];
-    header.is_some_and(|h| {
-        h.contains(separators)
-            && h.split(separators)
-                .any(|field| field.trim().eq_ignore_ascii_case("mx"))
-    })
-}
-
 impl Correction {
     /// The file form of a body-fixed effect; `channels` names the recording's current columns.
     pub fn from_effect(e: &Effect, channels: &[String]) -> Option<Correction> {
@@ -297,7 +276,7 @@ impl ParamsFile {
             source,
         })?;
         let file: ParamsFile = toml::from_str(&text).map_err(|e| {
-            if looks_like_recording(&text) {
+            if crate::files::looks_like_recording(&text) {
                 ParamsError::Recording { path: name.clone() }
             } else {
                 ParamsError::Format {
