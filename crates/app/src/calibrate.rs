@@ -731,22 +731,26 @@ fn units_unread(meta: &Metadata) -> Option<String> {
     })
 }
 
-/// A mean time step this many times larger or smaller than the metadata's sample interval is no jitter: the time
-/// column is in another unit (ms), or the rate is wrong.
+/// A time step this many times larger or smaller than the metadata's sample interval is no jitter: the time column
+/// is in another unit (ms), or the rate is wrong.
 const TIME_STEP_MISMATCH: f64 = 3.0;
 
-/// A warning when the time column's mean step (over the whole recording: host timestamps come in bursts, so the
-/// median step is no rate) disagrees with the metadata's `sample_rate_hz` by more than [`TIME_STEP_MISMATCH`]: time
-/// in milliseconds read as seconds made a 20 ms lag one of 19.9 s, graded good.
+/// A warning when the time column disagrees with the metadata's `sample_rate_hz` by more than
+/// [`TIME_STEP_MISMATCH`] both in its median step and in its mean step over the whole recording: time in
+/// milliseconds read as seconds made a 20 ms lag one of 19.9 s, graded good. Either alone is no unit: host timestamps
+/// come in bursts (the median step is a fraction of the interval), and the cube routine records only the poses (the
+/// mean step spans the turns between them).
 fn time_unit_mismatch(rec: &Recording) -> Option<String> {
     let rate_hz = rec.meta.sample_rate_hz?;
     let t = rec.t_s.as_deref()?;
     let (first, last) = (t.first()?, t.last()?);
-    let step = (last - first) / (t.len() - 1).max(1) as f64;
-    let ratio = step * rate_hz;
-    (!(1.0 / TIME_STEP_MISMATCH..=TIME_STEP_MISMATCH).contains(&ratio)).then(|| {
+    let mean_step = (last - first) / (t.len() - 1).max(1) as f64;
+    let median_step = diagnosis::typical_step(t);
+    let off =
+        |step: f64| !(1.0 / TIME_STEP_MISMATCH..=TIME_STEP_MISMATCH).contains(&(step * rate_hz));
+    (off(mean_step) && off(median_step)).then(|| {
         format!(
-            "the time column `t` steps by {step:.4} a sample on average, but the metadata's sample_rate_hz \
+            "the time column `t` steps by {median_step:.4} a sample (median), but the metadata's sample_rate_hz \
              ({rate_hz} Hz) means {:.4} s: `t` must be in seconds (in milliseconds, divide it by 1000), or the rate \
              is wrong. Every time, span and lag here is in the column's units",
             1.0 / rate_hz

@@ -48,6 +48,7 @@ pub use candidates::Untestable;
 pub use gross::SpanKind;
 pub use guard::NOTICEABLE_GAIN;
 pub use locate::{Components, Located, Orientation, Segment};
+pub use timing::typical_step;
 
 use crate::FitError;
 use crate::chunks;
