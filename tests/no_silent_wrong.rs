@@ -361,22 +361,20 @@ fn raw_counts_get_a_units_warning_with_the_scale() {
         counts.push('\n');
     }
     let rec = write(dir.path(), "counts.csv", &counts);
-    let out = magcal_fit(&[
-        rec.to_str().unwrap(),
-        "--no-diagnose",
-        "--export",
-        "ardupilot",
-    ]);
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose"]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let summary = String::from_utf8_lossy(&out.stderr);
+    let summary = String::from_utf8_lossy(&out.stdout);
     assert!(
         summary.contains("not in µT") && summary.contains("HMC5883L"),
         "{summary}"
     );
+    // An export of it is refused (readings_in_another_unit_are_not_exported).
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--export", "ardupilot"]);
+    assert!(!out.status.success());
     // With the field's magnitude known, the scale is the one that gives it: about 1/10.9 (the sensor's own gains
     // differ by a few per cent).
     let out = magcal_fit(&[
@@ -692,6 +690,28 @@ fn an_axis_clipped_by_the_sensors_range_is_left_out_saying_so() {
     assert!(
         !String::from_utf8_lossy(&magcal_fit(&[rec.to_str().unwrap(), field[0], field[1]]).stdout)
             .contains("clipped")
+    );
+}
+
+/// Readings in another unit than µT (here counts of 0.1 µT) exported to an autopilot (found 2026-11-27: the warning
+/// said the export would be wrong, and the export was written, exit 0). Now the export is refused, saying why.
+#[test]
+fn readings_in_another_unit_are_not_exported() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = tumble(dir.path());
+    let rec = write(
+        dir.path(),
+        "counts.csv",
+        &map_columns(&text, &["mx", "my", "mz"], |v| 10.0 * v),
+    );
+    let out = magcal_fit(&[rec.to_str().unwrap(), "--export", "ardupilot"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stdout}");
+    assert!(!stdout.contains("COMPASS_"), "{stdout}");
+    assert!(
+        stderr.contains("not exported") && stderr.contains("not µT"),
+        "{stderr}"
     );
 }
 

@@ -187,6 +187,12 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
     // Exports and devices hold A and b only: the base fit when the final model has corrections.
     let target = target_model(&cal);
+    if cal.raw_not_ut && (args.export.is_some() || args.write_to.is_some()) {
+        bail!(
+            "{name}: not exported or written: the raw readings are not µT (the WARNING above), so the offset is in \
+             their units and the target would read it wrong; convert the recording to µT and fit again"
+        );
+    }
     let found = cal.diagnosis.as_ref().map_or(&[][..], |d| &d.effects[..]);
     if let Some(format) = args.export {
         if let Some(why) = refusal(&target, format) {

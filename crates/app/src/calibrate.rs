@@ -93,6 +93,9 @@ pub struct Calibration {
     pub notes: Vec<String>,
     /// Things the user must not miss: the calibration may be wrong or unusable as it stands, and what to do.
     pub warnings: Vec<String>,
+    /// The raw readings are not µT (a warning says so): the offset is in their units, so exports and write-back,
+    /// which autopilots and devices read in their own units, would be wrong.
+    pub raw_not_ut: bool,
     /// What the robust base fit left out.
     pub robust: RobustSummary,
     /// What the base model leaves out, when diagnosed.
@@ -629,13 +632,8 @@ pub fn calibrate(
         ));
         noise = noise.scaled(residual_rms_ut / floor_now);
     }
-    warnings.extend(checks::check(
-        &model,
-        &fit,
-        &field,
-        &rec.mag_ut,
-        &robust.kept,
-    )?);
+    let checked = checks::check(&model, &fit, &field, &rec.mag_ut, &robust.kept)?;
+    warnings.extend(checked.warnings);
     let noise_floor_ut = match &fit {
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
         Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
@@ -656,6 +654,7 @@ pub fn calibrate(
         },
         notes,
         warnings,
+        raw_not_ut: checked.raw_not_ut,
         robust,
         diagnosis: None,
         diagnosis_failed: None,

@@ -35,6 +35,15 @@ const SCALES: [(&str, f64); 9] = [
     ("nanotesla", 0.001),
 ];
 
+/// What [`check`] found of a calibration it did not refuse.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Checked {
+    /// What the user must not miss.
+    pub warnings: Vec<String>,
+    /// The raw readings are not µT (their radius is far from any Earth's field): the offset is in their units.
+    pub raw_not_ut: bool,
+}
+
 /// Checks a fitted model (of the readings `raw_ut` it `kept`); refuses what cannot be a calibration and returns the
 /// warnings for the rest.
 pub fn check(
@@ -43,7 +52,7 @@ pub fn check(
     field: &ReferenceField,
     raw_ut: &[[f64; 3]],
     kept: &[bool],
-) -> Result<Vec<String>, FitError> {
+) -> Result<Checked, FitError> {
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let sv = a.singular_values();
     let (lo, hi) = (sv.min(), sv.max());
@@ -101,7 +110,8 @@ pub fn check(
         Fit::Scalar(s) => s.field_given.then_some(s.field_ut),
         Fit::Vector(_) => Some(calibrated),
     };
-    if !raw_in_range && raw_radius > 0.0 {
+    let raw_not_ut = !raw_in_range && raw_radius > 0.0;
+    if raw_not_ut {
         warnings.push(units_warning(raw_radius, model, c, known));
     } else if !(low..=high).contains(&calibrated) {
         warnings.push(format!(
@@ -140,7 +150,10 @@ pub fn check(
             offset / calibrated
         ));
     }
-    Ok(warnings)
+    Ok(Checked {
+        warnings,
+        raw_not_ut,
+    })
 }
 
 /// A vector fit's residual (RMS per axis, µT) and the field's magnitude when the residual exceeds
