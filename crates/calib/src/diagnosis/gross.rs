@@ -120,10 +120,11 @@ pub(crate) enum Residual<'a> {
         e: &'a [[f64; 3]],
         rot: Option<Attitudes<'a>>,
     },
-    /// The magnitude's residual and the field direction (sensor axes).
+    /// The magnitude's residual and the field direction (sensor axes), against the field's magnitude `field_ut`.
     Magnitude {
         rho: &'a [f64],
         unit: &'a [[f64; 3]],
+        field_ut: f64,
     },
 }
 
@@ -163,8 +164,16 @@ pub(crate) fn explained_at(
         (Residual::Vector { e, rot: Some(r) }, SpanKind::RoomFixed { field_ned_ut }) => {
             frames::norm(frames::sub(frames::mat_vec(&r.at(i), e[i]), *field_ned_ut))
         }
-        (Residual::Magnitude { rho, unit }, SpanKind::SensorFixed { offset_ut, .. }) => {
-            (rho[i] - frames::dot(unit[i], *offset_ut)).abs()
+        (
+            Residual::Magnitude {
+                rho,
+                unit,
+                field_ut,
+            },
+            SpanKind::SensorFixed { offset_ut, .. },
+        ) => {
+            let m = frames::scale(unit[i], field_ut + rho[i]);
+            (frames::norm(frames::sub(m, *offset_ut)) - field_ut).abs()
         }
         _ => return false,
     };
@@ -462,11 +471,27 @@ fn classify(
                 _ => unexplained,
             }
         }
-        Residual::Magnitude { rho, unit } => {
+        Residual::Magnitude {
+            rho,
+            unit,
+            field_ut,
+        } => {
             let shift_ut = rho[a..b].iter().sum::<f64>() / n;
             let rss_shift: f64 = rho[a..b].iter().map(|r| (r - shift_ut).powi(2)).sum();
             let body = along(&rho[a..b], &unit[a..b]);
+            // The first-order `d·u` holds for an offset small against the field; a larger one is fitted exactly, as
+            // the centre of the sphere of the field's radius the readings lie on (150 µT on the board of a turning
+            // sensor moved |B| between 111 and 154 µT, and was called a field fixed in the room).
+            let exact = off_centre(&rho[a..b], &unit[a..b], *field_ut, body.map(|(d, _)| d));
             let rss_body = body.map_or(f64::INFINITY, |(_, rss)| rss);
+            let body = match (body, exact) {
+                (Some(first), Some(exact)) if exact.1 < first.1 => Some(exact),
+                (first, _) => first,
+            };
+            let rss_body = rss_body.min(body.map_or(f64::INFINITY, |(_, rss)| rss));
+            eprintln!(
+                "DBG span {a}-{b} n {n} shift {shift_ut:.2} rss_shift {rss_shift:.3e} exact {exact:?} rss_body {rss_body:.3e} turned {turned}"
+            );
             match body {
                 _ if turned && explained(rss_shift) && rss_shift < FRAME_MARGIN * rss_body => {
                     SpanKind::MagnitudeShift { shift_ut }
@@ -527,6 +552,67 @@ fn along(rho: &[f64], unit: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
         .map(|(r, u)| (r - frames::dot(*u, [d.x, d.y, d.z])).powi(2))
         .sum();
     Some(([d.x, d.y, d.z], rss))
+}
+
+/// Gauss–Newton steps of [`off_centre`].
+const OFF_CENTRE_STEPS: usize = 20;
+
+/// The offset `d` (sensor axes, calibrated µT) for which the readings `(field_ut + rho)·unit` lie on the sphere of
+/// radius `field_ut` around it, and the sum of squares of `|m − d| − field_ut` it leaves; from `start` (the
+/// first-order offset) and from the readings' mean (the centre, when the sensor turned through many directions),
+/// the better; `None` if the readings do not determine it.
+fn off_centre(
+    rho: &[f64],
+    unit: &[[f64; 3]],
+    field_ut: f64,
+    start: Option<[f64; 3]>,
+) -> Option<([f64; 3], f64)> {
+    let readings: Vec<nalgebra::Vector3<f64>> = rho
+        .iter()
+        .zip(unit)
+        .map(|(r, u)| nalgebra::Vector3::from(*u) * (field_ut + r))
+        .collect();
+    let mean = readings.iter().sum::<nalgebra::Vector3<f64>>() / readings.len().max(1) as f64;
+    start
+        .map(nalgebra::Vector3::from)
+        .into_iter()
+        .chain([mean])
+        .filter_map(|d| centre_from(&readings, field_ut, d))
+        .min_by(|x, y| x.1.total_cmp(&y.1))
+}
+
+/// [`off_centre`] by Gauss–Newton from `d`.
+fn centre_from(
+    readings: &[nalgebra::Vector3<f64>],
+    field_ut: f64,
+    mut d: nalgebra::Vector3<f64>,
+) -> Option<([f64; 3], f64)> {
+    for _ in 0..OFF_CENTRE_STEPS {
+        let (mut jtj, mut jtr) = (
+            nalgebra::Matrix3::<f64>::zeros(),
+            nalgebra::Vector3::<f64>::zeros(),
+        );
+        for m in readings {
+            let to = m - d;
+            let dist = to.norm();
+            if dist == 0.0 {
+                continue;
+            }
+            let j = -to / dist;
+            jtj += j * j.transpose();
+            jtr += j * (dist - field_ut);
+        }
+        let step = jtj.try_inverse()? * -jtr;
+        d += step;
+        if step.norm() < 1e-9 * field_ut.max(1.0) {
+            break;
+        }
+    }
+    let rss: f64 = readings
+        .iter()
+        .map(|m| ((m - d).norm() - field_ut).powi(2))
+        .sum();
+    rss.is_finite().then_some(([d.x, d.y, d.z], rss))
 }
 
 /// The largest angle between the field directions of a span and their mean, degrees.
@@ -628,28 +714,96 @@ mod tests {
         assert!(matches!(whole[0].kind, SpanKind::Moving), "{whole:?}");
     }
 
+    /// Directions through the whole sphere (a golden-angle spiral, scrambled).
+    fn tumbling(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let j = (i * 7919) % n;
+                let z = 1.0 - 2.0 * (j as f64 + 0.5) / n as f64;
+                let r = (1.0 - z * z).sqrt();
+                let phi = j as f64 * 2.399_963;
+                [r * phi.cos(), r * phi.sin(), z]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn in_the_magnitude_a_large_field_on_the_board_is_not_one_in_the_room() {
+        // 150 µT on the board of a tumbling sensor moves |B| between 100 and 200 µT; first order (u·d) it was a
+        // constant shift, "a field fixed in the room". 150 µT fixed in the room adds a constant to |B|.
+        let (n, field_ut) = (1000, 50.0);
+        let t = tumbling(n);
+        for on_board in [true, false] {
+            let readings: Vec<[f64; 3]> = (0..n)
+                .map(|i| match i {
+                    300..700 if on_board => {
+                        frames::add(frames::scale(t[i], field_ut), [150.0, 0.0, 0.0])
+                    }
+                    300..700 => frames::scale(t[i], 180.0),
+                    _ => frames::scale(t[i], field_ut),
+                })
+                .collect();
+            let unit: Vec<[f64; 3]> = readings
+                .iter()
+                .map(|m| frames::scale(*m, 1.0 / frames::norm(*m)))
+                .collect();
+            let rho: Vec<f64> = readings
+                .iter()
+                .map(|m| frames::norm(*m) - field_ut)
+                .collect();
+            let mut kept = vec![true; n];
+            kept[300..700].fill(false);
+            let residual = Residual::Magnitude {
+                rho: &rho,
+                unit: &unit,
+                field_ut,
+            };
+            let found = spans(&residual, &kept, 0.1, &unit);
+            assert_eq!(found.len(), 1, "{found:?}");
+            let shift = matches!(found[0].kind, SpanKind::MagnitudeShift { .. });
+            assert_eq!(shift, !on_board, "on the board: {on_board}: {found:?}");
+            if let SpanKind::SensorFixed { offset_ut, .. } = found[0].kind {
+                assert!(
+                    frames::norm(frames::sub(offset_ut, [150.0, 0.0, 0.0])) < 1.0,
+                    "{found:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn in_the_magnitude_two_fields_on_the_board_merged_across_a_lull_are_two_spans() {
-        // The scalar method sees a field on the board as u·d in |B|: 100–400 one field, 500–900 another, the lull
-        // between clean, all of it one excluded run.
+        // The scalar method sees a field d on the board in |F·t + d| (t: the field's true direction): 100–400 one
+        // field, 500–900 another, the lull between clean, all of it one excluded run.
         let n = 1000;
-        let unit = turning(n);
-        let rho: Vec<f64> = (0..n)
-            .map(|i| {
-                let wobble = 0.01 * ((i * 7919) % 13) as f64;
+        let field_ut = 50.0;
+        let readings: Vec<[f64; 3]> = turning(n)
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
                 let d = match i {
                     100..400 => [20.0, 0.0, 0.0],
                     500..900 => [0.0, -15.0, 5.0],
                     _ => [0.0; 3],
                 };
-                wobble + frames::dot(unit[i], d)
+                frames::add(frames::scale(*t, field_ut), d)
             })
+            .collect();
+        let unit: Vec<[f64; 3]> = readings
+            .iter()
+            .map(|m| frames::scale(*m, 1.0 / frames::norm(*m)))
+            .collect();
+        let rho: Vec<f64> = readings
+            .iter()
+            .enumerate()
+            .map(|(i, m)| 0.01 * ((i * 7919) % 13) as f64 + frames::norm(*m) - field_ut)
             .collect();
         let mut kept = vec![true; n];
         kept[100..900].fill(false);
         let residual = Residual::Magnitude {
             rho: &rho,
             unit: &unit,
+            field_ut,
         };
         let found = spans(&residual, &kept, 0.1, &unit);
         let ranges: Vec<(usize, usize)> = found.iter().map(|s| (s.start, s.end)).collect();

@@ -639,6 +639,7 @@ impl<'a> Setup<'a> {
             Residual::Magnitude {
                 rho: &rho,
                 unit: &self.unit,
+                field_ut: self.field_ut,
             }
         };
         let mut spans = gross::spans(&view, kept, scale, &self.unit);
