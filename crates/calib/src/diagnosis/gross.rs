@@ -489,9 +489,6 @@ fn classify(
                 (first, _) => first,
             };
             let rss_body = rss_body.min(body.map_or(f64::INFINITY, |(_, rss)| rss));
-            eprintln!(
-                "DBG span {a}-{b} n {n} shift {shift_ut:.2} rss_shift {rss_shift:.3e} exact {exact:?} rss_body {rss_body:.3e} turned {turned}"
-            );
             match body {
                 _ if turned && explained(rss_shift) && rss_shift < FRAME_MARGIN * rss_body => {
                     SpanKind::MagnitudeShift { shift_ut }
