@@ -194,9 +194,12 @@ fn pathological_headers_read_in_linear_time_and_bounded_memory() {
             );
             per_unit.push(seconds / n as f64);
         }
-        // Linear: four times the size takes about four times as long (quadratic would be sixteen).
+        // Linear: four times the size takes about four times as long (quadratic would be sixteen). Per unit the
+        // larger file costs more: 160,000 metadata keys spill the caches that 40,000 fit in (2.0–2.4 times per unit
+        // alone, 3.0 and 3.3 in two CI runs beside other work); a quadratic read would take 4 times per unit, and
+        // seconds to minutes here.
         assert!(
-            per_unit[1] < 2.5 * per_unit[0] + 1e-7,
+            per_unit[1] < 3.6 * per_unit[0] + 1e-7,
             "{what}: {:.3e} s per unit at n, {:.3e} at 4n",
             per_unit[0],
             per_unit[1]
