@@ -125,6 +125,9 @@ impl RecordOptions {
 pub const MAX_DWELL_S: f64 = 60.0;
 /// The longest recording, s (a week).
 pub const MAX_DURATION_S: f64 = 604_800.0;
+/// The shortest `--max-duration`, s: less records too few samples to turn through any directions (1e-9 s wrote an
+/// empty recording, exit 0).
+pub const MIN_DURATION_S: f64 = 1.0;
 /// The largest stillness threshold, µT.
 pub const MAX_STILL_UT: f64 = 1000.0;
 /// How often rows reach the file at least (half the half second a killed recorder may lose).
@@ -141,6 +144,13 @@ impl RecordOptions {
             )));
         }
         positive_at_most("--max-duration", self.max_duration_s, MAX_DURATION_S, "s")?;
+        if self.max_duration_s < MIN_DURATION_S {
+            return Err(BadOption(format!(
+                "--max-duration {} s: must be at least {MIN_DURATION_S} s (a calibration needs the sensor turned \
+                 through many directions)",
+                self.max_duration_s
+            )));
+        }
         positive_at_most("--dwell", self.dwell_s, MAX_DWELL_S, "s")?;
         positive_at_most("--still-ut", self.still_ut, MAX_STILL_UT, "µT")?;
         positive_at_most("transition", self.transition_s, MAX_DWELL_S, "s")
@@ -1020,6 +1030,10 @@ mod tests {
             ),
             (|o| o.dwell_s = f64::NAN, "--dwell NaN"),
             (|o| o.max_duration_s = -1.0, "--max-duration -1"),
+            (
+                |o| o.max_duration_s = 1e-9,
+                "--max-duration 0.000000001 s: must be at least 1 s",
+            ),
             (|o| o.still_ut = 0.0, "--still-ut 0"),
             (|o| o.target_coverage = 1.5, "--coverage 1.5"),
         ] {
