@@ -15,14 +15,20 @@ use magcal_driver::ChipKind;
 use magcal_mockhw::{Fault, SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
-/// A simulated free-rotation recording of a LIS2MDL.
-fn recording(dir: &Path) -> PathBuf {
-    common::sim_recording(dir, "sim:lis2mdl", "free")
+/// A simulated free-rotation recording of the chip `device` names (`sim:CHIP`).
+fn recording(dir: &Path, device: &str) -> PathBuf {
+    common::sim_recording(dir, device, "free")
 }
 
+/// Fits a recording of the chip `device` names and writes it to `device`.
 fn fit_to(dir: &Path, device: &str) -> Output {
+    fit_recording_of(dir, device, device)
+}
+
+/// Fits a recording of `recorded` and writes it to `device`.
+fn fit_recording_of(dir: &Path, recorded: &str, device: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_magcal-fit"))
-        .arg(recording(dir))
+        .arg(recording(dir, recorded))
         .args(["--out", dir.join("params.toml").to_str().unwrap()])
         .args(["--report", dir.join("report.json").to_str().unwrap()])
         .args(["--write-to", device])
@@ -90,9 +96,27 @@ fn chips_without_offset_registers_are_refused_after_the_parameters_are_written()
 }
 
 #[test]
+fn another_chips_calibration_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = fit_recording_of(dir.path(), "sim:lis3mdl", "sim:lis2mdl");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr
+            .contains("sim:lis2mdl: the recording is of a lis3mdl (its metadata: `sensor: lis3mdl"),
+        "{stderr}"
+    );
+    assert!(dir.path().join("params.toml").exists());
+}
+
+#[test]
 fn a_missing_bus_is_an_error_naming_it() {
     let dir = tempfile::tempdir().unwrap();
-    let out = fit_to(dir.path(), "i2c:/dev/i2c-no-such-bus:lis2mdl");
+    let out = fit_recording_of(
+        dir.path(),
+        "sim:lis2mdl",
+        "i2c:/dev/i2c-no-such-bus:lis2mdl",
+    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(

@@ -212,7 +212,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         if let (DeviceSpec::Serial(_), Some(why)) = (device, mirror_refusal(&target)) {
             bail!("{name}: not written to {device}: {why}");
         }
-        for line in write_back_calibration(device, &cal)? {
+        for line in write_back_calibration(device, &cal, rec.meta.sensor.as_deref())? {
             say(&format!("{line}\n"))?;
         }
     }

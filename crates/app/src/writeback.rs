@@ -42,6 +42,21 @@ pub enum WriteBackError {
         /// The chip.
         chip: ChipKind,
     },
+    /// The recording was made with another chip than the device's.
+    #[error(
+        "{device}: the recording is of a {recorded} (its metadata: `sensor: {sensor}`), the device a {chip}: a \
+         calibration belongs to the sensor it was recorded with; record this device and fit that"
+    )]
+    OtherChip {
+        /// The device string.
+        device: String,
+        /// The device's chip.
+        chip: ChipKind,
+        /// The chip the recording names.
+        recorded: ChipKind,
+        /// The recording's `sensor` metadata.
+        sensor: String,
+    },
     /// The calibration cannot be expressed in the device's form.
     #[error("{device}: this calibration cannot be sent: {why}")]
     Unsendable {
@@ -71,11 +86,25 @@ pub enum WriteBackError {
 /// Writes a fitted calibration's `A` and `b` to the device and verifies it; the field magnitude is the one the fit
 /// used (for a scalar fit without one, the fitted radius). Body-fixed corrections in the model stay in the
 /// parameters file: no device here can hold them, so the device gets the base fit (`A` and `b` fitted without them,
-/// [`crate::verdict::target_model`]), and a line says so.
+/// [`crate::verdict::target_model`]), and a line says so. A recording whose `sensor` metadata names another chip
+/// than the device's is refused.
 pub fn write_back_calibration(
     spec: &DeviceSpec,
     cal: &Calibration,
+    sensor: Option<&str>,
 ) -> Result<Vec<String>, WriteBackError> {
+    if let (Some(chip), Some(sensor)) = (spec.chip(), sensor) {
+        let named = sensor.to_lowercase();
+        let recorded = ChipKind::ALL.into_iter().find(|c| named.contains(c.name()));
+        if let Some(recorded) = recorded.filter(|r| *r != chip) {
+            return Err(WriteBackError::OtherChip {
+                device: spec.to_string(),
+                chip,
+                recorded,
+                sensor: sensor.to_owned(),
+            });
+        }
+    }
     let model = crate::verdict::target_model(cal);
     let field_ut = cal.field.magnitude().or(match &cal.fit {
         Fit::Scalar(s) => Some(s.field_ut),
