@@ -485,8 +485,22 @@ fn exports_name_each_correction_left_out_with_its_size() {
         "{stdout}"
     );
 
-    // A chip's offset registers (--write-to): the same named list.
-    let (stdout, _) = run("temperature_bias", &["--write-to", "sim:lis2mdl"]);
+    // A chip's offset registers (--write-to): the same named list (the fixture's sensor named the LIS2MDL, the chip
+    // with offset registers, as a recording of it would).
+    let lis2mdl = dir.path().join("lis2mdl.csv");
+    let text = std::fs::read_to_string(fixture("temperature_bias")).unwrap();
+    std::fs::write(
+        &lis2mdl,
+        text.replacen("# sensor: lis3mdl", "# sensor: lis2mdl", 1),
+    )
+    .unwrap();
+    let out = magcal_fit(&[lis2mdl.to_str().unwrap(), "--write-to", "sim:lis2mdl"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8(out.stdout).unwrap();
     assert!(
         stdout.contains("the chip's offset registers hold an offset only")
             && stdout.contains(&format!("  {line}")),
