@@ -12,7 +12,7 @@ use magcal_calib::robust::{self, RobustProblem};
 use magcal_calib::saturation;
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
-use magcal_calib::{FitError, Inputs, Model};
+use magcal_calib::{FitError, Frame, Inputs, Model};
 use magcal_recording::{AttitudeToReference, Metadata, ReadOptions, Recording};
 use std::path::Path;
 
@@ -494,6 +494,28 @@ pub fn drop_clipped(rec: &mut Recording) -> Option<String> {
     ))
 }
 
+/// Row `i`'s raw reading with the body-fixed corrections of `model` taken out: `A⁻¹·(B − b)` for the field `B` the
+/// model gives (the reading itself for a model without corrections).
+fn without_corrections(model: &Model, rec: &Recording, i: usize) -> [f64; 3] {
+    let raw = rec.mag_ut[i];
+    if model.corrections().next().is_none() {
+        return raw;
+    }
+    let currents: Vec<f64> = rec.currents.iter().map(|c| c.values[i]).collect();
+    let inputs = Inputs {
+        t_s: rec.t_s.as_ref().map_or(0.0, |t| t[i]),
+        temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[i]),
+        currents_a: &currents,
+    };
+    let a = nalgebra::Matrix3::from_fn(|j, k| model.a[j][k]);
+    let Some(a_inv) = a.try_inverse() else {
+        return raw;
+    };
+    let field = frames::sub(model.apply(raw, &inputs), model.b_ut);
+    let m = a_inv * nalgebra::Vector3::from(field);
+    [m.x, m.y, m.z]
+}
+
 /// A noise floor from the readings' differences above the fit's residual by more than `1 / this` is not the noise:
 /// the rows change orientation from one to the next, and the differences measure the rotation.
 const UNMEASURED_NOISE_BOUND: f64 = 0.8;
@@ -672,13 +694,27 @@ pub fn calibrate(
             match diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model) {
                 Ok(first) => {
                     let d = around_spans(rec, &cal, first)?;
-                    // The rows the final model used.
-                    let r = &d.residuals;
-                    cal.sphere_coverage = fraction_of(r.rows.len(), |k| {
-                        (!r.excluded[k]).then(|| rec.mag_ut[r.rows[k]])
-                    });
                     cal.warnings.extend(other_offset_state(&d, rec));
                     cal.diagnosis = Some(d);
+                    // The rows the final model used, as the sensor would have read them without the body-fixed
+                    // effects it models, one-off windows included (a magnet on the board for a third of BROAD 33 is
+                    // counted where its rows point, not 27 µT off the sphere).
+                    let d = cal.diagnosis.as_ref().expect("just set");
+                    let mut model = cal.model();
+                    for found in d
+                        .effects
+                        .iter()
+                        .filter(|f| f.effect.id().frame() == Frame::Body)
+                    {
+                        if !model.corrections().any(|c| *c == found.effect) {
+                            let _ = model.add_correction(found.effect);
+                        }
+                    }
+                    let r = &d.residuals;
+                    let coverage = fraction_of(r.rows.len(), |k| {
+                        (!r.excluded[k]).then(|| without_corrections(&model, rec, r.rows[k]))
+                    });
+                    cal.sphere_coverage = coverage;
                 }
                 Err(e) => {
                     cal.notes.push(format!(

@@ -12,6 +12,9 @@
 //!    ([`Sphere::departs`]: a magnet or iron near the sensor) is rejected: it enters neither the sphere nor the
 //!    cells, so a magnet neither moves the centre nor adds directions.
 //!
+//! Before it settles, a burst of readings off the sphere the others lie on ([`DirectionCoverage::drop_burst`]: a magnet
+//! passed early) is rejected too, once the readings show it.
+//!
 //! Cells are counted again from all accepted readings whenever the centre or the radius moves by more than
 //! [`RECENTRE_UT`], and once more around the final sphere by [`DirectionCoverage::finish`]. Until the readings
 //! determine a sphere (they spread in three dimensions, over more than a µT), no direction is known and nothing is
@@ -36,6 +39,13 @@ pub const RECENTRE_UT: f64 = 2.0;
 const REFIT_EVERY: usize = 25;
 /// …and after this fraction of those so far (so a long recording costs a bounded number of fits).
 const REFIT_FRACTION: f64 = 0.02;
+/// Concentration steps of [`DirectionCoverage::drop_burst`]…
+const BURST_STEPS: usize = 5;
+/// …each fitting this share of the readings, those nearest the last sphere…
+const BURST_KEEP: f64 = 0.75;
+/// …and the readings off the sphere they find are a burst when they lie within a stretch of at most this share of
+/// the readings.
+const BURST_SHARE: f64 = 0.3;
 /// At most this many readings of a recording are looked at by [`recorded_fraction`] (evenly spaced).
 pub const RECORDED_READINGS: usize = 100_000;
 
@@ -118,6 +128,9 @@ impl DirectionCoverage {
         if n >= self.next_refit {
             self.next_refit = n + REFIT_EVERY.max((REFIT_FRACTION * n as f64) as usize);
             self.refit(false);
+            if !self.settled && n >= SETTLE_READINGS && self.misfit() > SETTLE_MISFIT {
+                self.drop_burst();
+            }
         }
         if !self.settled
             && n >= SETTLE_READINGS
@@ -127,6 +140,56 @@ impl DirectionCoverage {
             self.settled = true;
         }
         true
+    }
+
+    /// Before the sphere settles, a burst of readings off the sphere the rest lie on (a magnet passed early) keeps it
+    /// from settling and bends the centre every other reading is counted around: found by concentration steps (the
+    /// sphere of the readings nearest the last one), its readings are rejected, as a settled sphere would have, when
+    /// they lie within one stretch of at most [`BURST_SHARE`] of the readings. Readings off it all along (a strong
+    /// soft iron) are no burst.
+    fn drop_burst(&mut self) {
+        let Some(mut sphere) = self.sums.sphere() else {
+            return;
+        };
+        for _ in 0..BURST_STEPS {
+            let mut off: Vec<f64> = self
+                .readings
+                .iter()
+                .map(|m| (sphere.distance_ut(*m) - sphere.radius_ut).abs())
+                .collect();
+            let keep = (BURST_KEEP * off.len() as f64) as usize;
+            let cut = *off.select_nth_unstable_by(keep, f64::total_cmp).1;
+            let mut sums = SphereSums::default();
+            for m in &self.readings {
+                if (sphere.distance_ut(*m) - sphere.radius_ut).abs() <= cut {
+                    sums.add(*m);
+                }
+            }
+            let Some(next) = sums.sphere() else {
+                return;
+            };
+            sphere = next;
+        }
+        let off: Vec<usize> = (0..self.readings.len())
+            .filter(|&i| sphere.departs(self.readings[i]))
+            .collect();
+        let (Some(&first), Some(&last)) = (off.first(), off.last()) else {
+            return;
+        };
+        if (last + 1 - first) as f64 > BURST_SHARE * self.readings.len() as f64 {
+            return;
+        }
+        let mut k = 0;
+        self.readings.retain(|_| {
+            k += 1;
+            off.binary_search(&(k - 1)).is_err()
+        });
+        self.rejected += off.len() as u64;
+        self.sums = SphereSums::default();
+        for m in &self.readings {
+            self.sums.add(*m);
+        }
+        self.refit(true);
     }
 
     /// The RMS of the counted readings' distance from the sphere, over its radius (infinite without a sphere).
@@ -323,6 +386,48 @@ mod tests {
             .copied()
             .collect();
         assert_eq!(recorded_fraction(&disturbed), recorded_fraction(&without));
+    }
+
+    #[test]
+    fn a_magnet_before_the_sphere_settled_is_dropped_once_the_readings_show_it() {
+        // 150 readings of 300 µT more along x early on (the sphere cannot have settled): it kept the sphere from
+        // ever settling, and the coverage around the bent centre stayed at a few per cent for the whole recording.
+        let offset = [30.0, -20.0, 10.0];
+        let clean = turning(3000, offset);
+        let mut disturbed = clean.clone();
+        for m in &mut disturbed[100..250] {
+            m[0] += 300.0;
+        }
+        let mut c = DirectionCoverage::new();
+        disturbed.iter().for_each(|m| {
+            c.add(*m);
+        });
+        c.finish();
+        assert!(c.is_settled());
+        assert_eq!(c.rejected(), 150);
+        let s = c.sphere().unwrap();
+        assert!(
+            (0..3).all(|k| (s.centre_ut[k] - offset[k]).abs() < 1e-6),
+            "{s:?}"
+        );
+        let without: Vec<[f64; 3]> = clean[..100].iter().chain(&clean[250..]).copied().collect();
+        assert_eq!(c.fraction(), recorded_fraction(&without));
+    }
+
+    #[test]
+    fn readings_off_a_sphere_all_along_are_no_burst() {
+        // An ellipsoid 30 % longer along x than the others: its readings along x lie off the sphere every time the
+        // sensor points that way, not in one stretch; none is rejected before the sphere settles.
+        let offset = [5.0, 5.0, 5.0];
+        let stretched: Vec<[f64; 3]> = turning(3000, [0.0; 3])
+            .iter()
+            .map(|m| [offset[0] + 1.3 * m[0], offset[1] + m[1], offset[2] + m[2]])
+            .collect();
+        let mut c = DirectionCoverage::new();
+        for m in &stretched[..1000] {
+            c.add(*m);
+        }
+        assert_eq!(c.rejected(), 0);
     }
 
     #[test]
