@@ -715,6 +715,34 @@ fn readings_in_another_unit_are_not_exported() {
     );
 }
 
+/// A frozen output (found 2026-11-27: a sensor that repeated one reading for 2 s was "a constant field of 0.4 µT
+/// while the sensor hardly turned", graded good) is left out with a warning that says what it is.
+#[test]
+fn a_frozen_output_is_left_out_saying_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, text) = tumble(dir.path());
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let first = lines
+        .iter()
+        .position(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+        .unwrap();
+    let frozen: Vec<String> = lines[first + 1000].split(',').map(str::to_owned).collect();
+    for line in &mut lines[first + 1000..first + 1100] {
+        let mut cells: Vec<String> = line.split(',').map(str::to_owned).collect();
+        cells[1..4].clone_from_slice(&frozen[1..4]);
+        *line = cells.join(",");
+    }
+    let rec = write(dir.path(), "frozen.csv", &(lines.join("\n") + "\n"));
+    let out = magcal_fit(&[rec.to_str().unwrap()]);
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("100 samples")
+            && summary.contains("left out as frozen")
+            && !summary.contains("GOOD"),
+        "{summary}"
+    );
+}
+
 /// Defect 12: a reference column that does not turn (the world field written as `rx,ry,rz`) was refused as "the noise
 /// is as large as the rotation"; readings in gauss were refused as "the sensor was not rotated".
 #[test]

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Method, calibrate, drop_clipped, read_to_calibrate};
+use magcal_app::calibrate::{Method, calibrate, drop_faulty, read_to_calibrate};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
@@ -134,7 +134,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         read_to_calibrate(&args.recording, args.method, !args.no_diagnose, |meta| {
             Ok(resolve(&field_args, meta)?)
         })?;
-    let clipped = drop_clipped(&mut rec);
+    let faulty = drop_faulty(&mut rec);
     let mut cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
         Ok(cal) => cal,
         Err(e) => {
@@ -145,7 +145,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             return Err(e).with_context(|| format!("{name}: cannot calibrate"));
         }
     };
-    cal.warnings.extend(clipped);
+    cal.warnings.extend(faulty);
     let assessment = assess(&cal, &rec, args.export.is_some() || args.write_to.is_some());
 
     // With the export on stdout, everything else goes to stderr.

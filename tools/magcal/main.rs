@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Calibration, Fit, Method, calibrate, drop_clipped};
+use magcal_app::calibrate::{Calibration, Fit, Method, calibrate, drop_faulty};
 use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::field::resolve;
@@ -132,12 +132,12 @@ fn run(args: Args) -> anyhow::Result<()> {
 
     // Fit.
     let mut rec = Recording::read(&rec_path)?;
-    let clipped = drop_clipped(&mut rec);
+    let faulty = drop_faulty(&mut rec);
     let name = rec_path.display().to_string();
     let field = resolve(&args.field.field_args(None), &rec.meta)?;
     let mut cal = calibrate(&rec, Method::Auto, field, true)
         .with_context(|| format!("{name}: cannot calibrate"))?;
-    cal.warnings.extend(clipped);
+    cal.warnings.extend(faulty);
     let assessment = assess(&cal, &rec, false);
     say!("\n{}", summary(&cal, &assessment, &name))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();

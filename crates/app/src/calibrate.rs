@@ -8,8 +8,8 @@ use rayon::prelude::*;
 use std::borrow::Cow;
 
 use magcal_calib::coverage::CoverageError;
+use magcal_calib::faults;
 use magcal_calib::robust::{self, RobustProblem};
-use magcal_calib::saturation;
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Frame, Inputs, Model};
@@ -464,34 +464,68 @@ pub fn read_to_calibrate(
     Ok((rec, field))
 }
 
-/// Leaves out the rows of `rec` where an axis sits at its extreme while the sensor turns ([`saturation`]: the
-/// sensor's range clipped it), and says so; nothing when no axis is pinned.
-pub fn drop_clipped(rec: &mut Recording) -> Option<String> {
-    let pinned = saturation::pinned(&rec.mag_ut);
-    if pinned.is_empty() {
-        return None;
+/// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
+/// sensor turns (the sensor's range clipped it), or the same reading many times in a row (a frozen output); and says
+/// so, one warning per fault found.
+pub fn drop_faulty(rec: &mut Recording) -> Vec<String> {
+    let pinned = faults::pinned(&rec.mag_ut);
+    let mut left_out = faults::rows_pinned(&rec.mag_ut, &pinned);
+    let mut warnings = Vec::new();
+    let share = |n: usize| 100.0 * n as f64 / rec.len().max(1) as f64;
+    if !pinned.is_empty() {
+        let n = left_out.iter().filter(|c| **c).count();
+        let axes: Vec<String> = pinned
+            .iter()
+            .map(|p| {
+                format!(
+                    "m{} at {} ({} samples)",
+                    ["x", "y", "z"][p.axis],
+                    p.value,
+                    p.samples
+                )
+            })
+            .collect();
+        warnings.push(format!(
+            "{n} samples ({:.1} %) left out as clipped: {} — one value, the axis's extreme, held while the other \
+             axes swept on. The sensor's range was too small for the field it saw there (a magnet near, or a range \
+             setting too sensitive): set a wider range or keep magnets away, and record again if those directions \
+             matter",
+            share(n),
+            axes.join(", ")
+        ));
     }
-    let clipped = saturation::rows_pinned(&rec.mag_ut, &pinned);
-    let n = clipped.iter().filter(|c| **c).count();
-    let share = 100.0 * n as f64 / rec.len() as f64;
-    rec.retain_rows(&clipped.iter().map(|c| !c).collect::<Vec<bool>>());
-    let axes: Vec<String> = pinned
-        .iter()
-        .map(|p| {
-            format!(
-                "m{} at {} ({} samples)",
-                ["x", "y", "z"][p.axis],
-                p.value,
-                p.samples
-            )
-        })
+    // A recording that is one frozen run is left whole: the fit refuses it for what it is (all zeros, no turning).
+    let frozen: Vec<(usize, usize)> = faults::frozen_runs(&rec.mag_ut)
+        .into_iter()
+        .filter(|&(a, b)| b - a < rec.len())
         .collect();
-    Some(format!(
-        "{n} samples ({share:.1} %) left out as clipped: {} — one value, the axis's extreme, held while the other \
-         axes swept on. The sensor's range was too small for the field it saw there (a magnet near, or a range \
-         setting too sensitive): set a wider range or keep magnets away, and record again if those directions matter",
-        axes.join(", ")
-    ))
+    if !frozen.is_empty() {
+        let n: usize = frozen.iter().map(|(a, b)| b - a).sum();
+        let at: Vec<String> = frozen
+            .iter()
+            .take(3)
+            .map(|&(a, b)| match &rec.t_s {
+                Some(t) => format!("{:.2}–{:.2} s", t[a], t[b - 1]),
+                None => format!("samples {}–{}", a + 1, b),
+            })
+            .collect();
+        warnings.push(format!(
+            "{n} samples ({:.1} %) left out as frozen: the same reading, to the last digit, {} or more times in a row \
+             ({}{}) — the sensor stopped converting or the driver repeated its last value; check the sensor's mode \
+             and the reading loop",
+            share(n),
+            faults::FROZEN_RUN,
+            at.join(", "),
+            if frozen.len() > 3 { ", …" } else { "" }
+        ));
+        for (a, b) in frozen {
+            left_out[a..b].fill(true);
+        }
+    }
+    if left_out.iter().any(|l| *l) {
+        rec.retain_rows(&left_out.iter().map(|l| !l).collect::<Vec<bool>>());
+    }
+    warnings
 }
 
 /// Row `i`'s raw reading with the body-fixed corrections of `model` taken out: `A⁻¹·(B − b)` for the field `B` the

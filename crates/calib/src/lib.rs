@@ -26,11 +26,11 @@ pub mod directions;
 #[cfg(feature = "std")]
 mod error;
 #[cfg(feature = "std")]
+pub mod faults;
+#[cfg(feature = "std")]
 pub mod noise;
 #[cfg(feature = "std")]
 pub mod robust;
-#[cfg(feature = "std")]
-pub mod saturation;
 #[cfg(feature = "std")]
 pub mod scalar;
 #[cfg(feature = "std")]

@@ -1,8 +1,13 @@
-//! Readings clipped by the sensor's range: an axis that sits at one value, its extreme over the recording, while the
-//! sensor turns. A real field can hold one component at its largest only while that axis points along the field, and
-//! then the other two components sit near their centre; clipped, the axis stays at its limit while the others sweep
-//! through much of their range. Left in, the clipped samples bend `A` (the tester's recording with `mz` clipped at
-//! 20 µT: A_zz 1.060 against 0.974, 5.9° of heading error where 1.9° was graded) and the diagnosis calls them magnets.
+//! Readings a fault of the sensor's output made, which no calibration model explains:
+//! - **Clipped** by the sensor's range: an axis that sits at one value, its extreme over the recording, while the
+//!   sensor turns. A real field can hold one component at its largest only while that axis points along the field,
+//!   and then the other two components sit near their centre; clipped, the axis stays at its limit while the others
+//!   sweep through much of their range. Left in, the clipped samples bend `A` (the tester's recording with `mz`
+//!   clipped at 20 µT: A_zz 1.060 against 0.974, 5.9° of heading error where 1.9° was graded) and the diagnosis calls
+//!   them magnets.
+//! - **Frozen**: the same reading, all three axes to the last digit, [`FROZEN_RUN`] times in a row (a sensor that
+//!   stopped converting, a driver that repeats its last value); the diagnosis called one "a constant field of 0.4 µT
+//!   while the sensor hardly turned" in a recording graded good.
 
 /// An axis counts as pinned at an extreme when at least this share of the samples hold exactly that value…
 pub const MIN_SHARE: f64 = 0.005;
@@ -73,6 +78,25 @@ pub fn pinned(raw: &[[f64; 3]]) -> Vec<Pinned> {
     out
 }
 
+/// Identical readings in a row that make a frozen output: the physical recordings repeat one at most 4 times (host
+/// loggers that write a sample twice), and noise makes 25 in a row of a live sensor all but impossible.
+pub const FROZEN_RUN: usize = 25;
+
+/// The runs of at least [`FROZEN_RUN`] identical readings in `raw`, as ranges `[start, end)`.
+pub fn frozen_runs(raw: &[[f64; 3]]) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for i in 1..=raw.len() {
+        if i == raw.len() || raw[i] != raw[start] {
+            if i - start >= FROZEN_RUN {
+                runs.push((start, i));
+            }
+            start = i;
+        }
+    }
+    runs
+}
+
 /// Per row of `raw`, whether it holds a pinned value of `pinned`.
 pub fn rows_pinned(raw: &[[f64; 3]], pinned: &[Pinned]) -> Vec<bool> {
     raw.iter()
@@ -136,6 +160,17 @@ mod tests {
         let rows = rows_pinned(&clipped, &p);
         assert_eq!(rows.iter().filter(|r| **r).count(), p[0].samples);
         assert!(p[0].samples > 200, "{p:?}");
+    }
+
+    #[test]
+    fn a_frozen_output_is_a_run_of_identical_readings() {
+        let mut rec = sphere(1000, [0.0; 3]);
+        let frozen = rec[300];
+        rec[300..340].fill(frozen);
+        let repeated = rec[600];
+        rec[600..604].fill(repeated);
+        assert_eq!(frozen_runs(&rec), vec![(300, 340)]);
+        assert!(frozen_runs(&sphere(1000, [0.0; 3])).is_empty());
     }
 
     /// Quantised readings repeat their extreme while the axis points along the field, but the other axes then sit
