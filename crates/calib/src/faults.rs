@@ -32,29 +32,54 @@ pub struct Pinned {
 /// passes, nothing allocated per row.
 pub fn pinned(raw: &[[f64; 3]]) -> Vec<Pinned> {
     let finite = |m: &&[f64; 3]| m.iter().all(|v| v.is_finite());
-    let (n, ranges) = raw.iter().filter(finite).fold(
-        (0usize, [(f64::INFINITY, f64::NEG_INFINITY); 3]),
-        |(n, r), m| {
-            (
-                n + 1,
-                std::array::from_fn(|k| (r[k].0.min(m[k]), r[k].1.max(m[k]))),
+    let (n, ranges) = crate::chunks::fold(
+        raw.len(),
+        |r| {
+            raw[r].iter().filter(finite).fold(
+                (0usize, [(f64::INFINITY, f64::NEG_INFINITY); 3]),
+                |(n, r), m| {
+                    (
+                        n + 1,
+                        std::array::from_fn(|k| (r[k].0.min(m[k]), r[k].1.max(m[k]))),
+                    )
+                },
             )
         },
-    );
+        |(n, a), (m, b)| {
+            (
+                n + m,
+                std::array::from_fn(|k| (a[k].0.min(b[k].0), a[k].1.max(b[k].1))),
+            )
+        },
+    )
+    .unwrap_or((0, [(f64::INFINITY, f64::NEG_INFINITY); 3]));
     let enough = MIN_SAMPLES.max((MIN_SHARE * n as f64).ceil() as usize);
     if n < enough {
         return Vec::new();
     }
     // Per axis and end (low, high): the samples at it, and the sums and squares of every axis over them.
-    let mut at = [[Moments::default(); 2]; 3];
-    for m in raw.iter().filter(finite) {
-        for (axis, ends) in at.iter_mut().enumerate() {
-            let (lo, hi) = ranges[axis];
-            if lo < hi && (m[axis] == lo || m[axis] == hi) {
-                ends[usize::from(m[axis] == hi)].add(m);
+    let at = crate::chunks::fold(
+        raw.len(),
+        |r| {
+            let mut at = [[Moments::default(); 2]; 3];
+            for m in raw[r].iter().filter(finite) {
+                for (axis, ends) in at.iter_mut().enumerate() {
+                    let (lo, hi) = ranges[axis];
+                    if lo < hi && (m[axis] == lo || m[axis] == hi) {
+                        ends[usize::from(m[axis] == hi)].add(m);
+                    }
+                }
             }
-        }
-    }
+            at
+        },
+        |mut a, b| {
+            for (x, y) in a.iter_mut().flatten().zip(b.iter().flatten()) {
+                x.merge(y);
+            }
+            a
+        },
+    )
+    .unwrap_or_default();
     let mut out = Vec::new();
     for (axis, ends) in at.iter().enumerate() {
         for (end, moments) in ends.iter().enumerate() {
@@ -84,7 +109,17 @@ pub const FROZEN_RUN: usize = 25;
 
 /// The runs of at least [`FROZEN_RUN`] identical readings in `raw`, as ranges `[start, end)`.
 pub fn frozen_runs(raw: &[[f64; 3]]) -> Vec<(usize, usize)> {
+    // Most recordings repeat no reading at all: counted on all threads first.
+    let repeats = crate::chunks::fold(
+        raw.len(),
+        |r| r.filter(|&i| i > 0 && raw[i] == raw[i - 1]).count(),
+        |a, b| a + b,
+    )
+    .unwrap_or(0);
     let mut runs = Vec::new();
+    if repeats + 1 < FROZEN_RUN {
+        return runs;
+    }
     let mut start = 0;
     for i in 1..=raw.len() {
         if i == raw.len() || raw[i] != raw[start] {
@@ -118,6 +153,14 @@ impl Moments {
         for k in 0..3 {
             self.sum[k] += m[k];
             self.squares[k] += m[k] * m[k];
+        }
+    }
+
+    fn merge(&mut self, o: &Moments) {
+        self.n += o.n;
+        for k in 0..3 {
+            self.sum[k] += o.sum[k];
+            self.squares[k] += o.squares[k];
         }
     }
 

@@ -48,7 +48,6 @@ pub use candidates::Untestable;
 pub use gross::SpanKind;
 pub use guard::NOTICEABLE_GAIN;
 pub use locate::{Components, Located, Orientation, Segment};
-pub use timing::typical_step;
 
 use crate::FitError;
 use crate::chunks;

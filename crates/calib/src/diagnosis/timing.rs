@@ -200,7 +200,7 @@ fn partition_near(t: &[f64], u: f64, near: usize) -> usize {
 }
 
 /// The median step between consecutive times (NaN without two increasing ones).
-pub fn typical_step(t: &[f64]) -> f64 {
+pub(crate) fn typical_step(t: &[f64]) -> f64 {
     let steps: Vec<f64> = t
         .windows(2)
         .map(|w| w[1] - w[0])
