@@ -711,6 +711,19 @@ mod tests {
         assert!(matches!(whole[0].kind, SpanKind::Moving), "{whole:?}");
     }
 
+    /// What the scalar method sees of calibrated readings: their directions, and their magnitudes less the field's.
+    fn magnitude_of(readings: &[[f64; 3]], field_ut: f64) -> (Vec<[f64; 3]>, Vec<f64>) {
+        readings
+            .iter()
+            .map(|m| {
+                (
+                    frames::scale(*m, 1.0 / frames::norm(*m)),
+                    frames::norm(*m) - field_ut,
+                )
+            })
+            .unzip()
+    }
+
     /// Directions through the whole sphere (a golden-angle spiral, scrambled).
     fn tumbling(n: usize) -> Vec<[f64; 3]> {
         (0..n)
@@ -740,14 +753,7 @@ mod tests {
                     _ => frames::scale(t[i], field_ut),
                 })
                 .collect();
-            let unit: Vec<[f64; 3]> = readings
-                .iter()
-                .map(|m| frames::scale(*m, 1.0 / frames::norm(*m)))
-                .collect();
-            let rho: Vec<f64> = readings
-                .iter()
-                .map(|m| frames::norm(*m) - field_ut)
-                .collect();
+            let (unit, rho) = magnitude_of(&readings, field_ut);
             let mut kept = vec![true; n];
             kept[300..700].fill(false);
             let residual = Residual::Magnitude {
@@ -786,15 +792,10 @@ mod tests {
                 frames::add(frames::scale(*t, field_ut), d)
             })
             .collect();
-        let unit: Vec<[f64; 3]> = readings
-            .iter()
-            .map(|m| frames::scale(*m, 1.0 / frames::norm(*m)))
-            .collect();
-        let rho: Vec<f64> = readings
-            .iter()
-            .enumerate()
-            .map(|(i, m)| 0.01 * ((i * 7919) % 13) as f64 + frames::norm(*m) - field_ut)
-            .collect();
+        let (unit, mut rho) = magnitude_of(&readings, field_ut);
+        for (i, r) in rho.iter_mut().enumerate() {
+            *r += 0.01 * ((i * 7919) % 13) as f64;
+        }
         let mut kept = vec![true; n];
         kept[100..900].fill(false);
         let residual = Residual::Magnitude {
