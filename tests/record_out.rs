@@ -136,7 +136,7 @@ fn options_out_of_range_are_refused_before_anything_is_opened_or_written() {
     let truth = dir.path().join("truth.toml");
     let p = path.to_str().unwrap();
     let t = truth.to_str().unwrap();
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 10] = [
         (
             &["--dwell", "1e30"],
             "--dwell 1000000000000000000000000000000 s: must be a number > 0 and at most 60 s",
@@ -156,6 +156,9 @@ fn options_out_of_range_are_refused_before_anything_is_opened_or_written() {
         ),
         (&["--max-duration", "NaN"], "--max-duration NaN"),
         (&["--still-ut=-1"], "--still-ut -1"),
+        // A negative number after a space is the option's value, not a flag (clap took it for one).
+        (&["--coverage", "-0.1"], "--coverage -0.1: must be a fraction"),
+        (&["--max-duration", "-5"], "--max-duration -5 s"),
         (
             &["--device", "serial:/dev/ttyUSB0", "--idle-timeout", "0"],
             "--idle-timeout 0 s",

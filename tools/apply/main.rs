@@ -34,7 +34,7 @@ struct Args {
     field: WorldFieldOpts,
     /// Field magnitude in µT: |B| is checked against it (it replaces a field vector from the recording's
     /// metadata; --field-ned replaces the vector instead).
-    #[arg(long, value_name = "UT")]
+    #[arg(allow_negative_numbers = true, long, value_name = "UT")]
     field_ut: Option<f64>,
     /// Write the calibrated recording here (mx,my,mz replaced by the calibrated field).
     #[arg(long, value_name = "OUT.csv")]

@@ -52,7 +52,7 @@ struct Args {
     field: WorldFieldOpts,
     /// Field magnitude in µT, for the scalar method: it replaces a field vector from the recording's metadata (so
     /// only |B| is fitted); --field-ned replaces the vector instead.
-    #[arg(long, value_name = "UT")]
+    #[arg(allow_negative_numbers = true, long, value_name = "UT")]
     field_ut: Option<f64>,
     /// Write the parameters file (TOML) here, atomically.
     #[arg(long, value_name = "PARAMS.toml")]

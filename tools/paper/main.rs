@@ -10,10 +10,10 @@ use magcal_app::seed::{SeedExperiment, run, table};
 #[command(version)]
 struct Args {
     /// Mounting misalignment, degrees.
-    #[arg(long, default_value_t = SeedExperiment::default().mount_deg)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = SeedExperiment::default().mount_deg)]
     mount_deg: f64,
     /// Raw noise per axis, µT.
-    #[arg(long, default_value_t = SeedExperiment::default().noise_ut)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = SeedExperiment::default().noise_ut)]
     noise: f64,
     /// Seed.
     #[arg(long, default_value_t = SeedExperiment::default().seed)]

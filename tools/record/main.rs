@@ -92,26 +92,56 @@ struct Args {
     #[arg(long)]
     auto: bool,
     /// free: stop at this fraction of the sphere of field directions.
-    #[arg(long, default_value_t = 0.9, value_name = "FRACTION")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 0.9,
+        value_name = "FRACTION"
+    )]
     coverage: f64,
     /// Stop after this many seconds whatever happens.
-    #[arg(long, default_value_t = 600.0, value_name = "S")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 600.0,
+        value_name = "S"
+    )]
     max_duration: f64,
     /// cube24: how long each pose is held still and recorded, s.
-    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 1.0,
+        value_name = "S"
+    )]
     dwell: f64,
     /// cube24: largest spread (standard deviation per axis over the dwell) that counts as still, µT.
-    #[arg(long, default_value_t = 0.5, value_name = "UT")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 0.5,
+        value_name = "UT"
+    )]
     still_ut: f64,
     /// Output data rate to ask the chip for, Hz (the nearest it supports is used).
-    #[arg(long, default_value_t = 100.0, value_name = "HZ")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 100.0,
+        value_name = "HZ"
+    )]
     rate: f64,
     /// Full-scale range to ask the chip for, ± µT (the smallest that holds it).
-    #[arg(long, value_name = "UT")]
+    #[arg(allow_negative_numbers = true, long, value_name = "UT")]
     range_ut: Option<f64>,
     /// serial: no sample for this long ends the recording with an error naming the likely cause (a silent board,
     /// a wrong baud rate, a wrong protocol), s.
-    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 5.0,
+        value_name = "S"
+    )]
     idle_timeout: f64,
     /// sim: seed of the simulated sensor (its errors) and of the noise.
     #[arg(long, default_value_t = 1, value_name = "N")]

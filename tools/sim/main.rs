@@ -35,10 +35,10 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Routine::Tumble)]
     routine: Routine,
     /// Length of the tumble or turntable run, s.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = 120.0)]
     duration: f64,
     /// Sample rate, Hz (default: the chip's).
-    #[arg(long)]
+    #[arg(allow_negative_numbers = true, long)]
     rate: Option<f64>,
     /// Seed of every random draw.
     #[arg(long, default_value_t = 1)]
@@ -47,7 +47,7 @@ struct Args {
     #[arg(long, value_name = "N,E,D", value_parser = parse_floats::<3>, allow_hyphen_values = true)]
     field_ned: Option<[f64; 3]>,
     /// White noise per axis, µT (default: the chip's).
-    #[arg(long)]
+    #[arg(allow_negative_numbers = true, long)]
     noise: Option<f64>,
     /// Random sensor errors: soft iron (relative), hard iron (µT), misalignment (degrees).
     #[arg(long, value_name = "SOFT,HARD,MOUNT", value_parser = parse_floats::<3>, default_value = "0.1,30,3")]
@@ -56,7 +56,7 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Reference::Quaternion)]
     reference: Reference,
     /// Record a gyro with this noise, rad/s.
-    #[arg(long)]
+    #[arg(allow_negative_numbers = true, long)]
     gyro_noise: Option<f64>,
     /// Temperature: START °C warming by RISE °C with time constant TAU s, wobbling by WOBBLE °C with period
     /// PERIOD s.
