@@ -157,7 +157,10 @@ fn options_out_of_range_are_refused_before_anything_is_opened_or_written() {
         (&["--max-duration", "NaN"], "--max-duration NaN"),
         (&["--still-ut=-1"], "--still-ut -1"),
         // A negative number after a space is the option's value, not a flag (clap took it for one).
-        (&["--coverage", "-0.1"], "--coverage -0.1: must be a fraction"),
+        (
+            &["--coverage", "-0.1"],
+            "--coverage -0.1: must be a fraction",
+        ),
         (&["--max-duration", "-5"], "--max-duration -5 s"),
         (
             &["--device", "serial:/dev/ttyUSB0", "--idle-timeout", "0"],

@@ -122,6 +122,8 @@ enum Mark {
     Dashed(RGBColor),
     Dot(RGBColor),
     Patch(RGBColor),
+    /// No mark: a note beside the entries.
+    Note,
 }
 
 /// Width of a legend entry, pixels (14 px sans-serif averages under 7 px a character).
@@ -176,6 +178,7 @@ fn legend(area: &Area<'_>, entries: &[(Mark, String)]) -> PlotResult<()> {
                     c.mix(0.5).filled(),
                 ))?;
             }
+            Mark::Note => {}
         }
         area.draw_text(label, &style, (x + 30, y - 7))?;
         x += entry_px(label);
@@ -319,7 +322,7 @@ fn readings(path: &Path, rec: &Recording, cal: Option<&Calibration>) -> PlotResu
         ));
     } else {
         entries.push((
-            Mark::Patch(SPAN),
+            Mark::Note,
             "raw readings only: the fit was refused".to_owned(),
         ));
     }
