@@ -46,6 +46,8 @@ const BURST_KEEP: f64 = 0.75;
 /// …and the readings off the sphere they find are a burst when they lie within a stretch of at most this share of
 /// the readings.
 const BURST_SHARE: f64 = 0.3;
+/// A burst is looked for again once the readings have grown by this share.
+const BURST_AGAIN_SHARE: f64 = 0.25;
 /// At most this many readings of a recording are looked at by [`recorded_fraction`] (evenly spaced).
 pub const RECORDED_READINGS: usize = 100_000;
 
@@ -85,6 +87,8 @@ pub struct DirectionCoverage {
     radial: RadialSums,
     rejected: u64,
     next_refit: usize,
+    /// The readings before which no burst is looked for again.
+    next_burst: usize,
 }
 
 impl Default for DirectionCoverage {
@@ -108,6 +112,7 @@ impl DirectionCoverage {
             radial: RadialSums::default(),
             rejected: 0,
             next_refit: REFIT_EVERY,
+            next_burst: 0,
         }
     }
 
@@ -128,7 +133,12 @@ impl DirectionCoverage {
         if n >= self.next_refit {
             self.next_refit = n + REFIT_EVERY.max((REFIT_FRACTION * n as f64) as usize);
             self.refit(false);
-            if !self.settled && n >= SETTLE_READINGS && self.misfit() > SETTLE_MISFIT {
+            if !self.settled
+                && n >= SETTLE_READINGS.max(self.next_burst)
+                && self.misfit() > SETTLE_MISFIT
+            {
+                // Not at every refit: a sphere that never settles costs O(n) in all.
+                self.next_burst = n + (BURST_AGAIN_SHARE * n as f64) as usize;
                 self.drop_burst();
             }
         }
