@@ -535,17 +535,13 @@ fn without_corrections(model: &Model, rec: &Recording, i: usize) -> [f64; 3] {
     if model.corrections().next().is_none() {
         return raw;
     }
-    let currents: Vec<f64> = rec.currents.iter().map(|c| c.values[i]).collect();
-    let inputs = Inputs {
-        t_s: rec.t_s.as_ref().map_or(0.0, |t| t[i]),
-        temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[i]),
-        currents_a: &currents,
-    };
     let a = nalgebra::Matrix3::from_fn(|j, k| model.a[j][k]);
     let Some(a_inv) = a.try_inverse() else {
         return raw;
     };
-    let field = frames::sub(model.apply(raw, &inputs), model.b_ut);
+    let mut currents = vec![0.0; rec.currents.len()];
+    let calibrated = crate::apply::calibrate_row(model, rec, i, &mut currents);
+    let field = frames::sub(calibrated, model.b_ut);
     let m = a_inv * nalgebra::Vector3::from(field);
     [m.x, m.y, m.z]
 }
