@@ -375,3 +375,42 @@ fn a_magnet_that_does_not_saturate_is_said_live_and_kept_out_of_the_coverage() {
         }
     }
 }
+
+#[test]
+fn the_cube_routine_counts_only_the_disturbed_samples_it_recorded() {
+    // Between two cube poses readings are looked at and not written: a magnet across a pose change once counted
+    // 400 "recorded" samples for the 80 rows the file held.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cube.csv");
+    let out = record(&[
+        "--device",
+        "sim:lis3mdl",
+        "--routine",
+        "cube24",
+        "--sim-fault",
+        "magnet@20:5:150,0,0",
+        "--out",
+        path.to_str().unwrap(),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let n: usize = stdout
+        .lines()
+        .find_map(|l| {
+            l.rsplit_once("kept out of the coverage map): ")
+                .map(|(_, n)| n)
+        })
+        .unwrap_or_else(|| panic!("the summary counts them: {stdout}"))
+        .parse()
+        .unwrap();
+    let rec = Recording::read(&path).unwrap();
+    let t = rec.t_s.as_ref().unwrap();
+    let in_file = (0..t.len())
+        .filter(|&i| (20.0..25.0).contains(&t[i]))
+        .filter(|&i| rec.mag_ut[i].iter().map(|v| v * v).sum::<f64>().sqrt() > 110.0)
+        .count();
+    assert!(
+        n > 0 && n <= in_file,
+        "{n} counted, {in_file} disturbed rows in the file"
+    );
+}

@@ -700,6 +700,8 @@ fn run(
     let mut units_told = false;
     let mut jig = Cube::new((opts.dwell_s * rate_hz).round() as usize);
     let mut seen = 0u64;
+    // Rows written while the magnitude departed (between cube poses, readings are looked at and not written).
+    let mut disturbed = 0u64;
     let mut saturated_told = 0;
     let mut restarts_told = 0;
     let t0_s = out.t0_s;
@@ -796,6 +798,7 @@ fn run(
         match opts.routine {
             Routine::Free => {
                 out.write(&r, r.quat)?;
+                disturbed += u64::from(magnitude.last_departed());
                 map.add(r.mag_ut);
                 // The live figure counts around a sphere up to 2 µT old: the stop is decided on the final one.
                 if map.fraction() >= opts.target_coverage && {
@@ -807,7 +810,12 @@ fn run(
                 }
             }
             Routine::Cube24 => {
-                if cube_step(&mut jig, &r, source, opts, ui, out, &mut map)? {
+                let rows = out.rows();
+                let done = cube_step(&mut jig, &r, source, opts, ui, out, &mut map)?;
+                if out.rows() > rows {
+                    disturbed += u64::from(magnitude.last_departed());
+                }
+                if done {
                     ui.progress(&progress(t_s, out, &map, &magnitude, opts, Some(jig.taken)));
                     break Stop::AllPoses;
                 }
@@ -832,7 +840,7 @@ fn run(
         coverage: map.fraction(),
         poses: jig.taken,
         saturated: source.saturated(),
-        disturbed: magnitude.departed(),
+        disturbed,
         clock_restarts: source.clock_restarts().iter().map(|t| t - t0_s).collect(),
         garbage: source.garbage(),
         stop,
