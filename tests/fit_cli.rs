@@ -644,3 +644,35 @@ fn magcal_refusing_an_existing_recording_names_its_own_options() {
     let kept = std::fs::read_to_string(dir.path().join("recording.csv")).unwrap();
     assert_eq!(kept, "precious\n");
 }
+
+#[test]
+fn magcal_does_not_replace_an_earlier_runs_parameters_unasked() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("params.toml"), "precious\n").unwrap();
+    let run = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_magcal"))
+            .args(["--out-dir", dir.path().to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = run(&[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && err.contains("params.toml exists")
+            && err.contains("--force")
+            && !dir.path().join("recording.csv").exists(),
+        "{err}"
+    );
+    let kept = std::fs::read_to_string(dir.path().join("params.toml")).unwrap();
+    assert_eq!(kept, "precious\n");
+    let out = run(&["--force"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let made = std::fs::read_to_string(dir.path().join("params.toml")).unwrap();
+    assert_ne!(made, "precious\n");
+}

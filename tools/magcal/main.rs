@@ -58,6 +58,9 @@ struct Args {
 
 /// The option that names magcal's output, said when a recording there is refused.
 const OUT_DIR: &str = "--out-dir";
+/// The fit's outputs in the folder.
+const PARAMS: &str = "params.toml";
+const REPORT: &str = "report.json";
 
 fn main() -> ExitCode {
     exit("magcal", run(Args::parse()))
@@ -76,6 +79,17 @@ fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     check_out(&rec_path, args.force).map_err(|e| e.for_option(OUT_DIR))?;
+    // The fit's outputs of an earlier run are not replaced unasked either (its recording may be gone).
+    for name in [PARAMS, REPORT] {
+        let path = args.out_dir.join(name);
+        if path.exists() && !args.force {
+            bail!(
+                "{} exists (an earlier run's?): choose another {OUT_DIR}, or add --force to replace it (nothing was \
+                 recorded)",
+                path.display()
+            );
+        }
+    }
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;
 
@@ -141,11 +155,11 @@ fn run(args: Args) -> anyhow::Result<()> {
     let assessment = assess(&cal, &rec, false);
     say!("\n{}", summary(&cal, &assessment, &name))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
-    let report_path = args.out_dir.join("report.json");
+    let report_path = args.out_dir.join(REPORT);
     Report::new(&cal, &name, &channels)
         .with_assessment(&assessment)
         .write(&report_path)?;
-    let params_path = args.out_dir.join("params.toml");
+    let params_path = args.out_dir.join(PARAMS);
     ParamsFile::of(&cal, &rec, &name)
         .write(&params_path)
         .with_context(|| format!("writing {}", params_path.display()))?;
