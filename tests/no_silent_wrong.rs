@@ -398,9 +398,16 @@ fn raw_counts_get_a_units_warning_with_the_scale() {
             "{file}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
+        let summary = String::from_utf8_lossy(&out.stdout);
+        assert!(summary.contains("WARNING"), "{file}");
+        // The verdict itself says there are warnings, usable or turned usable by them.
+        let verdict = summary
+            .lines()
+            .find(|l| l.contains("verdict: "))
+            .unwrap_or_else(|| panic!("{file}: {summary}"));
         assert!(
-            String::from_utf8_lossy(&out.stdout).contains("WARNING"),
-            "{file}"
+            verdict.contains("USABLE") && verdict.contains("2 warning(s)"),
+            "{file}: {verdict}"
         );
     }
 }

@@ -405,6 +405,12 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
             todo: "read the WARNING below: it says what looks wrong and what would fix it"
                 .to_owned(),
         };
+    } else if verdict.grade == Grade::Usable && !cal.warnings.is_empty() {
+        verdict.reason = format!(
+            "{}; the fit also carries {} warning(s): read them below",
+            verdict.reason,
+            cal.warnings.len()
+        );
     }
     Assessment {
         heading: chosen.ok(),
