@@ -687,21 +687,22 @@ fn vector_method_calibrates_around_gross_disturbances() {
 fn scalar_method_calibrates_around_gross_disturbances() {
     let t = study(false);
     report("scalar method", &t);
-    // Measured 2026-11-26: 95.0 % good (93.5 % before the base fit's window scan fitted a field fixed to the sensor
-    // as well as one fixed in the room, and the diagnosis took its exclusions as they were; 92.5 % before the
-    // standard errors saw residuals alike over blocks of time, 92.0 % before the final fit left out the disturbed
-    // rows the diagnosis located beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration
-    // steps and shifted windows), 100 % located (98.9 % before spans merged across a lull were split here too),
-    // 94.5 % of the seeds both — short of the 95 % by one seed —, none worse (1 before a scalar finding had
-    // to explain a quarter of the residual's excess), 0 of 50 false alarms, none refused (1 before the bulk seed:
-    // seed 98, see below; it is now calibrated, 3.65 standard errors off in one element of A). These floors keep
-    // them, less one run of good and one refusal.
+    // Measured 2026-11-27: 95.5 % good (95.0 % before a gross span went on beyond its ramp, down to about the noise:
+    // `ScalarProblem::RAMP_TAIL`; on 2026-11-26 93.5 % before the base fit's window scan fitted a field fixed to the
+    // sensor as well as one fixed in the room, and the diagnosis took its exclusions as they were; 92.5 % before the
+    // standard errors saw residuals alike over blocks of time, 92.0 % before the final fit left out the disturbed rows
+    // the diagnosis located beyond the robust fit's; 84.8 % before the robust fit's sixth seeds, concentration steps
+    // and shifted windows), 100 % located (98.9 % before spans merged across a lull were split here too), 95.5 % of the
+    // seeds both (94.5 % before the ramps' tails: magnets' tails at 1–6 µT kept beside the spans), none worse (1 before
+    // a scalar finding had to explain a quarter of the residual's excess), 0 of 50 false alarms, none refused (1 before
+    // the bulk seed: seed 98, see below; it is now calibrated, 3.5 standard errors off in one element of A): the
+    // issue's targets. These floors keep them, less one run of good and of both, and one refusal.
     check(
         &t,
         &Floor {
-            good_pct: 94.5,
+            good_pct: 95.0,
             located_pct: 99.5,
-            both_pct: 94.5,
+            both_pct: 95.0,
             worse: 0,
             false_alarm_pct: 1.0,
             refused_pct: 0.5,

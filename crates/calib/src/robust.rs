@@ -87,6 +87,9 @@ pub trait RobustProblem: Sized + Sync {
     /// The median size of a residual of pure noise of unit standard deviation per axis (≈1.538 for the norm of a
     /// 3-vector, 0.6745 for the absolute value of a scalar).
     const MEDIAN_OF_UNIT: f64;
+    /// How far a gross span goes on beyond its ramp (the neighbours above [`RAMP_SIGMA`]), in the ramp's lengths:
+    /// none unless a problem says otherwise.
+    const RAMP_TAIL: f64 = 0.0;
     /// Number of samples.
     fn len(&self) -> usize;
     /// Whether there are no samples.
@@ -234,7 +237,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
         refresh(problem, &fit, &mut residual_ut);
     }
     let mut sigma_ut = scale::<P>(&residual_ut);
-    let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s), n);
+    let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s, P::RAMP_TAIL), n);
     let mut final_fit: Option<P::Fit> = None;
     for pass in 0..SPAN_PASSES {
         let start = final_fit.as_ref().unwrap_or(&fit);
@@ -242,7 +245,7 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
         refresh(problem, &f, &mut residual_ut);
         sigma_ut = scale::<P>(&residual_ut);
         final_fit = Some(f);
-        let again = gross_spans(&residual_ut, sigma_ut, t_s);
+        let again = gross_spans(&residual_ut, sigma_ut, t_s, P::RAMP_TAIL);
         // The spans returned are those the final fit left out.
         let settled = is_outside(&k, &again);
         kept = if settled || pass + 1 == SPAN_PASSES {
@@ -322,7 +325,7 @@ fn fit_outside<P: RobustProblem>(
             Err(_) => {
                 factor *= 2.0;
                 kept = outside(
-                    &gross_spans(residual_ut, factor * sigma_ut, t_s),
+                    &gross_spans(residual_ut, factor * sigma_ut, t_s, P::RAMP_TAIL),
                     kept.len(),
                 );
             }
@@ -360,9 +363,10 @@ pub fn outside(spans: &[(usize, usize)], n: usize) -> Vec<bool> {
 
 /// The gross spans of residual sizes `e` against the scale `sigma` (per axis): the samples beyond [`GROSS_SIGMA`],
 /// merged across gaps of up to [`SPAN_GAP_S`] (or [`SPAN_GAP_SAMPLES`] without time), widened over their ramps
-/// (neighbours beyond [`RAMP_SIGMA`]), and merged across lulls shorter than [`GAP_SHARE`] of the mean of the spans around them,
-/// as sample ranges `[start, end)`.
-pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>) -> Vec<(usize, usize)> {
+/// (neighbours beyond [`RAMP_SIGMA`], and on beyond them for `tail` times a ramp's length: see
+/// [`RobustProblem::RAMP_TAIL`]), and merged across lulls shorter than [`GAP_SHARE`] of the mean of the spans around
+/// them, as sample ranges `[start, end)`.
+pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>, tail: f64) -> Vec<(usize, usize)> {
     let gross = |i: usize| e[i].is_finite() && e[i] > GROSS_SIGMA * sigma;
     let ramp = |i: usize| e[i].is_finite() && e[i] > RAMP_SIGMA * sigma;
     let mut runs: Vec<(usize, usize)> = Vec::new();
@@ -387,6 +391,12 @@ pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>) -> Vec<(usize, us
         while b < ceiling && ramp(b) {
             b += 1;
         }
+        // The ramp goes on below the threshold, `tail` times as far again.
+        let (ra, rb) = runs[k];
+        a = a
+            .saturating_sub(((ra - a) as f64 * tail) as usize)
+            .max(floor);
+        b = (b + ((b - rb) as f64 * tail) as usize).min(ceiling);
         widened.push((a, b));
     }
     // Lulls shorter than a share of the spans around them are part of one disturbance.

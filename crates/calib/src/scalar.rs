@@ -193,6 +193,12 @@ impl RobustProblem for ScalarProblem<'_> {
     type Fit = ScalarFit;
     /// The median of |N(0, 1)|.
     const MEDIAN_OF_UNIT: f64 = 0.674_49;
+    /// A magnet passing at constant speed, its field falling off as the distance cubed, takes about twice as long to
+    /// fall from 3 to 1 scales as from 6 to 3: its tail is left out down to about the noise. Measured on the
+    /// disturbed study: 189 → 191 of 200 seeds within their bounds, every disturbance still located, no false alarm
+    /// on the nulls. (The vector method keeps none: there the same tail cost 8 seeds, each with standard errors
+    /// that no longer covered an error within the bound.)
+    const RAMP_TAIL: f64 = 2.0;
 
     fn len(&self) -> usize {
         self.raw_ut.len()

@@ -424,7 +424,11 @@ fn diagnose_at(
         let scale2 = setup.scale(&residual);
         let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
         let times = samples.has_time.then_some(&samples.t[..]);
-        let kept2 = robust::outside(&robust::gross_spans(&sizes, scale2, times), sizes.len());
+        let tail = crate::vector::VectorProblem::RAMP_TAIL;
+        let kept2 = robust::outside(
+            &robust::gross_spans(&sizes, scale2, times, tail),
+            sizes.len(),
+        );
         if kept2 == kept {
             break;
         }
