@@ -898,6 +898,35 @@ mod tests {
     }
 
     #[test]
+    fn a_magnets_tail_goes_with_its_span_and_a_steps_edge_does_not_widen() {
+        // Noise-free residual sizes against a scale of 1: a magnet passed at constant speed (40 at closest, falling
+        // off as the distance cubed) at sample 500, and a step of 20 from 800 to 900.
+        let pass = |i: usize| {
+            let u = (i as f64 - 500.0) / 20.0;
+            40.0 / (1.0 + u * u).powf(1.5)
+        };
+        let e: Vec<f64> = (0..1000)
+            .map(|i| pass(i) + if (800..900).contains(&i) { 20.0 } else { 0.0 })
+            .collect();
+        let first_below = |level: f64| (500..800).find(|&i| pass(i) < level).unwrap();
+        let bare = gross_spans(&e, 1.0, None, 0.0);
+        let tailed = gross_spans(&e, 1.0, None, 2.0);
+        assert_eq!(bare.len(), 2, "{bare:?}");
+        assert_eq!(tailed.len(), 2, "{tailed:?}");
+        // Without a tail the span ends where the pass falls below 3; with twice the ramp, near 1.
+        assert_eq!(bare[0].1, first_below(RAMP_SIGMA));
+        let reached = pass(tailed[0].1);
+        assert!((0.8..1.3).contains(&reached), "{tailed:?}: {reached}");
+        assert!(
+            (500 - tailed[0].0).abs_diff(tailed[0].1 - 1 - 500) <= 1,
+            "symmetric: {tailed:?}"
+        );
+        // The step has no ramp: its span is the step, tail or not.
+        assert_eq!(bare[1], (800, 900));
+        assert_eq!(tailed[1], (800, 900));
+    }
+
+    #[test]
     fn is_outside_says_whether_kept_is_outside_the_spans() {
         use rand::{RngExt, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
