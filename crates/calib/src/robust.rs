@@ -23,7 +23,8 @@
 //! 3. **On all samples**, a few reweighting passes from the best seed (until the weights settle; on a subsample of at
 //!    most [`REWEIGHT_SAMPLES`] samples, which fixes the fit far more closely than the spans need); then the samples
 //!    of the whole recording whose residual exceeds [`GROSS_SIGMA`] times the scale make spans — merged across gaps
-//!    of up to [`SPAN_GAP_S`] and widened over their ramps (neighbours above [`RAMP_SIGMA`]) — which are excluded,
+//!    of up to [`SPAN_GAP_S`] and widened over their ramps (neighbours above [`RAMP_SIGMA`], and on for
+//!    [`RobustProblem::RAMP_TAIL`] times a ramp's length: a magnet's tail in the scalar method) — which are excluded,
 //!    and the rest is fitted by plain (weighted 0/1) least squares, from the fit before (an iterative solver needs
 //!    fewer passes); twice, with the spans of the new fit. A whole span goes, not only its gross samples: a
 //!    magnet attached to a hand-held sensor shows in |B| only where the field points along its offset, and the
