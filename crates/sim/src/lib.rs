@@ -6,7 +6,7 @@
 //! current channels, white noise and quantisation to the chip's LSB. [`simulate`] turns it into a
 //! [`magcal_recording::Recording`], deterministically from the scenario's seed.
 //!
-//! [`bench`] is the same physics sampled at any time, for simulated chips: a virtual hand turns the sensor as a
+//! [`bench`](mod@bench) is the same physics sampled at any time, for simulated chips: a virtual hand turns the sensor as a
 //! recorder asks.
 //!
 //! The sensor model is the calibration model run backwards: with the true `A`, `b` and effects `δ`,

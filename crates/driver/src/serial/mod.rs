@@ -6,7 +6,7 @@
 //!   MotionCal and Adafruit's calibration sketches use (counts of 1/8192 g, 1/16 °/s, 0.1 µT).
 //! - **Native CSV** ([`csv_stream`]): a header naming magcal-recording v1 columns, then data.
 //! - **Patterns** ([`pattern`]): any line, read by a regular expression with named groups `mx`, `my`, `mz` (and
-//!   `t`, `temp`, `qw`…), in a unit the device string names ([`unit`]); built in for the Adafruit Unified Sensor
+//!   `t`, `temp`, `qw`…), in a unit the device string names ([`unit`](mod@unit)); built in for the Adafruit Unified Sensor
 //!   examples (`X: … Y: … Z: … uT`) and for three numbers a line (`x,y,z`).
 //!
 //! Lines are parsed without I/O ([`stream::StreamParser`]); garbage (noise, half lines, other
