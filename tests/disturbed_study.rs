@@ -326,6 +326,8 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
             return;
         }
     };
+    // However disturbed, a reference in magcal's convention is not taken for one in another.
+    assert_eq!(cal.attitude_convention, None, "{what}");
     let d = cal.diagnosis.as_ref().expect("diagnosed");
     let t = rec.t_s.as_ref().unwrap();
     // Where each disturbance is, and the clean rows.

@@ -595,8 +595,9 @@ fn map_columns(text: &str, names: &[&str], f: impl Fn(f64) -> f64) -> String {
 }
 
 /// Defect 11: quaternions in another convention (here the conjugate) fitted REDO with gain warnings and advice to
-/// check a saturated axis or record for longer. Now one warning names the likely conventions, and the verdict says
-/// to look there.
+/// check a saturated axis or record for longer. Then one warning listed the likely conventions; now the conventions
+/// are tried, and the verdict and warning name the one the reference fits in (the inverse turn), with and without
+/// the diagnosis, which is not made against it.
 #[test]
 fn a_reference_in_another_convention_is_named_as_such() {
     let dir = tempfile::tempdir().unwrap();
@@ -606,34 +607,38 @@ fn a_reference_in_another_convention_is_named_as_such() {
         "conjugate.csv",
         &map_columns(&text, &["qx", "qy", "qz"], |v| -v),
     );
-    let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose"]);
-    assert!(out.status.success());
-    let summary = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        summary.contains("REDO")
-            && summary.contains("another convention")
-            && summary.contains("conjugate")
-            && summary.contains("the WARNING below says what to try")
-            && !summary.contains("gains differ"),
-        "{summary}"
-    );
-    // With the diagnosis: the verdict says the reference disagrees (it said "the fit itself is uncertain" at 96 % of
-    // the directions), no heading figure passes 180°, and the diagnosis does not call the residual the reference's
-    // own error ("consistent").
-    let out = magcal_fit(&[rec.to_str().unwrap()]);
-    assert!(out.status.success());
-    let summary = String::from_utf8_lossy(&out.stdout);
-    let verdict = summary.lines().find(|l| l.starts_with("verdict:")).unwrap();
-    assert!(
-        verdict.contains("the readings and the attitude reference disagree by"),
-        "{summary}"
-    );
-    assert!(summary.contains("diagnosis: not judged"), "{summary}");
-    for degrees in summary
-        .split('°')
-        .filter_map(|s| s.rsplit(' ').next()?.parse::<f64>().ok())
-    {
-        assert!(degrees <= 180.0, "{summary}");
+    for diagnose in [false, true] {
+        let args = [rec.to_str().unwrap(), "--no-diagnose"];
+        let out = magcal_fit(&args[..if diagnose { 1 } else { 2 }]);
+        assert!(out.status.success());
+        let summary = String::from_utf8_lossy(&out.stdout);
+        let verdict = summary.lines().find(|l| l.starts_with("verdict:")).unwrap();
+        assert!(
+            verdict.contains("REDO")
+                && verdict.contains("better read as the inverse quaternion")
+                && verdict.contains("rewrite the attitude in magcal's convention"),
+            "{summary}"
+        );
+        assert!(
+            summary.contains(
+                "WARNING: the attitude reference fits the readings far better read as the inverse"
+            ) && !summary.contains("gains differ")
+                && !summary.contains("not in µT"),
+            "{summary}"
+        );
+        assert_eq!(
+            summary.contains(
+                "not diagnosed: the attitude reference fits far better in another convention"
+            ),
+            diagnose,
+            "{summary}"
+        );
+        for degrees in summary
+            .split('°')
+            .filter_map(|s| s.rsplit(' ').next()?.parse::<f64>().ok())
+        {
+            assert!(degrees <= 180.0, "{summary}");
+        }
     }
 }
 

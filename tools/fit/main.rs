@@ -6,7 +6,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Method, calibrate, drop_faulty, read_to_calibrate};
+use magcal_app::calibrate::{
+    Method, attitude_worth_checking, calibrate, drop_faulty, read_to_calibrate,
+};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
@@ -134,7 +136,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         read_to_calibrate(&args.recording, args.method, !args.no_diagnose, |meta| {
             Ok(resolve(&field_args, meta)?)
         })?;
-    let faulty = drop_faulty(&mut rec);
+    let mut faulty = drop_faulty(&mut rec);
     let mut cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
         Ok(cal) => cal,
         Err(e) => {
@@ -145,6 +147,19 @@ fn run(args: Args) -> anyhow::Result<()> {
             return Err(e).with_context(|| format!("{name}: cannot calibrate"));
         }
     };
+    // Without the diagnosis the quaternions were not kept: a fit that looks off is made again with them, and
+    // replaces the first if their convention is not magcal's.
+    if attitude_worth_checking(&cal, &rec) {
+        let (mut full, field) = read_to_calibrate(&args.recording, args.method, true, |meta| {
+            Ok(resolve(&field_args, meta)?)
+        })?;
+        let full_faulty = drop_faulty(&mut full);
+        if let Ok(again) = calibrate(&full, args.method, field, false)
+            && again.attitude_convention.is_some()
+        {
+            (rec, cal, faulty) = (full, again, full_faulty);
+        }
+    }
     cal.warnings.extend(faulty);
     let assessment = assess(&cal, &rec, args.export.is_some() || args.write_to.is_some());
 

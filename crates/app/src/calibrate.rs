@@ -1,5 +1,6 @@
 //! From a recording to a fitted calibration: pick the method, build the expected field, check, fit, measure.
 
+use magcal_calib::convention;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::directions::fraction_of;
 use magcal_calib::frames;
@@ -102,6 +103,8 @@ pub struct Calibration {
     pub diagnosis: Option<Diagnosis>,
     /// Why the diagnosis, asked for, could not be made (the calibration is then the base fit).
     pub diagnosis_failed: Option<String>,
+    /// Another convention the attitude reference fits far better in (a warning says so; the fit is no calibration).
+    pub attitude_convention: Option<convention::Better>,
 }
 
 impl Calibration {
@@ -464,6 +467,20 @@ pub fn read_to_calibrate(
     Ok((rec, field))
 }
 
+/// Whether a vector fit made without the quaternions (turned into the expected field as they were read, see
+/// [`read_to_calibrate`]) looks off enough to be made again with them kept, so that a reference in another
+/// convention can be recognised ([`convention`]): more than 1 % of the rows left out as grossly off, a residual
+/// above three times the noise, or one that is a good part of the field.
+pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
+    matches!(cal.fit, Fit::Vector(_))
+        && rec.quat.is_none()
+        && rec.ref_ut.is_some()
+        && cal.field.vector().is_some()
+        && (100 * cal.samples.excluded > cal.samples.total
+            || cal.residual_rms_ut > 3.0 * cal.noise_floor_ut
+            || checks::reference_off(&cal.fit, &cal.field).is_some())
+}
+
 /// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
 /// sensor turns (the sensor's range clipped it), or the same reading many times in a row (a frozen output); and says
 /// so, one warning per fault found.
@@ -684,7 +701,19 @@ pub fn calibrate(
         ));
         noise = noise.scaled(residual_rms_ut / floor_now);
     }
-    let checked = checks::check(&model, &fit, &field, &rec.mag_ut, &robust.kept)?;
+    // The attitude read in the conventions loggers also use (the inverse turn, the scalar last, an ENU world).
+    let attitude_convention = match (&fit, &rec.quat, field.vector()) {
+        (Fit::Vector(_), Some(q), Some(f)) => convention::better_convention(&rec.mag_ut, q, f),
+        _ => None,
+    };
+    let checked = checks::check(
+        &model,
+        &fit,
+        &field,
+        &rec.mag_ut,
+        &robust.kept,
+        attitude_convention.as_ref(),
+    )?;
     warnings.extend(checked.warnings);
     let noise_floor_ut = match &fit {
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
@@ -710,9 +739,16 @@ pub fn calibrate(
         robust,
         diagnosis: None,
         diagnosis_failed: None,
+        attitude_convention,
     };
     if diagnose {
-        if used < diagnosis::MIN_SAMPLES {
+        if cal.attitude_convention.is_some() {
+            cal.notes.push(
+                "not diagnosed: the attitude reference fits far better in another convention (the WARNING says \
+                 which); against it, the diagnosis would find disturbances that are not there"
+                    .to_owned(),
+            );
+        } else if used < diagnosis::MIN_SAMPLES {
             cal.notes.push(format!(
                 "not diagnosed: the diagnosis needs at least {} samples and this recording has {used}; the \
                  calibration above stands on its own",

@@ -2,6 +2,7 @@
 //! looks wrong for a reason the user can fix (units, a field outside the Earth's range) is written with a loud
 //! warning that says what it looks like and what would fix it.
 
+use magcal_calib::convention::Better;
 use magcal_calib::scalar::centre;
 use magcal_calib::{FitError, Model, frames};
 use nalgebra::Matrix3;
@@ -45,13 +46,15 @@ pub struct Checked {
 }
 
 /// Checks a fitted model (of the readings `raw_ut` it `kept`); refuses what cannot be a calibration and returns the
-/// warnings for the rest.
+/// warnings for the rest. `convention` is another convention the attitude reference fits far better in, if one was
+/// found ([`magcal_calib::convention`]).
 pub fn check(
     model: &Model,
     fit: &Fit,
     field: &ReferenceField,
     raw_ut: &[[f64; 3]],
     kept: &[bool],
+    convention: Option<&Better>,
 ) -> Result<Checked, FitError> {
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let sv = a.singular_values();
@@ -66,7 +69,9 @@ pub fn check(
     let mut warnings = Vec::new();
     // A reference off by a good part of the field bends A every way: that, not the gains, is what to say.
     let reference_off = reference_off(fit, field);
-    if let Some((rms, f)) = reference_off {
+    if let Some(b) = convention {
+        warnings.push(convention_warning(b));
+    } else if let Some((rms, f)) = reference_off {
         warnings.push(format!(
             "the readings and the attitude reference disagree by {rms:.1} µT RMS per axis, {:.0} % of the field: \
              more than any sensor's calibration leaves. The reference is likely in another convention than \
@@ -76,7 +81,8 @@ pub fn check(
             100.0 * rms / f
         ));
     }
-    if hi / lo > GAIN_SPREAD_WARN && reference_off.is_none() {
+    let reference_doubtful = reference_off.is_some() || convention.is_some();
+    if hi / lo > GAIN_SPREAD_WARN && !reference_doubtful {
         warnings.push(format!(
             "the fitted gains differ by a factor {:.2} between directions (singular values of A {:.4}–{:.4}): more \
              than a sensor's axes plausibly differ. Check for a saturated axis, a mis-set range, or a magnet moving \
@@ -110,7 +116,8 @@ pub fn check(
         Fit::Scalar(s) => s.field_given.then_some(s.field_ut),
         Fit::Vector(_) => Some(calibrated),
     };
-    let raw_not_ut = !raw_in_range && raw_radius > 0.0;
+    // Against a doubtful reference the centre is no hard iron, and the radius about it no unit.
+    let raw_not_ut = !reference_doubtful && !raw_in_range && raw_radius > 0.0;
     if raw_not_ut {
         warnings.push(units_warning(raw_radius, model, c, known));
     } else if !(low..=high).contains(&calibrated) {
@@ -123,7 +130,7 @@ pub fn check(
     let mean_gain = sv.iter().product::<f64>().cbrt();
     if raw_in_range
         && known.is_some()
-        && reference_off.is_none()
+        && !reference_doubtful
         && mean_gain.ln().abs() > MEAN_GAIN_WARN.ln()
     {
         warnings.push(format!(
@@ -133,7 +140,7 @@ pub fn check(
             field.source()
         ));
     }
-    if matches!(fit, Fit::Vector(_)) && reference_off.is_none() && a.determinant() < 0.0 {
+    if matches!(fit, Fit::Vector(_)) && !reference_doubtful && a.determinant() < 0.0 {
         warnings.push(
             "A mirrors the axes (its determinant is negative): the readings' axes are left-handed against the \
              attitude reference's — two axes swapped or one reversed (a wiring or a driver's axis map). A as fitted \
@@ -154,6 +161,22 @@ pub fn check(
         warnings,
         raw_not_ut,
     })
+}
+
+/// The warning for an attitude reference that fits far better in another convention.
+pub fn convention_warning(b: &Better) -> String {
+    format!(
+        "the attitude reference fits the readings far better read as {}: their misfit is {:.2} µT (median; {:.2} \
+         RMS) against {:.2} µT ({:.2} RMS) as the file gives it. magcal reads qw,qx,qy,qz as the turn of the \
+         sensor's axes into the world's north-east-down axes, with the field in NED: rewrite the quaternions in that \
+         convention and fit again. A and b here are not a calibration, and spans left out as disturbed are where \
+         the wrong reference happened not to fit",
+        b.convention.describe(),
+        b.better.median_ut,
+        b.better.rms_ut,
+        b.given.median_ut,
+        b.given.rms_ut
+    )
 }
 
 /// A vector fit's residual (RMS per axis, µT) and the field's magnitude when the residual exceeds

@@ -40,6 +40,10 @@ pub struct Report {
     /// What the base model leaves out (absent with `--no-diagnose`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnosis: Option<DiagnosisReport>,
+    /// Another convention the attitude reference fits far better in (absent when none does; the fit is then no
+    /// calibration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attitude_convention: Option<ConventionReport>,
     /// The heading error before and after, when the local field's direction is known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heading: Option<HeadingReport>,
@@ -69,6 +73,21 @@ pub struct HeadingReport {
     pub unexplained_ut: f64,
     /// One reading's noise across the field, degrees RMS.
     pub noise_deg: f64,
+}
+
+/// An attitude reference that fits far better in another convention than magcal's (`magcal_calib::convention`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConventionReport {
+    /// The quaternions turn the world's axes into the sensor's.
+    pub inverse: bool,
+    /// The columns `qw,qx,qy,qz` hold `x, y, z, w`.
+    pub scalar_last: bool,
+    /// The world is east-north-up.
+    pub enu: bool,
+    /// The median misfit (norm per sample, plain fit) in that convention, µT.
+    pub median_misfit_ut: f64,
+    /// The median misfit as the file gives the reference, µT.
+    pub given_median_misfit_ut: f64,
 }
 
 /// The verdict.
@@ -581,6 +600,13 @@ impl Report {
             notes: cal.notes.clone(),
             warnings: cal.warnings.clone(),
             diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
+            attitude_convention: cal.attitude_convention.map(|b| ConventionReport {
+                inverse: b.convention.inverse,
+                scalar_last: b.convention.scalar_last,
+                enu: b.convention.enu,
+                median_misfit_ut: b.better.median_ut,
+                given_median_misfit_ut: b.given.median_ut,
+            }),
             heading: None,
             verdict: None,
         }

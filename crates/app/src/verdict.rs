@@ -361,7 +361,21 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
     };
     // A reference in another convention: its warning says what to try, not more recording.
-    if verdict.grade != Grade::Good
+    if let Some(b) = &cal.attitude_convention {
+        verdict = Verdict {
+            grade: Grade::Redo,
+            reason: format!(
+                "the attitude reference fits the readings {:.0} times better read as {} (median misfit {:.2} µT \
+                 against {:.2} µT): the calibration is against a reference in the wrong convention",
+                b.given.median_ut / b.better.median_ut,
+                b.convention.describe(),
+                b.better.median_ut,
+                b.given.median_ut
+            ),
+            todo: "rewrite the attitude in magcal's convention (the WARNING below says how) and fit again"
+                .to_owned(),
+        };
+    } else if verdict.grade != Grade::Good
         && let Some((rms_ut, field_ut)) = crate::checks::reference_off(&cal.fit, &cal.field)
     {
         let left_deg = match &chosen {

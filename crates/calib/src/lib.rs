@@ -18,6 +18,8 @@ pub mod model;
 #[cfg(feature = "std")]
 mod chunks;
 #[cfg(feature = "std")]
+pub mod convention;
+#[cfg(feature = "std")]
 pub mod coverage;
 #[cfg(feature = "std")]
 pub mod diagnosis;
