@@ -24,25 +24,10 @@ fn read(rel: &str) -> (Vec<[f64; 3]>, Vec<[f64; 4]>, [f64; 3]) {
     (rec.mag_ut, rec.quat.expect("quaternions"), field)
 }
 
-/// The attitude and field as a logger in convention `c` writes what magcal reads as `q` and `field`.
+/// The attitude and field as a logger in convention `c` writes what magcal reads as `quat` and `field`.
 fn written_in(c: Convention, quat: &[[f64; 4]], field: [f64; 3]) -> (Vec<[f64; 4]>, [f64; 3]) {
-    let quat = quat
-        .iter()
-        .map(|&[w, x, y, z]| {
-            let [w, x, y, z] = if c.inverse {
-                [w, -x, -y, -z]
-            } else {
-                [w, x, y, z]
-            };
-            if c.scalar_last {
-                [x, y, z, w]
-            } else {
-                [w, x, y, z]
-            }
-        })
-        .collect();
-    let [n, e, d] = field;
-    (quat, if c.enu { [e, n, -d] } else { field })
+    let quat = quat.iter().map(|&q| c.written(q, field).0).collect();
+    (quat, c.written([1.0, 0.0, 0.0, 0.0], field).1)
 }
 
 #[test]
@@ -75,7 +60,19 @@ fn physical_recordings_written_in_another_convention_are_named() {
         for c in conventions {
             let (written, given_field) = written_in(c, &quat, field);
             let found = better_convention(&raw, &written, given_field);
-            assert_eq!(found.map(|b| b.convention), Some(c), "{rel}: {found:?}");
+            // Where the field has no east component to speak of (BROAD's, -0.31 µT), a north-west-up world and a
+            // reversed vertical field fit alike: either may come first, the other is named with it.
+            let named = found.as_ref().map(|b| {
+                let mut all = b.also.clone();
+                all.insert(0, b.convention);
+                all
+            });
+            assert!(
+                named
+                    .as_ref()
+                    .is_some_and(|n| n.contains(&c) && n.len() <= 2),
+                "{rel} {c:?}: {found:?}"
+            );
         }
     }
 }
@@ -129,9 +126,9 @@ fn magcal_fit_names_the_convention_of_a_physical_recording() {
             (
                 c["inverse"].as_bool(),
                 c["scalar_last"].as_bool(),
-                c["enu"].as_bool()
+                c["world"].as_str()
             ),
-            (Some(true), Some(false), Some(false)),
+            (Some(true), Some(false), Some("ned")),
             "{c}"
         );
         assert!(r.get("diagnosis").is_none(), "{}", r["diagnosis"]);

@@ -616,7 +616,7 @@ fn a_reference_in_another_convention_is_named_as_such() {
         assert!(
             verdict.contains("REDO")
                 && verdict.contains("better read as the inverse quaternion")
-                && verdict.contains("rewrite the attitude in magcal's convention"),
+                && verdict.contains("rewrite the attitude (or the field) in magcal's convention"),
             "{summary}"
         );
         assert!(

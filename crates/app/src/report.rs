@@ -3,6 +3,7 @@
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
 //! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
+use magcal_calib::convention::World;
 use magcal_calib::diagnosis::{Components, Diagnosis, FoundEffect, ParamValue, SpanKind, Verdict};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -82,8 +83,12 @@ pub struct ConventionReport {
     pub inverse: bool,
     /// The columns `qw,qx,qy,qz` hold `x, y, z, w`.
     pub scalar_last: bool,
-    /// The world is east-north-up.
-    pub enu: bool,
+    /// The world's axes: `ned` (magcal's), `enu`, `nwu`, or `field_up` (NED, the field's vertical reversed).
+    pub world: String,
+    /// In words.
+    pub described: String,
+    /// Others the reference fits about as well in (the recording cannot tell them apart), in words.
+    pub also: Vec<String>,
     /// The median misfit (norm per sample, plain fit) in that convention, µT.
     pub median_misfit_ut: f64,
     /// The median misfit as the file gives the reference, µT.
@@ -600,10 +605,18 @@ impl Report {
             notes: cal.notes.clone(),
             warnings: cal.warnings.clone(),
             diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
-            attitude_convention: cal.attitude_convention.map(|b| ConventionReport {
+            attitude_convention: cal.attitude_convention.as_ref().map(|b| ConventionReport {
                 inverse: b.convention.inverse,
                 scalar_last: b.convention.scalar_last,
-                enu: b.convention.enu,
+                world: match b.convention.world {
+                    World::Ned => "ned",
+                    World::Enu => "enu",
+                    World::Nwu => "nwu",
+                    World::FieldUp => "field_up",
+                }
+                .to_owned(),
+                described: b.convention.describe(),
+                also: b.also.iter().map(|c| c.describe()).collect(),
                 median_misfit_ut: b.better.median_ut,
                 given_median_misfit_ut: b.given.median_ut,
             }),

@@ -368,11 +368,11 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
                 "the attitude reference fits the readings {:.0} times better read as {} (median misfit {:.2} µT \
                  against {:.2} µT): the calibration is against a reference in the wrong convention",
                 b.given.median_ut / b.better.median_ut,
-                b.convention.describe(),
+                b.describe(),
                 b.better.median_ut,
                 b.given.median_ut
             ),
-            todo: "rewrite the attitude in magcal's convention (the WARNING below says how) and fit again"
+            todo: "rewrite the attitude (or the field) in magcal's convention (the WARNING below says how) and fit again"
                 .to_owned(),
         };
     } else if verdict.grade != Grade::Good

@@ -2,19 +2,48 @@
 //!
 //! magcal reads a quaternion `qw,qx,qy,qz` as the turn of the sensor's axes into the world's NED axes, and the field
 //! in NED ([`crate::frames`]). Loggers also write the inverse turn (world into sensor), the scalar last (`x,y,z,w`
-//! under magcal's names), or an ENU world. A constant turn or mirror between the sensor's axes and the reference's is
+//! under magcal's names), or an ENU or NWU world. A constant turn or mirror between the sensor's axes and the reference's is
 //! part of `A` and needs nothing; these are not constant, and a fit against them is no calibration. It is not always
 //! plain to see: on a recording that turns slowly the robust fit finds stretches that the wrong reference happens to
 //! match and leaves the rest out as "disturbed" (the BROAD recording with its quaternions inverted: 37 % left out,
 //! 1.1 µT on the rest, and nine magnets that were never there).
 //!
 //! [`better_convention`] fits the readings (plain least squares, on a subsample) against the reference in each of
-//! the eight combinations and says when one of them fits far better than the reference as given. On the physical
-//! recordings the convention as given fits best by a factor of 2.2 or more (median misfit); with their quaternions
-//! inverted, the inverse fits 3 times better.
+//! the sixteen combinations (a field given with its vertical reversed among them: the fix is the same, and where the
+//! field has no east component it cannot be told from a north-west-up world) and says when one of them fits far
+//! better than the reference as given. On the physical recordings the convention as given fits best by a factor of
+//! 2.2 or more (median misfit); with their quaternions inverted, the inverse fits 3 times better.
 
 use crate::frames;
 use crate::vector::{self, VectorOptions};
+
+/// The world axes a quaternion turns the sensor's into, or the field given against them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum World {
+    /// North-east-down, magcal's.
+    #[default]
+    Ned,
+    /// East-north-up (Android's rotation vector, ROS).
+    Enu,
+    /// North-west-up (some AHRS filters).
+    Nwu,
+    /// North-east-down axes, but the field given with its vertical component reversed (up taken as positive).
+    FieldUp,
+}
+
+impl World {
+    const ALL: [World; 4] = [World::Ned, World::Enu, World::Nwu, World::FieldUp];
+
+    /// The field a turn into these axes, read as one into NED, should meet: the NED field in these axes.
+    fn field(self, [n, e, d]: [f64; 3]) -> [f64; 3] {
+        match self {
+            World::Ned => [n, e, d],
+            World::Enu => [e, n, -d],
+            World::Nwu => [n, -e, -d],
+            World::FieldUp => [n, e, -d],
+        }
+    }
+}
 
 /// How an attitude reference may have been written, against magcal's convention.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -23,8 +52,8 @@ pub struct Convention {
     pub inverse: bool,
     /// The columns `qw,qx,qy,qz` hold `x, y, z, w` (the scalar last).
     pub scalar_last: bool,
-    /// The world is east-north-up, not north-east-down.
-    pub enu: bool,
+    /// The world's axes.
+    pub world: World,
 }
 
 impl Convention {
@@ -32,15 +61,17 @@ impl Convention {
     pub const MAGCAL: Convention = Convention {
         inverse: false,
         scalar_last: false,
-        enu: false,
+        world: World::Ned,
     };
 
     /// Every combination, magcal's first.
     pub fn all() -> impl Iterator<Item = Convention> {
-        (0..8u8).map(|k| Convention {
-            inverse: k & 1 != 0,
-            scalar_last: k & 2 != 0,
-            enu: k & 4 != 0,
+        World::ALL.into_iter().flat_map(|world| {
+            (0..4u8).map(move |k| Convention {
+                inverse: k & 1 != 0,
+                scalar_last: k & 2 != 0,
+                world,
+            })
         })
     }
 
@@ -57,10 +88,24 @@ impl Convention {
         } else {
             [w, x, y, z]
         };
-        // A turn into ENU axes read as one into NED: the field it should meet is the NED field in ENU order.
-        let [n, e, d] = field_ned_ut;
-        let field = if self.enu { [e, n, -d] } else { field_ned_ut };
-        (q, field)
+        (q, self.world.field(field_ned_ut))
+    }
+
+    /// What a file in this convention holds for magcal's quaternion `q` and NED field `field_ned_ut` (the inverse
+    /// of [`Convention::to_magcal`]).
+    pub fn written(self, q: [f64; 4], field_ned_ut: [f64; 3]) -> ([f64; 4], [f64; 3]) {
+        let [w, x, y, z] = if self.inverse {
+            [q[0], -q[1], -q[2], -q[3]]
+        } else {
+            q
+        };
+        let q = if self.scalar_last {
+            [x, y, z, w]
+        } else {
+            [w, x, y, z]
+        };
+        // Each world's field is its own inverse (a half turn, or a reflection).
+        (q, self.world.field(field_ned_ut))
     }
 
     /// What the convention is, in words (for a message: "read as …").
@@ -72,8 +117,13 @@ impl Convention {
         if self.scalar_last {
             parts.push("the scalar last (the columns qw,qx,qy,qz holding x, y, z, w)");
         }
-        if self.enu {
-            parts.push("an east-north-up world");
+        match self.world {
+            World::Ned => {}
+            World::Enu => parts.push("an east-north-up world"),
+            World::Nwu => parts.push("a north-west-up world"),
+            World::FieldUp => {
+                parts.push("the field's vertical component reversed (given up-positive)")
+            }
         }
         if parts.is_empty() {
             "magcal's convention".to_owned()
@@ -93,15 +143,32 @@ pub struct Misfit {
 }
 
 /// A convention that fits the readings far better than the reference as given.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Better {
-    /// The convention the reference fits far better in.
+    /// The convention the reference fits best in.
     pub convention: Convention,
+    /// Others it fits about as well in (median misfit within [`TIE_SHARE`] of the best): the recording cannot tell
+    /// them apart (a north-west-up world and a reversed vertical field where the field has no east component).
+    pub also: Vec<Convention>,
     /// The misfit against the reference as given.
     pub given: Misfit,
     /// The misfit against the reference read in `convention`.
     pub better: Misfit,
 }
+
+impl Better {
+    /// The convention in words, with those it fits about as well in.
+    pub fn describe(&self) -> String {
+        let mut text = self.convention.describe();
+        for c in &self.also {
+            text += &format!(" (or, as well, {})", c.describe());
+        }
+        text
+    }
+}
+
+/// Conventions whose median misfit is within this share of the best one's are named with it.
+pub const TIE_SHARE: f64 = 1.1;
 
 /// Samples the conventions are compared on, at most (spread evenly over the recording).
 pub const SAMPLES: usize = 20_000;
@@ -151,16 +218,23 @@ pub fn better_convention(
         Some(Misfit { median_ut, rms_ut })
     };
     let given = misfit(Convention::MAGCAL)?;
-    Convention::all()
+    let mut better: Vec<(Convention, Misfit)> = Convention::all()
         .skip(1)
         .filter_map(|c| Some((c, misfit(c)?)))
         .filter(|(_, m)| m.median_ut < BETTER_SHARE * given.median_ut && m.rms_ut < given.rms_ut)
-        .min_by(|a, b| a.1.median_ut.total_cmp(&b.1.median_ut))
-        .map(|(convention, better)| Better {
-            convention,
-            given,
-            better,
-        })
+        .collect();
+    better.sort_by(|a, b| a.1.median_ut.total_cmp(&b.1.median_ut));
+    let (&(convention, best), rest) = better.split_first()?;
+    Some(Better {
+        convention,
+        also: rest
+            .iter()
+            .filter(|(_, m)| m.median_ut <= TIE_SHARE * best.median_ut)
+            .map(|(c, _)| *c)
+            .collect(),
+        given,
+        better: best,
+    })
 }
 
 #[cfg(test)]
@@ -191,16 +265,15 @@ mod tests {
     #[test]
     fn every_convention_is_tried_once_and_magcals_is_the_identity() {
         let all: Vec<Convention> = Convention::all().collect();
-        assert_eq!(all.len(), 8);
+        assert_eq!(all.len(), 16);
         assert_eq!(all[0], Convention::MAGCAL);
+        let (q, f) = ([0.5, -0.5, 0.5, 0.5], [1.0, 2.0, 3.0]);
+        assert_eq!(Convention::MAGCAL.to_magcal(q, f), (q, f));
         for (k, c) in all.iter().enumerate() {
             assert!(!all[..k].contains(c));
+            let (wq, wf) = c.written(q, f);
+            assert_eq!(c.to_magcal(wq, wf), (q, f), "{c:?}");
         }
-        let q = [0.5, -0.5, 0.5, 0.5];
-        assert_eq!(
-            Convention::MAGCAL.to_magcal(q, [1.0, 2.0, 3.0]),
-            (q, [1.0, 2.0, 3.0])
-        );
     }
 
     #[test]
@@ -213,29 +286,16 @@ mod tests {
     fn a_reference_written_in_another_convention_is_named() {
         let (raw, quat, field) = recording(3000);
         for c in Convention::all().skip(1) {
-            // The file as a logger in convention `c` would have written it: undo what `to_magcal` does.
-            let written: Vec<[f64; 4]> = quat
-                .iter()
-                .map(|&[w, x, y, z]| {
-                    let [w, x, y, z] = if c.inverse {
-                        [w, -x, -y, -z]
-                    } else {
-                        [w, x, y, z]
-                    };
-                    if c.scalar_last {
-                        [x, y, z, w]
-                    } else {
-                        [w, x, y, z]
-                    }
-                })
-                .collect();
-            let [n, e, d] = field;
-            let given_field = if c.enu { [e, n, -d] } else { field };
-            let found = better_convention(&raw, &written, given_field)
+            let written: Vec<([f64; 4], [f64; 3])> =
+                quat.iter().map(|&q| c.written(q, field)).collect();
+            let (written_quat, written_field): (Vec<[f64; 4]>, Vec<[f64; 3]>) =
+                written.into_iter().unzip();
+            let found = better_convention(&raw, &written_quat, written_field[0])
                 .unwrap_or_else(|| panic!("{c:?} not found"));
             assert_eq!(found.convention, c, "{}", c.describe());
+            assert!(found.also.is_empty(), "{found:?}");
             assert!(found.better.rms_ut < 0.5, "{:?}", found.better);
-            assert!(found.given.rms_ut > 5.0, "{:?}", found.given);
+            assert!(found.given.rms_ut > 2.0, "{:?}", found.given);
         }
     }
 }
