@@ -701,7 +701,7 @@ pub fn calibrate(
         ));
         noise = noise.scaled(residual_rms_ut / floor_now);
     }
-    // The attitude read in the conventions loggers also use (the inverse turn, the scalar last, an ENU world).
+    // The attitude read in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds).
     let attitude_convention = match (&fit, &rec.quat, field.vector()) {
         (Fit::Vector(_), Some(q), Some(f)) => convention::better_convention(&rec.mag_ut, q, f),
         _ => None,

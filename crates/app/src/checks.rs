@@ -168,9 +168,9 @@ pub fn convention_warning(b: &Better) -> String {
     format!(
         "the attitude reference fits the readings far better read as {}: their misfit is {:.2} µT (median; {:.2} \
          RMS) against {:.2} µT ({:.2} RMS) as the file gives it. magcal reads qw,qx,qy,qz as the turn of the \
-         sensor's axes into the world's north-east-down axes, with the field in NED: rewrite the quaternions (or the \
-         field) in that convention and fit again. A and b here are not a calibration, and spans left out as disturbed are where \
-         the wrong reference happened not to fit",
+         sensor's axes into the world's north-east-down axes, with the field in NED: rewrite the quaternions (or \
+         the field) in that convention and fit again. A and b here are not a calibration, and spans left out as \
+         disturbed are where the wrong reference happened not to fit",
         b.describe(),
         b.better.median_ut,
         b.better.rms_ut,

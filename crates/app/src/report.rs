@@ -3,7 +3,6 @@
 //! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
 //! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
-use magcal_calib::convention::World;
 use magcal_calib::diagnosis::{Components, Diagnosis, FoundEffect, ParamValue, SpanKind, Verdict};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -608,13 +607,7 @@ impl Report {
             attitude_convention: cal.attitude_convention.as_ref().map(|b| ConventionReport {
                 inverse: b.convention.inverse,
                 scalar_last: b.convention.scalar_last,
-                world: match b.convention.world {
-                    World::Ned => "ned",
-                    World::Enu => "enu",
-                    World::Nwu => "nwu",
-                    World::FieldUp => "field_up",
-                }
-                .to_owned(),
+                world: b.convention.world.as_str().to_owned(),
                 described: b.convention.describe(),
                 also: b.also.iter().map(|c| c.describe()).collect(),
                 median_misfit_ut: b.better.median_ut,

@@ -2,9 +2,9 @@
 //!
 //! magcal reads a quaternion `qw,qx,qy,qz` as the turn of the sensor's axes into the world's NED axes, and the field
 //! in NED ([`crate::frames`]). Loggers also write the inverse turn (world into sensor), the scalar last (`x,y,z,w`
-//! under magcal's names), or an ENU or NWU world. A constant turn or mirror between the sensor's axes and the reference's is
-//! part of `A` and needs nothing; these are not constant, and a fit against them is no calibration. It is not always
-//! plain to see: on a recording that turns slowly the robust fit finds stretches that the wrong reference happens to
+//! under magcal's names), or an ENU or NWU world. A constant turn or mirror between the sensor's axes and the
+//! reference's is part of `A` and needs nothing; these are not constant, and a fit against them is no calibration. It
+//! is not always plain to see: on a recording that turns slowly the robust fit finds stretches that the wrong reference happens to
 //! match and leaves the rest out as "disturbed" (the BROAD recording with its quaternions inverted: 37 % left out,
 //! 1.1 µT on the rest, and nine magnets that were never there).
 //!
@@ -33,6 +33,16 @@ pub enum World {
 
 impl World {
     const ALL: [World; 4] = [World::Ned, World::Enu, World::Nwu, World::FieldUp];
+
+    /// Its name in reports: `ned`, `enu`, `nwu`, `field_up`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            World::Ned => "ned",
+            World::Enu => "enu",
+            World::Nwu => "nwu",
+            World::FieldUp => "field_up",
+        }
+    }
 
     /// The field a turn into these axes, read as one into NED, should meet: the NED field in these axes.
     fn field(self, [n, e, d]: [f64; 3]) -> [f64; 3] {
