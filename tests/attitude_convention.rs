@@ -115,7 +115,7 @@ fn magcal_fit_names_the_convention_of_a_physical_recording() {
         let verdict = summary.lines().find(|l| l.starts_with("verdict:")).unwrap();
         assert!(
             verdict.starts_with("verdict: REDO")
-                && verdict.contains("better read as the inverse quaternion"),
+                && verdict.contains("read as the inverse quaternion"),
             "{summary}"
         );
         assert!(!summary.contains("disturbance "), "{summary}");

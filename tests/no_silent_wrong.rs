@@ -615,7 +615,7 @@ fn a_reference_in_another_convention_is_named_as_such() {
         let verdict = summary.lines().find(|l| l.starts_with("verdict:")).unwrap();
         assert!(
             verdict.contains("REDO")
-                && verdict.contains("better read as the inverse quaternion")
+                && verdict.contains("read as the inverse quaternion")
                 && verdict.contains("rewrite the attitude (or the field) in magcal's convention"),
             "{summary}"
         );

@@ -166,16 +166,16 @@ pub fn check(
 /// The warning for an attitude reference that fits far better in another convention.
 pub fn convention_warning(b: &Better) -> String {
     format!(
-        "the attitude reference fits the readings far better read as {}: their misfit is {:.2} µT (median; {:.2} \
-         RMS) against {:.2} µT ({:.2} RMS) as the file gives it. magcal reads qw,qx,qy,qz as the turn of the \
+        "the attitude reference fits the readings far better read as {}: then it explains {:.0} % of them (median \
+         misfit {:.2} µT), as the file gives it {:.0} % ({:.2} µT). magcal reads qw,qx,qy,qz as the turn of the \
          sensor's axes into the world's north-east-down axes, with the field in NED: rewrite the quaternions (or \
          the field) in that convention and fit again. A and b here are not a calibration, and spans left out as \
          disturbed are where the wrong reference happened not to fit",
         b.describe(),
+        100.0 * b.better.explained,
         b.better.median_ut,
-        b.better.rms_ut,
-        b.given.median_ut,
-        b.given.rms_ut
+        100.0 * b.given.explained,
+        b.given.median_ut
     )
 }
 

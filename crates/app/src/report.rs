@@ -88,10 +88,14 @@ pub struct ConventionReport {
     pub described: String,
     /// Others the reference fits about as well in (the recording cannot tell them apart), in words.
     pub also: Vec<String>,
-    /// The median misfit (norm per sample, plain fit) in that convention, µT.
+    /// The median misfit (norm per sample, trimmed fit) in that convention, µT.
     pub median_misfit_ut: f64,
     /// The median misfit as the file gives the reference, µT.
     pub given_median_misfit_ut: f64,
+    /// The share of the samples the reference explains in that convention (`magcal_calib::convention::Misfit`).
+    pub explained: f64,
+    /// The share as the file gives the reference.
+    pub given_explained: f64,
 }
 
 /// The verdict.
@@ -612,6 +616,8 @@ impl Report {
                 also: b.also.iter().map(|c| c.describe()).collect(),
                 median_misfit_ut: b.better.median_ut,
                 given_median_misfit_ut: b.given.median_ut,
+                explained: b.better.explained,
+                given_explained: b.given.explained,
             }),
             heading: None,
             verdict: None,

@@ -365,12 +365,11 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         verdict = Verdict {
             grade: Grade::Redo,
             reason: format!(
-                "the attitude reference fits the readings {:.0} times better read as {} (median misfit {:.2} µT \
-                 against {:.2} µT): the calibration is against a reference in the wrong convention",
-                b.given.median_ut / b.better.median_ut,
+                "the attitude reference explains {:.0} % of the readings read as {}, {:.0} % as the file gives it: \
+                 the calibration is against a reference in the wrong convention",
+                100.0 * b.better.explained,
                 b.describe(),
-                b.better.median_ut,
-                b.given.median_ut
+                100.0 * b.given.explained
             ),
             todo: "rewrite the attitude (or the field) in magcal's convention (the WARNING below says how) and fit again"
                 .to_owned(),
