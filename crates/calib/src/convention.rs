@@ -4,9 +4,9 @@
 //! in NED ([`crate::frames`]). Loggers also write the inverse turn (world into sensor), the scalar last (`x,y,z,w`
 //! under magcal's names), or an ENU or NWU world. A constant turn or mirror between the sensor's axes and the
 //! reference's is part of `A` and needs nothing; these are not constant, and a fit against them is no calibration. It
-//! is not always plain to see: on a recording that turns slowly the robust fit finds stretches that the wrong reference happens to
-//! match and leaves the rest out as "disturbed" (the BROAD recording with its quaternions inverted: 37 % left out,
-//! 1.1 µT on the rest, and nine magnets that were never there).
+//! is not always plain to see: on a recording that turns slowly the robust fit finds stretches that the wrong
+//! reference happens to match and leaves the rest out as "disturbed" (the BROAD recording with its quaternions
+//! inverted: 37 % left out, 1.1 µT on the rest, and nine magnets that were never there).
 //!
 //! [`better_convention`] fits the readings (trimmed least squares, on a subsample) against the reference in each of
 //! the sixteen combinations (a field given with its vertical reversed among them: the fix is the same, and where the
