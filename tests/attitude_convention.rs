@@ -34,7 +34,7 @@ fn written_in(c: Convention, quat: &[[f64; 4]], field: [f64; 3]) -> (Vec<[f64; 4
 fn physical_recordings_in_magcals_convention_are_left_alone() {
     for rel in WITH_ATTITUDE {
         let (raw, quat, field) = read(rel);
-        assert_eq!(better_convention(&raw, &quat, field), None, "{rel}");
+        assert_eq!(better_convention(&raw, &quat, field, None), None, "{rel}");
     }
 }
 
@@ -59,7 +59,7 @@ fn physical_recordings_written_in_another_convention_are_named() {
         let (raw, quat, field) = read(rel);
         for c in conventions {
             let (written, given_field) = written_in(c, &quat, field);
-            let found = better_convention(&raw, &written, given_field);
+            let found = better_convention(&raw, &written, given_field, None);
             // Where the field has no east component to speak of (BROAD's, -0.31 µT), a north-west-up world and a
             // reversed vertical field fit alike: either may come first, the other is named with it.
             let named = found.as_ref().map(|b| {

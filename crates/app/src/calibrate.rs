@@ -703,7 +703,9 @@ pub fn calibrate(
     }
     // The attitude read in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds).
     let attitude_convention = match (&fit, &rec.quat, field.vector()) {
-        (Fit::Vector(_), Some(q), Some(f)) => convention::better_convention(&rec.mag_ut, q, f),
+        (Fit::Vector(_), Some(q), Some(f)) => {
+            convention::better_convention(&rec.mag_ut, q, f, Some(&robust.kept))
+        }
         _ => None,
     };
     let checked = checks::check(
