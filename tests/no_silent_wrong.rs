@@ -640,6 +640,20 @@ fn a_reference_in_another_convention_is_named_as_such() {
             assert!(degrees <= 180.0, "{summary}");
         }
     }
+    // Nothing goes to an autopilot or a device.
+    let export = dir.path().join("ardupilot.param");
+    let out = magcal_fit(&[
+        rec.to_str().unwrap(),
+        "--export",
+        "ardupilot",
+        "--export-out",
+        export.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("not exported or written") && !export.exists(),
+        "{stderr}"
+    );
 }
 
 /// Time in milliseconds under a `sample_rate_hz` in Hz (found 2026-11-27): a 20 ms lag was reported as 19.9 s, graded

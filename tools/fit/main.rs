@@ -208,6 +208,12 @@ fn run(args: Args) -> anyhow::Result<()> {
              their units and the target would read it wrong; convert the recording to µT and fit again"
         );
     }
+    if cal.reference_doubtful() && (args.export.is_some() || args.write_to.is_some()) {
+        bail!(
+            "{name}: not exported or written: the readings do not fit the attitude reference as given (the WARNING \
+             above), so A and b are not a calibration; fix the reference and fit again"
+        );
+    }
     let found = cal.diagnosis.as_ref().map_or(&[][..], |d| &d.effects[..]);
     if let Some(format) = args.export {
         if let Some(why) = refusal(&target, format) {

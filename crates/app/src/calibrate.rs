@@ -108,6 +108,13 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// Whether the attitude reference is in another convention ([`convention`]) or off by a good part of the field
+    /// ([`checks::reference_off`]): `A` and `b` are then no calibration (a warning says so), and go to no target.
+    pub fn reference_doubtful(&self) -> bool {
+        self.attitude_convention.is_some()
+            || checks::reference_off(&self.fit, &self.field).is_some()
+    }
+
     /// The method that was used.
     pub fn method(&self) -> Method {
         match self.fit {
