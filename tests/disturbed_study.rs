@@ -326,8 +326,9 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
             return;
         }
     };
-    // However disturbed, a reference in magcal's convention is not taken for one in another.
+    // However disturbed, a reference in magcal's convention and on the readings' clock is not taken for another.
     assert_eq!(cal.attitude_convention, None, "{what}");
+    assert_eq!(cal.reference_offset, None, "{what}");
     let d = cal.diagnosis.as_ref().expect("diagnosed");
     let t = rec.t_s.as_ref().unwrap();
     // Where each disturbance is, and the clean rows.

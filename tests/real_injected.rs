@@ -515,3 +515,47 @@ fn a_field_in_the_room_or_on_the_board_for_a_while_is_no_other_attitude_conventi
         assert_ne!(r["verdict"]["grade"], "redo", "{name}: {}", r["verdict"]);
     }
 }
+
+/// BROAD 02 with its reference a quarter of a second to a second ahead of the readings (two streams on different
+/// clocks): the diagnosis took 250–500 ms for a filter's delay on each axis ("rate_coupling", three delays within 2
+/// ms of each other, "not one timing offset") and graded redo "for want of directions"; at a second the base fit's
+/// gains differed 85-fold, the readings were "not in µT" and nine magnets were found. Now the offset is named, with
+/// or without the diagnosis; below 0.2 s it stays the diagnosis' `time_lag`.
+#[test]
+fn a_reference_out_of_step_with_the_readings_is_named_with_its_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    // 36 and 143 rows of 7 ms, and BROAD's own 15 ms.
+    for (rows, offset_s) in [(36, 0.267), (143, 1.016)] {
+        let path = with_reference_ahead(BROAD_02, dir.path(), &format!("ahead{rows}.csv"), rows);
+        for extra in [&[][..], &["--no-diagnose"][..]] {
+            let r = fit_report(&path, extra);
+            let found = r["reference_offset"]["offset_s"].as_f64();
+            assert!(
+                found.is_some_and(|s| (s - offset_s).abs() < 0.01),
+                "{rows} rows {extra:?}: {}",
+                r["reference_offset"]
+            );
+            assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+            assert!(r.get("diagnosis").is_none(), "{}", r["diagnosis"]);
+            let warnings = r["warnings"].to_string();
+            assert!(
+                warnings.contains("out of step") && !warnings.contains("not in µT"),
+                "{warnings}"
+            );
+        }
+    }
+    // 21 rows (147 ms, 162 in all): the diagnosis models it.
+    let path = with_reference_ahead(BROAD_02, dir.path(), "ahead21.csv", 21);
+    let r = fit_report(&path, &[]);
+    assert!(
+        r.get("reference_offset").is_none(),
+        "{}",
+        r["reference_offset"]
+    );
+    assert_eq!(
+        effect_ids(&r),
+        ["time_lag"],
+        "{}",
+        r["diagnosis"]["effects"]
+    );
+}

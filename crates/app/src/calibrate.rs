@@ -105,6 +105,47 @@ pub struct Calibration {
     pub diagnosis_failed: Option<String>,
     /// Another convention the attitude reference fits far better in (a warning says so; the fit is no calibration).
     pub attitude_convention: Option<convention::Better>,
+    /// A clock offset between the readings and the reference (a warning says so; the fit is no calibration).
+    pub reference_offset: Option<convention::OutOfStep>,
+}
+
+/// What a vector fit's reference may be instead of what it was taken for ([`convention`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReferenceDoubt {
+    /// The attitude in another convention.
+    pub convention: Option<convention::Better>,
+    /// The reference out of step with the readings (looked for when no other convention is found).
+    pub offset: Option<convention::OutOfStep>,
+}
+
+impl ReferenceDoubt {
+    /// Whether either was found.
+    pub fn is_some(&self) -> bool {
+        self.convention.is_some() || self.offset.is_some()
+    }
+}
+
+/// The attitude in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds), then,
+/// if the fit `looks_off`, the reference `expected_ut` shifted in time; each fitted from the samples the robust fit
+/// `kept`.
+fn reference_out_of_convention(
+    rec: &Recording,
+    expected_ut: &[[f64; 3]],
+    field: &ReferenceField,
+    kept: &[bool],
+    looks_off: bool,
+) -> ReferenceDoubt {
+    let convention = match (&rec.quat, field.vector()) {
+        (Some(q), Some(f)) => convention::better_convention(&rec.mag_ut, q, f, Some(kept)),
+        _ => None,
+    };
+    let offset = match (&convention, &rec.t_s) {
+        (None, Some(t)) if looks_off => {
+            convention::clock_offset(&rec.mag_ut, expected_ut, t, Some(kept))
+        }
+        _ => None,
+    };
+    ReferenceDoubt { convention, offset }
 }
 
 impl Calibration {
@@ -112,6 +153,7 @@ impl Calibration {
     /// ([`checks::reference_off`]): `A` and `b` are then no calibration (a warning says so), and go to no target.
     pub fn reference_doubtful(&self) -> bool {
         self.attitude_convention.is_some()
+            || self.reference_offset.is_some()
             || checks::reference_off(&self.fit, &self.field).is_some()
     }
 
@@ -619,7 +661,7 @@ pub fn calibrate(
     warnings.extend(units_unread(&rec.meta));
     warnings.extend(time_unit_mismatch(rec));
     let mut notes = Vec::new();
-    let (fit, mut noise, used, robust, rows_coverage) = match method {
+    let (fit, mut noise, used, robust, rows_coverage, reference) = match method {
         Method::Vector => {
             let expected = expected_field(rec, &field)?;
             let noise = noise::estimate(&rec.mag_ut, Some(&expected));
@@ -635,12 +677,18 @@ pub fn calibrate(
             let rows_coverage = fraction_of(e.len(), |i| {
                 (r.kept[i] && e[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
             });
+            // A reference out of step leaves a fit that excludes much or misses by far more than the noise; the
+            // search for its offset is not made for one that fits (it takes about as long as the fit of 10⁶ rows).
+            let excluded = r.kept.iter().filter(|k| !**k).count();
+            let looks_off = 100 * excluded > r.kept.len()
+                || rms3(r.fit.residual_rms_ut) > 3.0 * rms3(noise.floor_ut);
+            let reference = reference_out_of_convention(rec, e, &field, &r.kept, looks_off);
             let n = r.fit.n;
             let (fit, kept) = (
                 Fit::Vector(r.fit),
                 RobustSummary::of(r.kept, r.sigma_ut, rec, false),
             );
-            (fit, noise, n, kept, rows_coverage)
+            (fit, noise, n, kept, rows_coverage, reference)
         }
         _ => {
             let noise = noise::estimate(&rec.mag_ut, None);
@@ -676,6 +724,7 @@ pub fn calibrate(
                 n,
                 RobustSummary::of(r.kept, r.sigma_ut, rec, true),
                 rows_coverage,
+                ReferenceDoubt::default(),
             )
         }
     };
@@ -708,21 +757,7 @@ pub fn calibrate(
         ));
         noise = noise.scaled(residual_rms_ut / floor_now);
     }
-    // The attitude read in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds).
-    let attitude_convention = match (&fit, &rec.quat, field.vector()) {
-        (Fit::Vector(_), Some(q), Some(f)) => {
-            convention::better_convention(&rec.mag_ut, q, f, Some(&robust.kept))
-        }
-        _ => None,
-    };
-    let checked = checks::check(
-        &model,
-        &fit,
-        &field,
-        &rec.mag_ut,
-        &robust.kept,
-        attitude_convention.as_ref(),
-    )?;
+    let checked = checks::check(&model, &fit, &field, &rec.mag_ut, &robust.kept, &reference)?;
     warnings.extend(checked.warnings);
     let noise_floor_ut = match &fit {
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
@@ -748,13 +783,15 @@ pub fn calibrate(
         robust,
         diagnosis: None,
         diagnosis_failed: None,
-        attitude_convention,
+        attitude_convention: reference.convention,
+        reference_offset: reference.offset,
     };
     if diagnose {
-        if cal.attitude_convention.is_some() {
+        if cal.attitude_convention.is_some() || cal.reference_offset.is_some() {
             cal.notes.push(
-                "not diagnosed: the attitude reference fits far better in another convention (the WARNING says \
-                 which); against it, the diagnosis would find disturbances that are not there"
+                "not diagnosed: the attitude reference fits far better in another convention or shifted in time \
+                 (the WARNING says how); against it as given, the diagnosis would find disturbances that are not \
+                 there"
                     .to_owned(),
             );
         } else if used < diagnosis::MIN_SAMPLES {

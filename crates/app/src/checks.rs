@@ -2,12 +2,12 @@
 //! looks wrong for a reason the user can fix (units, a field outside the Earth's range) is written with a loud
 //! warning that says what it looks like and what would fix it.
 
-use magcal_calib::convention::Better;
+use magcal_calib::convention::{Better, OutOfStep};
 use magcal_calib::scalar::centre;
 use magcal_calib::{FitError, Model, frames};
 use nalgebra::Matrix3;
 
-use crate::calibrate::Fit;
+use crate::calibrate::{Fit, ReferenceDoubt};
 use crate::field::ReferenceField;
 
 /// The range of the Earth's field at its surface, µT (the World Magnetic Model's extremes, rounded out).
@@ -46,15 +46,14 @@ pub struct Checked {
 }
 
 /// Checks a fitted model (of the readings `raw_ut` it `kept`); refuses what cannot be a calibration and returns the
-/// warnings for the rest. `convention` is another convention the attitude reference fits far better in, if one was
-/// found ([`magcal_calib::convention`]).
+/// warnings for the rest. `reference` is what the reference was found to be instead ([`magcal_calib::convention`]).
 pub fn check(
     model: &Model,
     fit: &Fit,
     field: &ReferenceField,
     raw_ut: &[[f64; 3]],
     kept: &[bool],
-    convention: Option<&Better>,
+    reference: &ReferenceDoubt,
 ) -> Result<Checked, FitError> {
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let sv = a.singular_values();
@@ -69,8 +68,10 @@ pub fn check(
     let mut warnings = Vec::new();
     // A reference off by a good part of the field bends A every way: that, not the gains, is what to say.
     let reference_off = reference_off(fit, field);
-    if let Some(b) = convention {
+    if let Some(b) = &reference.convention {
         warnings.push(convention_warning(b));
+    } else if let Some(o) = &reference.offset {
+        warnings.push(offset_warning(o));
     } else if let Some((rms, f)) = reference_off {
         warnings.push(format!(
             "the readings and the attitude reference disagree by {rms:.1} µT RMS per axis, {:.0} % of the field: \
@@ -81,7 +82,7 @@ pub fn check(
             100.0 * rms / f
         ));
     }
-    let reference_doubtful = reference_off.is_some() || convention.is_some();
+    let reference_doubtful = reference_off.is_some() || reference.is_some();
     if hi / lo > GAIN_SPREAD_WARN && !reference_doubtful {
         warnings.push(format!(
             "the fitted gains differ by a factor {:.2} between directions (singular values of A {:.4}–{:.4}): more \
@@ -176,6 +177,24 @@ pub fn convention_warning(b: &Better) -> String {
         b.better.median_ut,
         100.0 * b.given.explained,
         b.given.median_ut
+    )
+}
+
+/// The warning for readings out of step with their reference.
+pub fn offset_warning(o: &OutOfStep) -> String {
+    format!(
+        "the readings and the attitude reference are out of step: with the reference shifted so that the readings \
+         are {} by {:.0} ms, it explains {:.0} % of them (median misfit {:.2} µT), as the file gives it {:.0} % \
+         ({:.2} µT). The two were likely logged on different clocks: shift the reference's times by {:+.0} ms (or \
+         record both on one clock) and fit again. A and b here are not a calibration, and spans left out as \
+         disturbed are where the reference happened to fit",
+        if o.offset_s > 0.0 { "late" } else { "early" },
+        1000.0 * o.offset_s.abs(),
+        100.0 * o.shifted.explained,
+        o.shifted.median_ut,
+        100.0 * o.given.explained,
+        o.given.median_ut,
+        1000.0 * o.offset_s
     )
 }
 

@@ -44,6 +44,10 @@ pub struct Report {
     /// calibration).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attitude_convention: Option<ConventionReport>,
+    /// A clock offset between the readings and the reference (absent when none is found; the fit is then no
+    /// calibration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_offset: Option<OffsetReport>,
     /// The heading error before and after, when the local field's direction is known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heading: Option<HeadingReport>,
@@ -93,6 +97,17 @@ pub struct ConventionReport {
     /// The median misfit as the file gives the reference, µT.
     pub given_median_misfit_ut: f64,
     /// The share of the samples the reference explains in that convention (`magcal_calib::convention::Misfit`).
+    pub explained: f64,
+    /// The share as the file gives the reference.
+    pub given_explained: f64,
+}
+
+/// Readings out of step with their reference (`magcal_calib::convention::OutOfStep`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OffsetReport {
+    /// How late the readings are against the reference, s (negative: early).
+    pub offset_s: f64,
+    /// The share of the samples the reference explains shifted so.
     pub explained: f64,
     /// The share as the file gives the reference.
     pub given_explained: f64,
@@ -618,6 +633,11 @@ impl Report {
                 given_median_misfit_ut: b.given.median_ut,
                 explained: b.better.explained,
                 given_explained: b.given.explained,
+            }),
+            reference_offset: cal.reference_offset.map(|o| OffsetReport {
+                offset_s: o.offset_s,
+                explained: o.shifted.explained,
+                given_explained: o.given.explained,
             }),
             heading: None,
             verdict: None,

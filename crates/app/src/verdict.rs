@@ -374,6 +374,20 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
             todo: "rewrite the attitude (or the field) in magcal's convention (the WARNING below says how) and fit again"
                 .to_owned(),
         };
+    } else if let Some(o) = &cal.reference_offset {
+        verdict = Verdict {
+            grade: Grade::Redo,
+            reason: format!(
+                "the attitude reference explains {:.0} % of the readings shifted by {:+.0} ms, {:.0} % as the file \
+                 gives it: the readings and the reference are out of step",
+                100.0 * o.shifted.explained,
+                1000.0 * o.offset_s,
+                100.0 * o.given.explained
+            ),
+            todo: "put the readings and the reference on one clock (the WARNING below says by how much to shift) \
+                   and fit again"
+                .to_owned(),
+        };
     } else if verdict.grade != Grade::Good
         && let Some((rms_ut, field_ut)) = crate::checks::reference_off(&cal.fit, &cal.field)
     {

@@ -1,4 +1,4 @@
-//! Attitude references written in another convention than magcal's.
+//! Attitude references written in another convention than magcal's, or out of step with the readings.
 //!
 //! magcal reads a quaternion `qw,qx,qy,qz` as the turn of the sensor's axes into the world's NED axes, and the field
 //! in NED ([`crate::frames`]). Loggers also write the inverse turn (world into sensor), the scalar last (`x,y,z,w`
@@ -216,6 +216,7 @@ pub fn better_convention(
     let stride = usable.len().div_ceil(SAMPLES).max(1);
     let rows: Vec<usize> = usable.into_iter().step_by(stride).collect();
     let raw: Vec<[f64; 3]> = rows.iter().map(|&i| raw_ut[i]).collect();
+    let kept: Vec<bool> = rows.iter().map(|&i| start.is_none_or(|k| k[i])).collect();
     // The residuals' norms of a trimmed fit against the reference in convention `c`.
     let residuals = |c: Convention| -> Option<Vec<f64>> {
         let expected: Vec<[f64; 3]> = rows
@@ -225,28 +226,7 @@ pub fn better_convention(
                 frames::expected_sensor_field(q, f)
             })
             .collect();
-        let mut kept: Vec<bool> = rows.iter().map(|&i| start.is_none_or(|k| k[i])).collect();
-        let mut norms = Vec::new();
-        for _ in 0..=TRIM_PASSES {
-            let opts = VectorOptions {
-                skip_coverage_check: true,
-                estimates_only: true,
-                kept: Some(&kept),
-                ..VectorOptions::default()
-            };
-            let fit = vector::fit(&raw, &expected, &opts).ok()?;
-            norms = raw
-                .iter()
-                .zip(&expected)
-                .map(|(m, e)| {
-                    let calibrated = frames::add(frames::mat_vec(&fit.a, *m), fit.b_ut);
-                    frames::norm(frames::sub(calibrated, *e))
-                })
-                .collect();
-            let limit = TRIM_MEDIANS * median(&norms);
-            kept = norms.iter().map(|r| *r <= limit).collect();
-        }
-        Some(norms)
+        trimmed_residuals(&raw, &expected, kept.clone())
     };
     let all: Vec<(Convention, Vec<f64>)> = Convention::all()
         .filter_map(|c| Some((c, residuals(c)?)))
@@ -259,11 +239,7 @@ pub fn better_convention(
         .iter()
         .map(|(_, r)| median(r))
         .fold(f64::INFINITY, f64::min);
-    let misfit = |r: &[f64]| Misfit {
-        median_ut: median(r),
-        explained: r.iter().filter(|e| **e <= EXPLAINED_SCALES * scale).count() as f64
-            / r.len() as f64,
-    };
+    let misfit = |r: &[f64]| Misfit::of(r, scale);
     let given = misfit(given);
     let mut better: Vec<(Convention, Misfit)> = all[1..]
         .iter()
@@ -286,6 +262,47 @@ pub fn better_convention(
     })
 }
 
+impl Misfit {
+    /// The misfit of the residual norms `r` when the best reference's median is `scale`.
+    fn of(r: &[f64], scale: f64) -> Misfit {
+        Misfit {
+            median_ut: median(r),
+            explained: r.iter().filter(|e| **e <= EXPLAINED_SCALES * scale).count() as f64
+                / r.len() as f64,
+        }
+    }
+}
+
+/// The residuals' norms (µT) of `raw` against `expected` under a trimmed fit ([`TRIM_PASSES`], [`TRIM_MEDIANS`])
+/// that starts from the samples `kept`; `None` if a fit cannot be made.
+fn trimmed_residuals(
+    raw: &[[f64; 3]],
+    expected: &[[f64; 3]],
+    mut kept: Vec<bool>,
+) -> Option<Vec<f64>> {
+    let mut norms = Vec::new();
+    for _ in 0..=TRIM_PASSES {
+        let opts = VectorOptions {
+            skip_coverage_check: true,
+            estimates_only: true,
+            kept: Some(&kept),
+            ..VectorOptions::default()
+        };
+        let fit = vector::fit(raw, expected, &opts).ok()?;
+        norms = raw
+            .iter()
+            .zip(expected)
+            .map(|(m, e)| {
+                let calibrated = frames::add(frames::mat_vec(&fit.a, *m), fit.b_ut);
+                frames::norm(frames::sub(calibrated, *e))
+            })
+            .collect();
+        let limit = TRIM_MEDIANS * median(&norms);
+        kept = norms.iter().map(|r| *r <= limit).collect();
+    }
+    Some(norms)
+}
+
 /// The median of `v` (NaN if empty).
 fn median(v: &[f64]) -> f64 {
     if v.is_empty() {
@@ -294,6 +311,112 @@ fn median(v: &[f64]) -> f64 {
     let mut v = v.to_vec();
     let mid = v.len() / 2;
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Readings and a reference out of step: the readings late against the reference by `offset_s` (negative: early),
+/// as when two streams were logged on different clocks and merged by their time stamps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutOfStep {
+    /// How late the readings are against the reference, s (the sign of the diagnosis' `time_lag`).
+    pub offset_s: f64,
+    /// The misfit against the reference as given.
+    pub given: Misfit,
+    /// The misfit against the reference shifted by `offset_s`.
+    pub shifted: Misfit,
+}
+
+/// Offsets searched, s either way.
+pub const OFFSET_RANGE_S: f64 = 5.0;
+/// The coarse search's step, s (or the sampling's, if longer); the best coarse offset is refined by samples.
+pub const OFFSET_STEP_S: f64 = 0.1;
+/// Samples the offsets are compared on, at most (fewer than the conventions': there are a hundred offsets and more).
+pub const OFFSET_SAMPLES: usize = 2_000;
+/// Offsets below this are the diagnosis' `time_lag`, which models them in the final fit (it found 162 ms where the
+/// reference of BROAD 02 was moved 147 ms ahead); from 250 ms on it took them for a filter's delay on each axis
+/// (`rate_coupling`, three delays within 2 ms of each other) and the fit was graded redo for want of directions.
+pub const MIN_OFFSET_S: f64 = 0.2;
+
+/// The offset between the readings `raw_ut` and the reference `expected_ut` (per sample, at times `t_s`) at which the
+/// reference explains [`EXPLAINED_MORE`] more of the readings than as given, if it is [`MIN_OFFSET_S`] or more. The
+/// samples are taken to be evenly spaced (the median step); each trimmed fit starts from the samples `start` keeps.
+pub fn clock_offset(
+    raw_ut: &[[f64; 3]],
+    expected_ut: &[[f64; 3]],
+    t_s: &[f64],
+    start: Option<&[bool]>,
+) -> Option<OutOfStep> {
+    let n = raw_ut.len().min(expected_ut.len()).min(t_s.len());
+    let steps: Vec<f64> = t_s[..n]
+        .windows(2)
+        .step_by((n / OFFSET_SAMPLES).max(1))
+        .map(|w| w[1] - w[0])
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    let step_s = median(&steps);
+    if step_s.is_nan() || step_s <= 0.0 {
+        return None;
+    }
+    let finite = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
+    let usable: Vec<usize> = (0..n)
+        .filter(|&i| finite(&raw_ut[i]) && finite(&expected_ut[i]))
+        .collect();
+    let stride = usable.len().div_ceil(OFFSET_SAMPLES).max(1);
+    let rows: Vec<usize> = usable.into_iter().step_by(stride).collect();
+    // The readings' rows paired with the reference `k` rows on (NaN past either end).
+    let residuals = |k: isize| -> Option<Vec<f64>> {
+        let paired: Vec<usize> = rows
+            .iter()
+            .copied()
+            .filter(|&i| {
+                i.checked_add_signed(k)
+                    .is_some_and(|j| j < n && finite(&expected_ut[j]))
+            })
+            .collect();
+        let raw: Vec<[f64; 3]> = paired.iter().map(|&i| raw_ut[i]).collect();
+        let expected: Vec<[f64; 3]> = paired
+            .iter()
+            .map(|&i| expected_ut[i.wrapping_add_signed(k)])
+            .collect();
+        let kept = paired.iter().map(|&i| start.is_none_or(|s| s[i])).collect();
+        trimmed_residuals(&raw, &expected, kept)
+    };
+    let coarse = (OFFSET_STEP_S / step_s).round().max(1.0) as isize;
+    let reach = (OFFSET_RANGE_S / step_s).round() as isize;
+    let mut shifts: Vec<(isize, Vec<f64>)> = (-reach / coarse..=reach / coarse)
+        .filter_map(|c| Some((c * coarse, residuals(c * coarse)?)))
+        .collect();
+    let scale = |shifts: &[(isize, Vec<f64>)]| {
+        shifts
+            .iter()
+            .map(|(_, r)| median(r))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let best_of = |shifts: &[(isize, Vec<f64>)]| {
+        let scale = scale(shifts);
+        shifts
+            .iter()
+            .map(|(k, r)| (*k, Misfit::of(r, scale)))
+            .max_by(|a, b| a.1.explained.total_cmp(&b.1.explained))
+    };
+    let (best, _) = best_of(&shifts)?;
+    // Refined by samples around the best coarse shift.
+    shifts.extend(
+        (best - coarse + 1..best + coarse)
+            .filter(|k| k % coarse != 0)
+            .filter_map(|k| Some((k, residuals(k)?))),
+    );
+    let scale = scale(&shifts);
+    let given = Misfit::of(&shifts.iter().find(|(k, _)| *k == 0)?.1, scale);
+    let (best, shifted) = best_of(&shifts)?;
+    let offset_s = -(best as f64) * step_s;
+    (shifted.explained >= given.explained + EXPLAINED_MORE
+        && shifted.median_ut < given.median_ut
+        && offset_s.abs() >= MIN_OFFSET_S)
+        .then_some(OutOfStep {
+            offset_s,
+            given,
+            shifted,
+        })
 }
 
 #[cfg(test)]
@@ -319,6 +442,66 @@ mod tests {
             quat.push(q);
         }
         (raw, quat, field)
+    }
+
+    /// A sensor turned smoothly at 100 Hz (about an axis that wanders), and its readings.
+    fn turning(n: usize) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Vec<f64>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let field = [19.0, 1.2, 45.0];
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.01).collect();
+        let expected: Vec<[f64; 3]> = t
+            .iter()
+            .map(|&t| {
+                let axis = [(0.3 * t).sin(), (0.2 * t).cos(), 0.5];
+                let norm = frames::norm(axis);
+                let half = 0.9 * t;
+                let q = [
+                    half.cos(),
+                    half.sin() * axis[0] / norm,
+                    half.sin() * axis[1] / norm,
+                    half.sin() * axis[2] / norm,
+                ];
+                frames::expected_sensor_field(q, field)
+            })
+            .collect();
+        let raw = expected
+            .iter()
+            .map(|e| {
+                std::array::from_fn(|k| {
+                    1.05 * e[k] + [12.0, -7.0, 30.0][k] + rng.random_range(-0.3..0.3)
+                })
+            })
+            .collect();
+        (raw, expected, t)
+    }
+
+    #[test]
+    fn a_reference_out_of_step_is_found_and_one_in_step_or_nearly_is_left_alone() {
+        let (raw, expected, t) = turning(6000);
+        assert_eq!(clock_offset(&raw, &expected, &t, None), None);
+        for (rows, found) in [(40isize, true), (-130, true), (10, false)] {
+            // The reference `rows` ahead of the readings: each row holds the field `rows` later.
+            let ahead: Vec<[f64; 3]> = (0..expected.len())
+                .map(|i| {
+                    i.checked_add_signed(rows)
+                        .and_then(|j| expected.get(j))
+                        .copied()
+                        .unwrap_or([f64::NAN; 3])
+                })
+                .collect();
+            let out = clock_offset(&raw, &ahead, &t, None);
+            assert_eq!(out.is_some(), found, "{rows}: {out:?}");
+            if let Some(o) = out {
+                assert!(
+                    (o.offset_s - 0.01 * rows as f64).abs() < 1e-9,
+                    "{rows}: {o:?}"
+                );
+                assert!(
+                    o.shifted.explained > 0.95 && o.given.explained < 0.8,
+                    "{o:?}"
+                );
+            }
+        }
     }
 
     #[test]
