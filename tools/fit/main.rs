@@ -245,9 +245,12 @@ fn run(args: Args) -> anyhow::Result<()> {
         },
         (None, None) => Target::None,
     };
-    say(&format!(
-        "\n{}",
-        how_to_apply(where_to, args.out.as_deref(), found)
-    ))?;
+    // A fit against a doubtful reference is no calibration: nothing to put to use.
+    if !cal.reference_doubtful() {
+        say(&format!(
+            "\n{}",
+            how_to_apply(where_to, args.out.as_deref(), found)
+        ))?;
+    }
     Ok(())
 }

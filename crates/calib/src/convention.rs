@@ -151,8 +151,8 @@ impl Convention {
 pub struct Misfit {
     /// The median residual (its norm per sample), µT.
     pub median_ut: f64,
-    /// The share of the samples within [`EXPLAINED_SCALES`] times the smallest median of all conventions: the part of
-    /// the recording the reference explains.
+    /// The share of the samples within [`EXPLAINED_SCALES`] times the smallest median of the references compared
+    /// (conventions, or shifts in time): the part of the recording the reference explains.
     pub explained: f64,
 }
 
