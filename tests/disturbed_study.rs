@@ -327,8 +327,8 @@ fn run(seed: u64, vector: bool, tally: &Mutex<Tally>) {
         }
     };
     // However disturbed, a reference in magcal's convention and on the readings' clock is not taken for another.
-    assert_eq!(cal.attitude_convention, None, "{what}");
-    assert_eq!(cal.reference_offset, None, "{what}");
+    assert_eq!(cal.reference.convention, None, "{what}");
+    assert_eq!(cal.reference.offset, None, "{what}");
     let d = cal.diagnosis.as_ref().expect("diagnosed");
     let t = rec.t_s.as_ref().unwrap();
     // Where each disturbance is, and the clean rows.

@@ -155,7 +155,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         })?;
         let full_faulty = drop_faulty(&mut full);
         if let Ok(again) = calibrate(&full, args.method, field, false)
-            && again.attitude_convention.is_some()
+            && again.reference.convention.is_some()
         {
             (rec, cal, faulty) = (full, again, full_faulty);
         }

@@ -103,10 +103,9 @@ pub struct Calibration {
     pub diagnosis: Option<Diagnosis>,
     /// Why the diagnosis, asked for, could not be made (the calibration is then the base fit).
     pub diagnosis_failed: Option<String>,
-    /// Another convention the attitude reference fits far better in (a warning says so; the fit is no calibration).
-    pub attitude_convention: Option<convention::Better>,
-    /// A clock offset between the readings and the reference (a warning says so; the fit is no calibration).
-    pub reference_offset: Option<convention::OutOfStep>,
+    /// What the reference was found to be instead of what it was taken for (a warning says so; the fit is then no
+    /// calibration).
+    pub reference: ReferenceDoubt,
 }
 
 /// What a vector fit's reference may be instead of what it was taken for ([`convention`]).
@@ -152,9 +151,7 @@ impl Calibration {
     /// Whether the attitude reference is in another convention ([`convention`]) or off by a good part of the field
     /// ([`checks::reference_off`]): `A` and `b` are then no calibration (a warning says so), and go to no target.
     pub fn reference_doubtful(&self) -> bool {
-        self.attitude_convention.is_some()
-            || self.reference_offset.is_some()
-            || checks::reference_off(&self.fit, &self.field).is_some()
+        self.reference.is_some() || checks::reference_off(&self.fit, &self.field).is_some()
     }
 
     /// The method that was used.
@@ -516,18 +513,26 @@ pub fn read_to_calibrate(
     Ok((rec, field))
 }
 
+/// Whether a fit looks off in a way a reference in another convention or out of step leaves it: more than 1 % of
+/// its `total` rows `excluded` as grossly off, or a residual above three times the noise (both RMS, µT).
+fn fit_looks_off(excluded: usize, total: usize, residual_ut: f64, noise_ut: f64) -> bool {
+    100 * excluded > total || residual_ut > 3.0 * noise_ut
+}
+
 /// Whether a vector fit made without the quaternions (turned into the expected field as they were read, see
 /// [`read_to_calibrate`]) looks off enough to be made again with them kept, so that a reference in another
-/// convention can be recognised ([`convention`]): more than 1 % of the rows left out as grossly off, a residual
-/// above three times the noise, or one that is a good part of the field.
+/// convention can be recognised ([`convention`]): [`fit_looks_off`], or a residual that is a good part of the field.
 pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
     matches!(cal.fit, Fit::Vector(_))
         && rec.quat.is_none()
         && rec.ref_ut.is_some()
         && cal.field.vector().is_some()
-        && (100 * cal.samples.excluded > cal.samples.total
-            || cal.residual_rms_ut > 3.0 * cal.noise_floor_ut
-            || checks::reference_off(&cal.fit, &cal.field).is_some())
+        && (fit_looks_off(
+            cal.samples.excluded,
+            cal.samples.total,
+            cal.residual_rms_ut,
+            cal.noise_floor_ut,
+        ) || checks::reference_off(&cal.fit, &cal.field).is_some())
 }
 
 /// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
@@ -677,11 +682,15 @@ pub fn calibrate(
             let rows_coverage = fraction_of(e.len(), |i| {
                 (r.kept[i] && e[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
             });
-            // A reference out of step leaves a fit that excludes much or misses by far more than the noise; the
-            // search for its offset is not made for one that fits (it takes about as long as the fit of 10⁶ rows).
+            // The search for a reference out of step is not made for a fit that fits (it takes about as long as the
+            // fit of 10⁶ rows).
             let excluded = r.kept.iter().filter(|k| !**k).count();
-            let looks_off = 100 * excluded > r.kept.len()
-                || rms3(r.fit.residual_rms_ut) > 3.0 * rms3(noise.floor_ut);
+            let looks_off = fit_looks_off(
+                excluded,
+                r.kept.len(),
+                rms3(r.fit.residual_rms_ut),
+                rms3(noise.floor_ut),
+            );
             let reference = reference_out_of_convention(rec, e, &field, &r.kept, looks_off);
             let n = r.fit.n;
             let (fit, kept) = (
@@ -783,11 +792,10 @@ pub fn calibrate(
         robust,
         diagnosis: None,
         diagnosis_failed: None,
-        attitude_convention: reference.convention,
-        reference_offset: reference.offset,
+        reference,
     };
     if diagnose {
-        if cal.attitude_convention.is_some() || cal.reference_offset.is_some() {
+        if cal.reference.is_some() {
             cal.notes.push(
                 "not diagnosed: the attitude reference fits far better in another convention or shifted in time \
                  (the WARNING says how); against it as given, the diagnosis would find disturbances that are not \

@@ -623,7 +623,7 @@ impl Report {
             notes: cal.notes.clone(),
             warnings: cal.warnings.clone(),
             diagnosis: cal.diagnosis.as_ref().map(DiagnosisReport::new),
-            attitude_convention: cal.attitude_convention.as_ref().map(|b| ConventionReport {
+            attitude_convention: cal.reference.convention.as_ref().map(|b| ConventionReport {
                 inverse: b.convention.inverse,
                 scalar_last: b.convention.scalar_last,
                 world: b.convention.world.as_str().to_owned(),
@@ -634,7 +634,7 @@ impl Report {
                 explained: b.better.explained,
                 given_explained: b.given.explained,
             }),
-            reference_offset: cal.reference_offset.map(|o| OffsetReport {
+            reference_offset: cal.reference.offset.map(|o| OffsetReport {
                 offset_s: o.offset_s,
                 explained: o.shifted.explained,
                 given_explained: o.given.explained,

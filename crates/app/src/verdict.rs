@@ -361,7 +361,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
     };
     // A reference in another convention: its warning says what to try, not more recording.
-    if let Some(b) = &cal.attitude_convention {
+    if let Some(b) = &cal.reference.convention {
         verdict = Verdict {
             grade: Grade::Redo,
             reason: format!(
@@ -374,7 +374,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
             todo: "rewrite the attitude (or the field) in magcal's convention (the WARNING below says how) and fit again"
                 .to_owned(),
         };
-    } else if let Some(o) = &cal.reference_offset {
+    } else if let Some(o) = &cal.reference.offset {
         verdict = Verdict {
             grade: Grade::Redo,
             reason: format!(

@@ -17,6 +17,7 @@
 //! explains all but the disturbed part.
 
 use crate::frames;
+use crate::robust::median;
 use crate::vector::{self, VectorOptions};
 
 /// The world axes a quaternion turns the sensor's into, or the field given against them.
@@ -235,10 +236,7 @@ pub fn better_convention(
     if *given_convention != Convention::MAGCAL {
         return None;
     }
-    let scale = all
-        .iter()
-        .map(|(_, r)| median(r))
-        .fold(f64::INFINITY, f64::min);
+    let scale = smallest_median(all.iter().map(|(_, r)| r));
     let misfit = |r: &[f64]| Misfit::of(r, scale);
     let given = misfit(given);
     let mut better: Vec<(Convention, Misfit)> = all[1..]
@@ -303,14 +301,9 @@ fn trimmed_residuals(
     Some(norms)
 }
 
-/// The median of `v` (NaN if empty).
-fn median(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut v = v.to_vec();
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+/// The smallest median of the references' residual norms: the scale of [`Misfit::explained`].
+fn smallest_median<'a>(residuals: impl Iterator<Item = &'a Vec<f64>>) -> f64 {
+    residuals.map(|r| median(r)).fold(f64::INFINITY, f64::min)
 }
 
 /// Readings and a reference out of step: the readings late against the reference by `offset_s` (negative: early),
@@ -385,12 +378,7 @@ pub fn clock_offset(
     let mut shifts: Vec<(isize, Vec<f64>)> = (-reach / coarse..=reach / coarse)
         .filter_map(|c| Some((c * coarse, residuals(c * coarse)?)))
         .collect();
-    let scale = |shifts: &[(isize, Vec<f64>)]| {
-        shifts
-            .iter()
-            .map(|(_, r)| median(r))
-            .fold(f64::INFINITY, f64::min)
-    };
+    let scale = |shifts: &[(isize, Vec<f64>)]| smallest_median(shifts.iter().map(|(_, r)| r));
     let best_of = |shifts: &[(isize, Vec<f64>)]| {
         let scale = scale(shifts);
         shifts
