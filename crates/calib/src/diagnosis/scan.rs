@@ -5,7 +5,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::frames;
+use crate::{chunks, frames};
 
 /// A scanned hyperparameter.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -178,15 +178,47 @@ struct Directional<'a> {
 }
 
 impl Directional<'_> {
-    /// The sums over `[a, b)` added to `from`.
-    fn add(&self, mut from: TermSums, a: usize, b: usize) -> TermSums {
+    /// The sums over `[a, b)` added to `from`: the upper triangle of `xxᵀ` and `x·rho`, in plain sums (the products
+    /// by `x`'s constant 1 are the values themselves, and `xxᵀ` mirrors its upper triangle exactly).
+    fn add(&self, from: TermSums, a: usize, b: usize) -> TermSums {
+        let (mut xx, mut xr) = (from.xx, from.xr);
+        let mut upper = [0.0; TERMS * (TERMS + 1) / 2];
+        let mut e = 0;
+        for r in 0..TERMS {
+            for c in r..TERMS {
+                upper[e] = xx[(r, c)];
+                e += 1;
+            }
+        }
+        let mut r_sums = [xr[0], xr[1], xr[2], xr[3]];
         for i in (a..b).filter(|&i| self.free[i]) {
             let [x, y, z] = self.u[i];
-            let x = TermVec::new(1.0, x, y, z);
-            from.xx += x * x.transpose();
-            from.xr += x * self.rho[i];
+            let rho = self.rho[i];
+            upper[0] += 1.0;
+            upper[1] += x;
+            upper[2] += y;
+            upper[3] += z;
+            upper[4] += x * x;
+            upper[5] += x * y;
+            upper[6] += x * z;
+            upper[7] += y * y;
+            upper[8] += y * z;
+            upper[9] += z * z;
+            r_sums[0] += rho;
+            r_sums[1] += x * rho;
+            r_sums[2] += y * rho;
+            r_sums[3] += z * rho;
         }
-        from
+        let mut e = 0;
+        for r in 0..TERMS {
+            for c in r..TERMS {
+                xx[(r, c)] = upper[e];
+                xx[(c, r)] = upper[e];
+                e += 1;
+            }
+        }
+        xr = TermVec::from(r_sums);
+        TermSums { xx, xr }
     }
 
     /// The prefix sums at `lo..=hi`, from the prefix sum `at_lo` at `lo`.
@@ -298,7 +330,7 @@ fn window_terms(w: &TermSums, m_inv: &Terms, fitted_all: &TermVec) -> Option<(Te
 
 /// The window `[a, b)` of `0..=n` with the largest `stat(a, b)`: on a coarse grid of [`WINDOW_GRID`] boundaries
 /// first ([`coarse`]), then refined ([`refine`]).
-fn best_window(n: usize, stat: impl Fn(usize, usize) -> f64) -> Option<Scan> {
+fn best_window(n: usize, stat: impl Fn(usize, usize) -> f64 + Sync) -> Option<Scan> {
     let g = WINDOW_GRID.min(n);
     let grid: Vec<usize> = (0..=g).map(|i| i * n / g).collect();
     let (a, b) = coarse(&grid, |a, b| stat(grid[a], grid[b]))?;
@@ -306,16 +338,24 @@ fn best_window(n: usize, stat: impl Fn(usize, usize) -> f64) -> Option<Scan> {
 }
 
 /// The pair of `grid` boundaries (their indices) with the largest `stat`, if any is finite.
-fn coarse(grid: &[usize], stat: impl Fn(usize, usize) -> f64) -> Option<(usize, usize)> {
-    let mut best = (0, 0, f64::NEG_INFINITY);
-    for a in 0..grid.len() {
+/// The starts are searched on all threads; the first pair in `(a, b)` order wins a tie, as in one loop.
+fn coarse(grid: &[usize], stat: impl Fn(usize, usize) -> f64 + Sync) -> Option<(usize, usize)> {
+    let row = |a: usize| {
+        let mut best = (a, a, f64::NEG_INFINITY);
         for b in a + 1..grid.len() {
             let s = stat(a, b);
             if s > best.2 {
                 best = (a, b, s);
             }
         }
-    }
+        best
+    };
+    let best =
+        chunks::parts(grid.len(), row)
+            .into_iter()
+            .fold((0, 0, f64::NEG_INFINITY), |best, r| {
+                if r.2 > best.2 { r } else { best }
+            });
     best.2.is_finite().then_some((best.0, best.1))
 }
 
