@@ -12,7 +12,7 @@
 //!    spans' effects. A timing lag too large for `time_lag`'s first-order term is found coarsely first and the
 //!    field linearised there ([`timing`], when the samples are gathered). Effects the recording cannot observe are
 //!    untestable, with the reason; candidates the base model absorbs are reported as absorbed.
-//! 5. **Selection** ([`select`]): a Wald test with a BIC penalty, blocked cross-validation on the clean samples, a
+//! 5. **Selection** ([`select`](mod@select)): a Wald test with a BIC penalty, blocked cross-validation on the clean samples, a
 //!    share of the residual it must explain, and for local effects a size above the reference's own error; greedy,
 //!    with ambiguity. In the vector method the catalogue effects then come out of the residual and the spans are
 //!    looked for again (a timing lag's residual is not a disturbance), at most [`ROUNDS`] times; the scalar method's
