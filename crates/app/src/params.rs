@@ -109,13 +109,13 @@ fn first_non_finite(v: &toml::Value, at: String) -> Option<String> {
 /// A parameters file that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ParamsError {
-    /// Unreadable.
-    #[error("{path}: {source}")]
+    /// Unreadable. The system's error is said in the message, not chained again as its source.
+    #[error("{path}: cannot read: {why}")]
     Io {
         /// The file.
         path: String,
         /// Why.
-        source: std::io::Error,
+        why: std::io::Error,
     },
     /// Not valid TOML of this format.
     #[error("{path}: {why}")]
@@ -271,9 +271,9 @@ impl ParamsFile {
     /// Reads a file.
     pub fn read(path: &Path) -> Result<ParamsFile, ParamsError> {
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ParamsError::Io {
+        let text = std::fs::read_to_string(path).map_err(|why| ParamsError::Io {
             path: name.clone(),
-            source,
+            why,
         })?;
         let file: ParamsFile = toml::from_str(&text).map_err(|e| {
             if crate::files::looks_like_recording(&text) {

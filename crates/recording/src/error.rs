@@ -130,23 +130,18 @@ pub(crate) fn header_as_read(line: u64, names: &[String]) -> String {
 pub(crate) const CUT_OFF: &str = "the file ends in the middle of this line (cut off, e.g. a logger stopped while \
                                   writing): remove this last line and the rest can be read";
 
-impl std::error::Error for ReadError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self.kind() {
-            ReadErrorKind::Io(e) => Some(e),
-            _ => None,
-        }
-    }
-}
+/// No source: the system's error of [`ReadErrorKind::Io`] is said in the message, and an error chain printed whole
+/// would say it twice.
+impl std::error::Error for ReadError {}
 
 /// What went wrong while reading a recording. One variant per kind of failure. Text quoted from the file is at most
 /// a short excerpt, shown escaped.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ReadErrorKind {
-    /// The file could not be opened or read.
+    /// The file could not be opened or read (the system's error is in the message, not a source).
     #[error("cannot read: {0}")]
-    Io(#[source] std::io::Error),
+    Io(std::io::Error),
     /// The file holds nothing but blank lines (or nothing at all).
     #[error("empty file")]
     Empty,
