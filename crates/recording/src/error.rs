@@ -188,6 +188,13 @@ pub enum ReadErrorKind {
         /// True if a row of numbers stands where the header should be.
         data_first: bool,
     },
+    /// The file is a MotionCal-style board's serial output saved as it came (`Raw:` lines), not a recording.
+    #[error(
+        "MotionCal serial output (Raw:ax,ay,az,gx,gy,gz,mx,my,mz lines), not a recording: record the board with \
+         magcal-record --device serial:PORT (it reads these lines), or make this a recording: a header line mx,my,mz \
+         and, on each line, the last three numbers divided by 10 (MotionCal's counts are 0.1 µT)"
+    )]
+    MotionCalLog,
     /// One of the required columns `mx`, `my`, `mz` is not in the header.
     #[error("missing required column {0:?} (mx, my and mz are required)")]
     MissingColumn(&'static str),

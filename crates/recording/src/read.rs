@@ -181,6 +181,9 @@ pub(crate) fn read_split<R: Read>(
         names.push(text.to_owned());
     }
     let header = Header::parse(&names).map_err(|(column, kind)| {
+        if names.first().is_some_and(|n| n.starts_with("Raw:")) {
+            return ReadError::new(name, Some(header_line), None, ReadErrorKind::MotionCalLog);
+        }
         let note = matches!(kind, ReadErrorKind::MissingColumn(_))
             .then(|| header_as_read(header_line, &names));
         ReadError::new(

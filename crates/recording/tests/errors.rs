@@ -300,6 +300,13 @@ fn cases() -> Vec<Case> {
             says: "separated by ;",
         },
         Case {
+            what: "a MotionCal board's serial output saved as it came",
+            input: b"Raw:-12,40,8190,1,-2,0,153,-87,412\nRaw:-11,41,8191,0,-1,1,152,-88,413\n",
+            kind: |k| matches!(k, K::MotionCalLog),
+            prefix: "rec.csv:1: ",
+            says: "divided by 10",
+        },
+        Case {
             what: "a decimal comma in a ;-separated file",
             input: b"t;mx;my;mz\n0;1,5;2;3\n",
             kind: |k| matches!(k, K::DecimalComma(t) if t == "1,5"),
