@@ -902,3 +902,43 @@ fn outputs_that_cannot_be_made_are_refused_before_the_fit() {
         assert!(out.stdout.is_empty(), "{args:?}");
     }
 }
+
+/// Defect 11 (a user's units, 2026-11-27): the field given in nT was fitted USABLE, A scaling the readings by about
+/// 1000 and a heading figure for a horizontal field of 15,000 µT; in gauss it was refused as if the recording gave
+/// `rx,ry,rz`. Now both are refused before the fit, saying the unit and the field in µT; nothing is exported.
+#[test]
+fn a_field_given_in_nt_or_gauss_is_refused_saying_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, text) = tumble(dir.path());
+    let ned: Vec<f64> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# field_ned_ut:"))
+        .expect("the simulator writes the field")
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    let in_ut = format!("{:.2},{:.2},{:.2}", ned[0], ned[1], ned[2]);
+    for (scale, unit) in [(1000.0, "nT"), (0.01, "gauss")] {
+        let given = format!(
+            "--field-ned={},{},{}",
+            ned[0] * scale,
+            ned[1] * scale,
+            ned[2] * scale
+        );
+        let json = dir.path().join(format!("{unit}.json"));
+        let out = magcal_fit(&[
+            rec.to_str().unwrap(),
+            &given,
+            "--export",
+            "json",
+            "--export-out",
+            json.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(&format!("in {unit}? then it is {in_ut} µT")),
+            "{unit}: {stderr}"
+        );
+        assert!(!json.exists(), "{unit}: exported");
+    }
+}

@@ -7,6 +7,7 @@ use anyhow::{Context, bail};
 use clap::Parser;
 use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
+use magcal_app::field::resolve;
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
     RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record,
@@ -189,6 +190,8 @@ fn run(args: Args) -> anyhow::Result<()> {
     check_out(&args.out, args.force)?;
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
+    // A field given in another unit than µT is refused before anything is opened, as the fit would refuse it.
+    resolve(&args.field.field_args(None), &opts.meta)?;
     if let Some(note) = sim_field_note(&spec, &opts.meta) {
         tellln!("{note}");
     }

@@ -88,11 +88,73 @@ pub enum FieldError {
         /// What the model said.
         why: String,
     },
+    /// A field given in numbers is no field a magnetometer here measures, in µT: given in another unit.
+    #[error(
+        "the field given ({given_by}) is {magnitude_ut} µT, where the Earth's is 22–67 µT and no magnetometer this tool \
+         reads measures more than {FIELD_MAX_UT} µT: it must be in µT{hint}"
+    )]
+    NotMicrotesla {
+        /// Where it came from.
+        given_by: String,
+        /// Its magnitude as given, shortened.
+        magnitude_ut: String,
+        /// The unit it most likely is in, and the field in µT then.
+        hint: String,
+    },
+}
+
+/// The least field magnitude taken as given in µT: below, it is in gauss or tesla (the Earth's is 22–67 µT).
+pub const FIELD_MIN_UT: f64 = 1.0;
+/// The largest: the widest range of the chips this tool reads (the LIS2MDL's ±50 gauss). Above, it is in nT.
+pub const FIELD_MAX_UT: f64 = 5000.0;
+
+/// `field` if its magnitude can be a field in µT ([`FIELD_MIN_UT`]–[`FIELD_MAX_UT`]); otherwise the error that says
+/// which unit it most likely is in.
+fn in_microtesla(field: ReferenceField) -> Result<ReferenceField, FieldError> {
+    let Some(m) = field.magnitude() else {
+        return Ok(field);
+    };
+    if (FIELD_MIN_UT..=FIELD_MAX_UT).contains(&m) {
+        return Ok(field);
+    }
+    let scaled = |k: f64, unit: &str| -> String {
+        let shown = match &field {
+            ReferenceField::Vector { field_ned_ut, .. } => {
+                let [n, e, d] = field_ned_ut.map(|c| c * k);
+                format!("{n:.2},{e:.2},{d:.2}")
+            }
+            _ => format!("{:.2}", m * k),
+        };
+        format!(" (in {unit}? then it is {shown} µT)")
+    };
+    let (hint, magnitude_ut) = if m > FIELD_MAX_UT {
+        (scaled(1e-3, "nT"), format!("{m:.0}"))
+    } else if m >= 1e-3 {
+        (scaled(100.0, "gauss"), format!("{m:.4}"))
+    } else if m > 0.0 {
+        (scaled(1e6, "tesla"), format!("{m:.3e}"))
+    } else {
+        (
+            " — a field of zero cannot be fitted against: give the local field".to_owned(),
+            format!("{m}"),
+        )
+    };
+    Err(FieldError::NotMicrotesla {
+        given_by: field.source().to_owned(),
+        magnitude_ut,
+        hint,
+    })
 }
 
 /// Resolves the field: the command line first (`--field-ned`, then `--location/--date`, then `--field-ut`), then the
-/// recording's metadata (`field_ned_ut`, then `location` + `date`).
+/// recording's metadata (`field_ned_ut`, then `location` + `date`). A field given in another unit than µT is
+/// refused ([`in_microtesla`]).
 pub fn resolve(args: &FieldArgs, meta: &Metadata) -> Result<ReferenceField, FieldError> {
+    in_microtesla(given(args, meta)?)
+}
+
+/// The field as given, before its unit is checked.
+fn given(args: &FieldArgs, meta: &Metadata) -> Result<ReferenceField, FieldError> {
     if let Some(f) = args.field_ned_ut {
         return Ok(ReferenceField::Vector {
             field_ned_ut: f,
@@ -206,6 +268,62 @@ mod tests {
         assert_eq!(
             resolve(&FieldArgs::default(), &Metadata::default()).unwrap(),
             ReferenceField::Unknown
+        );
+    }
+
+    #[test]
+    fn a_field_given_in_another_unit_is_refused_saying_which() {
+        let given = |f: [f64; 3]| {
+            let args = FieldArgs {
+                field_ned_ut: Some(f),
+                ..FieldArgs::default()
+            };
+            resolve(&args, &Metadata::default()).map_err(|e| e.to_string())
+        };
+        let nt = given([19_800.0, 1_200.0, 45_300.0]).unwrap_err();
+        assert!(nt.contains("in nT? then it is 19.80,1.20,45.30 µT"), "{nt}");
+        let gauss = given([0.198, 0.012, 0.453]).unwrap_err();
+        assert!(
+            gauss.contains("in gauss? then it is 19.80,1.20,45.30 µT"),
+            "{gauss}"
+        );
+        let tesla = given([19.8e-6, 1.2e-6, 45.3e-6]).unwrap_err();
+        assert!(
+            tesla.contains("in tesla? then it is 19.80,1.20,45.30 µT"),
+            "{tesla}"
+        );
+        let zero = given([0.0; 3]).unwrap_err();
+        assert!(zero.contains("a field of zero"), "{zero}");
+        // µT, the Earth's or a coil's, up to the widest range of the chips read.
+        for f in [
+            [19.8, 1.2, 45.3],
+            [0.0, 0.0, FIELD_MIN_UT],
+            [FIELD_MAX_UT, 0.0, 0.0],
+        ] {
+            assert!(given(f).is_ok(), "{f:?}");
+        }
+        // The metadata's field and a magnitude alone alike, named by where they came from.
+        let meta = Metadata {
+            field_ned_ut: Some([19_800.0, 1_200.0, 45_300.0]),
+            ..Metadata::default()
+        };
+        let from_meta = resolve(&FieldArgs::default(), &meta)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            from_meta.contains("recording metadata field_ned_ut"),
+            "{from_meta}"
+        );
+        let magnitude = FieldArgs {
+            field_ut: Some(49_000.0),
+            ..FieldArgs::default()
+        };
+        let msg = resolve(&magnitude, &Metadata::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("(--field-ut)") && msg.contains("then it is 49.00 µT"),
+            "{msg}"
         );
     }
 }
