@@ -942,3 +942,27 @@ fn a_field_given_in_nt_or_gauss_is_refused_saying_so() {
         assert!(!json.exists(), "{unit}: exported");
     }
 }
+
+/// Defect 12 (a user's column names, 2026-11-27): the attitude written as `q0,q1,q2,q3` was carried along unread and
+/// the recording fitted by the scalar method without a word of why. Now a warning names the columns and magcal's.
+#[test]
+fn quaternions_under_other_names_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, text) = tumble(dir.path());
+    let renamed = write(
+        dir.path(),
+        "q0.csv",
+        &text.replacen("qw,qx,qy,qz", "q0,q1,q2,q3", 1),
+    );
+    for (path, named) in [(&renamed, true), (&rec, false)] {
+        let out = magcal_fit(&[path.to_str().unwrap(), "--no-diagnose"]);
+        assert!(out.status.success());
+        let summary = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            summary.contains("columns q0, q1, q2, q3 look like an attitude quaternion"),
+            named,
+            "{summary}"
+        );
+        assert_eq!(summary.contains("scalar calibration"), named, "{summary}");
+    }
+}

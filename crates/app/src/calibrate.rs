@@ -650,6 +650,13 @@ pub fn calibrate(
                      to fit every component (vector method)"
                         .to_owned(),
                 );
+            } else if let Some(columns) = quaternion_like_columns(rec) {
+                warnings.push(format!(
+                    "only the magnitude was fitted (scalar method: misalignment unobserved): the recording's columns \
+                     {columns} look like an attitude quaternion, but magcal reads the attitude from columns named \
+                     qw,qx,qy,qz (scalar first, turning sensor axes into NED). Named so, with the world field, they give \
+                     the vector method, which fits every component"
+                ));
             } else if rec.quat.is_some() {
                 warnings.push(format!(
                     "the recording has attitude quaternions but no world field vector, so only the magnitude was \
@@ -849,6 +856,48 @@ pub fn calibrate(
 }
 
 /// Metadata keys that look like the field's but are not read (a typo: `field_ned:`), as a clause to append.
+/// Four carried-along columns that look like an attitude quaternion under other names than magcal's (`q0`…`q3`,
+/// `q1`…`q4`, `quat_w`…`quat_z`: names with a `q` in them that differ only in their last character, four of 0–4 or
+/// of w, x, y, z), listed as found; `None` when there are none or the recording has magcal's.
+fn quaternion_like_columns(rec: &Recording) -> Option<String> {
+    if rec.quat.is_some() {
+        return None;
+    }
+    let split = |name: &str| {
+        let name = name.trim().to_lowercase();
+        let last = name.chars().last()?;
+        let family = if ('0'..='4').contains(&last) {
+            0
+        } else if "wxyz".contains(last) {
+            1
+        } else {
+            return None;
+        };
+        let prefix = name[..name.len() - 1]
+            .trim_end_matches(['_', '.', ' '])
+            .to_owned();
+        prefix.contains('q').then_some((prefix, family, last))
+    };
+    let parts: Vec<(String, i32, char)> = rec.extra.iter().filter_map(|c| split(&c.name)).collect();
+    let (prefix, family, _) = parts.iter().find(|(p, f, _)| {
+        let mut ends: Vec<char> = parts
+            .iter()
+            .filter(|(q, g, _)| q == p && g == f)
+            .map(|x| x.2)
+            .collect();
+        ends.sort_unstable();
+        ends.dedup();
+        ends.len() == 4
+    })?;
+    let names: Vec<&str> = rec
+        .extra
+        .iter()
+        .filter(|c| split(&c.name).is_some_and(|(p, f, _)| &p == prefix && f == *family))
+        .map(|c| c.name.trim())
+        .collect();
+    Some(names.join(", "))
+}
+
 fn unread_field_keys(meta: &Metadata) -> String {
     let looks_like = |k: &str| {
         ["field", "ned", "location", "lat", "date"]
