@@ -260,6 +260,7 @@ pub fn check(
         diagnosis_skipped: false,
         noise_unmeasured,
         declination_off_deg: None,
+        excluded_share: 0.0,
     };
     let (heading, mut verdict) = match field.vector() {
         Some(f) => {

@@ -91,7 +91,13 @@ pub struct Hints {
     /// degrees, when more than [`GOOD_DEG`]: the calibration models it, but a heading computed with the declination
     /// given is off by as much.
     pub declination_off_deg: Option<f64>,
+    /// The share of the rows the fit could use that it left out as grossly off.
+    pub excluded_share: f64,
 }
+
+/// From this share of the rows left out as grossly off, a fit made uncertain by what it could keep is not helped by
+/// recording longer as it was: what made them grossly off must go first.
+pub const EXCLUDED_NOT_LONGER: f64 = 0.1;
 
 /// Degrees in two significant figures below 10, whole degrees above.
 pub fn fmt_deg(x: f64) -> String {
@@ -187,6 +193,26 @@ fn judge_heading(h: &HeadingErrors, hints: &Hints) -> Verdict {
                 .to_owned(),
         };
         (why, todo)
+    } else if hints.excluded_share >= EXCLUDED_NOT_LONGER {
+        let share = 100.0 * hints.excluded_share;
+        (
+            format!(
+                "{} of heading error left: the fit itself is uncertain ({:.0} % of the directions covered, {share:.0} % \
+                 of the readings left out as grossly off)",
+                fmt_deg(left),
+                100.0 * hints.coverage
+            ),
+            format!(
+                "record again with magnets, metal and cables away from the sensor rather than for longer: {share:.0} % \
+                 of the readings were left out (the notes below say when){}",
+                if hints.vector {
+                    "; if nothing magnetic was near, check the attitude reference there (its convention, axes and \
+                     clock against the sensor's)"
+                } else {
+                    ""
+                }
+            ),
+        )
     } else {
         (
             format!(
@@ -315,6 +341,8 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         diagnosis_skipped: cal.diagnosis.is_none() && cal.diagnosis_failed.is_none(),
         noise_unmeasured: !cal.noise_measured,
         declination_off_deg: cal.diagnosis.as_ref().and_then(declination_off_deg),
+        excluded_share: cal.samples.excluded as f64
+            / (cal.samples.used + cal.samples.excluded).max(1) as f64,
     };
     let magnitude_ut = model_field_ut(cal, rec).unwrap_or(f64::NAN);
     let direction = cal.field.vector().map(|f| frames::field_angles(f).1);
