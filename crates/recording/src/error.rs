@@ -238,7 +238,7 @@ pub enum ReadErrorKind {
     #[error("not a number: {0:?} (a decimal comma? write numbers with a decimal point)")]
     DecimalComma(String),
     /// A finite number beyond what the column can hold (see [`crate::limits`]).
-    #[error("out of range: {value:?} (this column holds at most ±{limit:e} {unit})")]
+    #[error("out of range: {value:?} (this column holds at most ±{limit:e} {unit}{hint})")]
     OutOfRange {
         /// The number as written.
         value: String,
@@ -246,6 +246,8 @@ pub enum ReadErrorKind {
         limit: f64,
         /// The column's unit.
         unit: &'static str,
+        /// What the number most likely is, when something is (it starts with "; "), or "".
+        hint: &'static str,
     },
     /// `mx`, `my` or `mz` is NaN or infinite.
     #[error("magnetic field must be finite, got {0:?}")]

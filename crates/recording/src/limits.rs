@@ -24,27 +24,34 @@ pub const MAX_COLUMNS: usize = 10_000;
 pub(crate) struct Limit {
     pub max: f64,
     pub unit: &'static str,
+    /// What a number beyond it most likely is, for the message ("" when nothing is likely).
+    pub hint: &'static str,
 }
 
 pub(crate) const FIELD: Limit = Limit {
     max: MAX_FIELD_UT,
     unit: "µT",
+    hint: "",
 };
 pub(crate) const TIME: Limit = Limit {
     max: MAX_T_S,
     unit: "s",
+    hint: "; t is in seconds: a timestamp in milliseconds or nanoseconds divided by 1000 or 10⁹ is one",
 };
 pub(crate) const TEMP: Limit = Limit {
     max: MAX_TEMP_C,
     unit: "°C",
+    hint: "",
 };
 pub(crate) const GYRO: Limit = Limit {
     max: MAX_GYRO_RAD_S,
     unit: "rad/s",
+    hint: "",
 };
 pub(crate) const CURRENT: Limit = Limit {
     max: MAX_CURRENT_A,
     unit: "A",
+    hint: "",
 };
 
 impl Limit {
@@ -58,4 +65,5 @@ impl Limit {
 pub(crate) const UNBOUNDED: Limit = Limit {
     max: f64::MAX,
     unit: "",
+    hint: "",
 };

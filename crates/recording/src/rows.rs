@@ -394,6 +394,7 @@ fn within<'t>(
             value: excerpt(&text()),
             limit: limit.max,
             unit: limit.unit,
+            hint: limit.hint,
         });
     }
     Ok(value)

@@ -293,6 +293,13 @@ fn cases() -> Vec<Case> {
             says: "out of range",
         },
         Case {
+            what: "a Unix timestamp in milliseconds",
+            input: b"t,mx,my,mz\n1732700000000,1,2,3\n",
+            kind: |k| matches!(k, K::OutOfRange { unit: "s", .. }),
+            prefix: "rec.csv:2:1 (t): ",
+            says: "t is in seconds: a timestamp in milliseconds or nanoseconds divided by 1000 or 10⁹",
+        },
+        Case {
             what: "semicolons that name no mx,my,mz",
             input: b"time;Bx;By;Bz\n0;1;2;3\n",
             kind: |k| matches!(k, K::Separator { separator: ';' }),
