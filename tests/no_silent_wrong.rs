@@ -679,6 +679,26 @@ fn time_in_milliseconds_is_named() {
     );
     let seconds = magcal_fit(&[write(dir.path(), "s.csv", &text).to_str().unwrap()]);
     assert!(!String::from_utf8_lossy(&seconds.stdout).contains("time column"));
+    // Without a sample_rate_hz: a logger's millis(), whole numbers, said too; whole seconds are not.
+    let no_rate: String = text
+        .lines()
+        .filter(|l| !l.starts_with("# sample_rate_hz"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    for (scale, named) in [(1000.0, true), (1.0, false)] {
+        let rec = write(
+            dir.path(),
+            "no_rate.csv",
+            &map_columns(&no_rate, &["t"], |t| (scale * t).round()),
+        );
+        let out = magcal_fit(&[rec.to_str().unwrap(), "--no-diagnose"]);
+        let summary = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            summary.contains("most likely in milliseconds — divide it by 1000"),
+            named,
+            "{scale}: {summary}"
+        );
+    }
 }
 
 /// An axis clipped by the sensor's range (found 2026-11-27: `mz` held at −45 and 20 µT in a third of a hand-held

@@ -945,9 +945,10 @@ const TIME_STEPS_LOOKED_AT: usize = 10_000;
 /// [`TIME_STEP_MISMATCH`] both in its median step and in its mean step over the whole recording: time in
 /// milliseconds read as seconds made a 20 ms lag one of 19.9 s, graded good. Either alone is no unit: host timestamps
 /// come in bursts (the median step is a fraction of the interval), and the cube routine records only the poses (the
-/// mean step spans the turns between them).
+/// mean step spans the turns between them). Without a `sample_rate_hz`, times in whole numbers stepping by
+/// [`MILLISECOND_STEP_MIN`] or more (a logger's `millis()`) are taken for milliseconds: a calibration turns the
+/// sensor, and no logger that does takes a reading only every five seconds or more.
 fn time_unit_mismatch(rec: &Recording) -> Option<String> {
-    let rate_hz = rec.meta.sample_rate_hz?;
     let t = rec.t_s.as_deref()?;
     let (first, last) = (t.first()?, t.last()?);
     let mean_step = (last - first) / (t.len() - 1).max(1) as f64;
@@ -963,6 +964,18 @@ fn time_unit_mismatch(rec: &Recording) -> Option<String> {
     }
     let mid = steps.len() / 2;
     let median_step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let Some(rate_hz) = rec.meta.sample_rate_hz else {
+        let whole = (0..t.len())
+            .step_by(stride)
+            .all(|i| !t[i].is_finite() || t[i].fract() == 0.0);
+        return (whole && median_step >= MILLISECOND_STEP_MIN).then(|| {
+            format!(
+                "the time column `t` holds whole numbers stepping by {median_step} a sample (median): a reading every \
+                 {median_step} s is too slow for a sensor being turned, so `t` is most likely in milliseconds — \
+                 divide it by 1000 (t is in seconds). Every time, span and lag here is in the column's units"
+            )
+        });
+    };
     let off =
         |step: f64| !(1.0 / TIME_STEP_MISMATCH..=TIME_STEP_MISMATCH).contains(&(step * rate_hz));
     (off(mean_step) && off(median_step)).then(|| {
@@ -974,6 +987,10 @@ fn time_unit_mismatch(rec: &Recording) -> Option<String> {
         )
     })
 }
+
+/// The least median step of whole-number times taken for milliseconds when no `sample_rate_hz` says otherwise (a
+/// logger at 200 Hz or slower).
+const MILLISECOND_STEP_MIN: f64 = 5.0;
 
 /// A warning when the scalar fit kept windows in which the magnitude sat apart from the rest (a field on the board
 /// or in the room for that time, found by the window scan) because without them the recording would cover too few
