@@ -963,8 +963,9 @@ fn a_field_given_in_nt_or_gauss_is_refused_saying_so() {
     }
 }
 
-/// Defect 12 (a user's column names, 2026-11-27): the attitude written as `q0,q1,q2,q3` was carried along unread and
-/// the recording fitted by the scalar method without a word of why. Now a warning names the columns and magcal's.
+/// Defect 12 (a user's column names, 2026-11-27): the attitude written as `q0,q1,q2,q3` (or as roll, pitch and yaw) was
+/// carried along unread and the recording fitted by the scalar method without a word of why. Now a warning names the
+/// columns and magcal's.
 #[test]
 fn quaternions_under_other_names_are_named() {
     let dir = tempfile::tempdir().unwrap();
@@ -985,4 +986,16 @@ fn quaternions_under_other_names_are_named() {
         );
         assert_eq!(summary.contains("scalar calibration"), named, "{summary}");
     }
+    // Angles, in whatever convention, are named too (the values here are a quaternion's: only the names count).
+    let angles = write(
+        dir.path(),
+        "angles.csv",
+        &text.replacen("qw,qx,qy,qz", "n,roll_deg,pitch_deg,yaw_deg", 1),
+    );
+    let out = magcal_fit(&[angles.to_str().unwrap(), "--no-diagnose"]);
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("columns roll_deg, pitch_deg, yaw_deg look like an attitude in angles"),
+        "{summary}"
+    );
 }

@@ -657,6 +657,14 @@ pub fn calibrate(
                      qw,qx,qy,qz (scalar first, turning sensor axes into NED). Named so, with the world field, they give \
                      the vector method, which fits every component"
                 ));
+            } else if let Some(columns) = euler_like_columns(rec) {
+                warnings.push(format!(
+                    "only the magnitude was fitted (scalar method: misalignment unobserved): the recording's columns \
+                     {columns} look like an attitude in angles, which magcal does not read (their order and axes \
+                     differ from one program to the next). Written as a quaternion qw,qx,qy,qz (scalar first, turning \
+                     sensor axes into NED), with the world field, the attitude gives the vector method, which fits \
+                     every component"
+                ));
             } else if rec.quat.is_some() {
                 warnings.push(format!(
                     "the recording has attitude quaternions but no world field vector, so only the magnitude was \
@@ -896,6 +904,25 @@ fn quaternion_like_columns(rec: &Recording) -> Option<String> {
         .map(|c| c.name.trim())
         .collect();
     Some(names.join(", "))
+}
+
+/// Carried-along columns that look like an attitude in angles (roll, pitch and yaw, heading or azimuth, with any
+/// prefix or unit suffix), listed as found; `None` without roll and pitch and one of the others, or with quaternions.
+fn euler_like_columns(rec: &Recording) -> Option<String> {
+    if rec.quat.is_some() {
+        return None;
+    }
+    let named = |word: &str| {
+        rec.extra
+            .iter()
+            .find(|c| c.name.to_lowercase().contains(word))
+            .map(|c| c.name.trim())
+    };
+    let (roll, pitch) = (named("roll")?, named("pitch")?);
+    let turn = named("yaw")
+        .or_else(|| named("heading"))
+        .or_else(|| named("azimuth"))?;
+    Some(format!("{roll}, {pitch}, {turn}"))
 }
 
 fn unread_field_keys(meta: &Metadata) -> String {
