@@ -278,7 +278,10 @@ pub enum ReadErrorKind {
     #[error("t must be a finite number in every row, got {0:?}")]
     NonFiniteTime(String),
     /// `t` is smaller than in the row before.
-    #[error("t goes backwards: {t_s} s after {previous_s} s")]
+    #[error(
+        "t goes backwards: {t_s} s after {previous_s} s (the rows must be in time order: sort them by t; where a \
+         device's clock restarted, make t go on from where it was, or leave the t column out to fit without times)"
+    )]
     TimeBackwards {
         /// `t` in the previous data row.
         previous_s: f64,
