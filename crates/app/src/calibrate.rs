@@ -863,7 +863,6 @@ pub fn calibrate(
     Ok(cal)
 }
 
-/// Metadata keys that look like the field's but are not read (a typo: `field_ned:`), as a clause to append.
 /// Four carried-along columns that look like an attitude quaternion under other names than magcal's (`q0`…`q3`,
 /// `q1`…`q4`, `quat_w`…`quat_z`: names with a `q` in them that differ only in their last character, four of 0–4 or
 /// of w, x, y, z), listed as found; `None` when there are none or the recording has magcal's.
@@ -925,6 +924,7 @@ fn euler_like_columns(rec: &Recording) -> Option<String> {
     Some(format!("{roll}, {pitch}, {turn}"))
 }
 
+/// Metadata keys that look like the field's but are not read (a typo: `field_ned:`), as a clause to append.
 fn unread_field_keys(meta: &Metadata) -> String {
     let looks_like = |k: &str| {
         ["field", "ned", "location", "lat", "date"]

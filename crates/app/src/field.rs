@@ -89,27 +89,24 @@ pub enum FieldError {
         why: String,
     },
     /// A field given in numbers is no field a magnetometer here measures, in µT: given in another unit.
-    #[error(
-        "the field given ({given_by}) is {magnitude_ut} µT, where the Earth's is 22–67 µT and no magnetometer this tool \
-         reads measures more than {FIELD_MAX_UT} µT: it must be in µT{hint}"
-    )]
+    #[error("the field given ({given_by}) is {magnitude_ut} µT{why}")]
     NotMicrotesla {
         /// Where it came from.
         given_by: String,
         /// Its magnitude as given, shortened.
         magnitude_ut: String,
-        /// The unit it most likely is in, and the field in µT then.
-        hint: String,
+        /// Why that is no field in µT, and the unit it most likely is in with the field in µT then.
+        why: String,
     },
 }
 
-/// The least field magnitude taken as given in µT: below, it is in gauss or tesla (the Earth's is 22–67 µT).
+/// The least field magnitude taken as given in µT: below, it is in gauss, mT or tesla (the Earth's is 22–67 µT).
 pub const FIELD_MIN_UT: f64 = 1.0;
 /// The largest: the widest range of the chips this tool reads (the LIS2MDL's ±50 gauss). Above, it is in nT.
 pub const FIELD_MAX_UT: f64 = 5000.0;
 
 /// `field` if its magnitude can be a field in µT ([`FIELD_MIN_UT`]–[`FIELD_MAX_UT`]); otherwise the error that says
-/// which unit it most likely is in.
+/// which unit it most likely is in (the one that puts it at the Earth's 22–67 µT).
 fn in_microtesla(field: ReferenceField) -> Result<ReferenceField, FieldError> {
     let Some(m) = field.magnitude() else {
         return Ok(field);
@@ -127,22 +124,43 @@ fn in_microtesla(field: ReferenceField) -> Result<ReferenceField, FieldError> {
         };
         format!(" (in {unit}? then it is {shown} µT)")
     };
-    let (hint, magnitude_ut) = if m > FIELD_MAX_UT {
-        (scaled(1e-3, "nT"), format!("{m:.0}"))
-    } else if m >= 1e-3 {
-        (scaled(100.0, "gauss"), format!("{m:.4}"))
-    } else if m > 0.0 {
-        (scaled(1e6, "tesla"), format!("{m:.3e}"))
-    } else {
+    let (magnitude_ut, why) = if m > FIELD_MAX_UT {
         (
-            " — a field of zero cannot be fitted against: give the local field".to_owned(),
-            format!("{m}"),
+            format!("{m:.0}"),
+            format!(
+                ", more than any magnetometer this tool reads measures ({FIELD_MAX_UT} µT): it must be in µT{}",
+                scaled(1e-3, "nT")
+            ),
+        )
+    } else if m == 0.0 {
+        (
+            "0".to_owned(),
+            ": a field of zero cannot be fitted against; give the local field".to_owned(),
+        )
+    } else {
+        let hint = if m >= 0.1 {
+            scaled(100.0, "gauss")
+        } else if m >= 0.01 {
+            scaled(1000.0, "mT")
+        } else if m < 1e-3 {
+            scaled(1e6, "tesla")
+        } else {
+            String::new()
+        };
+        let shown = if m >= 1e-3 {
+            format!("{m:.4}")
+        } else {
+            format!("{m:.3e}")
+        };
+        (
+            shown,
+            format!(", where the Earth's is 22–67 µT: it must be in µT{hint}"),
         )
     };
     Err(FieldError::NotMicrotesla {
         given_by: field.source().to_owned(),
         magnitude_ut,
-        hint,
+        why,
     })
 }
 
@@ -292,6 +310,8 @@ mod tests {
             tesla.contains("in tesla? then it is 19.80,1.20,45.30 µT"),
             "{tesla}"
         );
+        let mt = given([0.0198, 0.0012, 0.0453]).unwrap_err();
+        assert!(mt.contains("in mT? then it is 19.80,1.20,45.30 µT"), "{mt}");
         let zero = given([0.0; 3]).unwrap_err();
         assert!(zero.contains("a field of zero"), "{zero}");
         // µT, the Earth's or a coil's, up to the widest range of the chips read.
