@@ -178,47 +178,15 @@ struct Directional<'a> {
 }
 
 impl Directional<'_> {
-    /// The sums over `[a, b)` added to `from`: the upper triangle of `xxᵀ` and `x·rho`, in plain sums (the products
-    /// by `x`'s constant 1 are the values themselves, and `xxᵀ` mirrors its upper triangle exactly).
-    fn add(&self, from: TermSums, a: usize, b: usize) -> TermSums {
-        let (mut xx, mut xr) = (from.xx, from.xr);
-        let mut upper = [0.0; TERMS * (TERMS + 1) / 2];
-        let mut e = 0;
-        for r in 0..TERMS {
-            for c in r..TERMS {
-                upper[e] = xx[(r, c)];
-                e += 1;
-            }
-        }
-        let mut r_sums = [xr[0], xr[1], xr[2], xr[3]];
+    /// The sums over `[a, b)` added to `from`.
+    fn add(&self, mut from: TermSums, a: usize, b: usize) -> TermSums {
         for i in (a..b).filter(|&i| self.free[i]) {
             let [x, y, z] = self.u[i];
-            let rho = self.rho[i];
-            upper[0] += 1.0;
-            upper[1] += x;
-            upper[2] += y;
-            upper[3] += z;
-            upper[4] += x * x;
-            upper[5] += x * y;
-            upper[6] += x * z;
-            upper[7] += y * y;
-            upper[8] += y * z;
-            upper[9] += z * z;
-            r_sums[0] += rho;
-            r_sums[1] += x * rho;
-            r_sums[2] += y * rho;
-            r_sums[3] += z * rho;
+            let x = TermVec::new(1.0, x, y, z);
+            from.xx += x * x.transpose();
+            from.xr += x * self.rho[i];
         }
-        let mut e = 0;
-        for r in 0..TERMS {
-            for c in r..TERMS {
-                xx[(r, c)] = upper[e];
-                xx[(c, r)] = upper[e];
-                e += 1;
-            }
-        }
-        xr = TermVec::from(r_sums);
-        TermSums { xx, xr }
+        from
     }
 
     /// The prefix sums at `lo..=hi`, from the prefix sum `at_lo` at `lo`.
