@@ -59,6 +59,18 @@ impl Components {
         Components { dims, values }
     }
 
+    /// The first `dims` components of each residual, taking the residuals' memory when they are all kept (`dims` 3):
+    /// a per-sample vector the size of the residuals is not held twice.
+    pub(crate) fn from_residuals(residuals: Vec<[f64; 3]>, dims: usize) -> Components {
+        if dims == 3 {
+            return Components {
+                dims,
+                values: residuals.into_flattened(),
+            };
+        }
+        Components::of(residuals.iter(), dims)
+    }
+
     /// Samples held.
     pub fn len(&self) -> usize {
         self.values.len() / self.dims.max(1)

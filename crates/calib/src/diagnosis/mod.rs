@@ -1211,8 +1211,7 @@ impl Setup<'_> {
         let final_residual = self.residual(&ext_a, ext_b, &all);
         let sizes = self.sizes(&chosen, &final_residual);
         let dims = if vector { 3 } else { 1 };
-        let extended = Components::of(final_residual.iter(), dims);
-        drop(final_residual);
+        let extended = Components::from_residuals(final_residual, dims);
         for (k, (c, effect, se)) in chosen.iter().enumerate() {
             let cand = &round.cands[*c];
             if effect.id().frame() == Frame::Body && !effect.id().is_transient() {
@@ -1308,16 +1307,13 @@ impl Setup<'_> {
         // segments are the gross spans.
         let used: Vec<usize> = (0..n).filter(|&i| round.included[i]).collect();
         let all_used = used.len() == n;
-        let base_rows = Components::of(base_residual.iter(), dims);
-        let used_rows = if all_used {
-            Cow::Borrowed(&base_rows)
-        } else {
-            Cow::Owned(Components::of(
-                used.iter().map(|&i| &base_residual[i]),
-                dims,
-            ))
+        let used_only =
+            (!all_used).then(|| Components::of(used.iter().map(|&i| &base_residual[i]), dims));
+        let base_rows = Components::from_residuals(base_residual, dims);
+        let used_rows = match used_only {
+            Some(rows) => Cow::Owned(rows),
+            None => Cow::Borrowed(&base_rows),
         };
-        drop(base_residual);
         let pick = |v: &'_ [f64]| -> Vec<f64> { used.iter().map(|&i| v[i]).collect() };
         let used_channels: Vec<(&str, Cow<[f64]>)> = channels
             .iter()
