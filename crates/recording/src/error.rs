@@ -289,7 +289,7 @@ pub enum ReadErrorKind {
         t_s: f64,
     },
     /// A complete quaternion whose norm is outside 1 ± 0.01.
-    #[error("quaternion far from unit length: |q| = {norm}")]
+    #[error("quaternion far from unit length: |q| = {norm}{}", quat_norm_hint(*norm))]
     QuatNotUnit {
         /// The quaternion's norm.
         norm: f64,
@@ -310,3 +310,21 @@ pub enum ReadErrorKind {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("cannot write this header: {0}")]
 pub struct HeaderError(pub String);
+
+/// Fixed-point scales quaternions are written in: Q14 (BNO055, BNO08x), Q15, Q30 (the MPU's DMP), and ×10⁴.
+const QUAT_FIXED_POINT: [f64; 4] = [16_384.0, 32_768.0, 1_073_741_824.0, 10_000.0];
+
+/// What a quaternion's norm far from 1 most likely means: written in fixed point (the scale to divide by), or all
+/// zeros for a missing attitude; "" otherwise.
+fn quat_norm_hint(norm: f64) -> String {
+    if norm == 0.0 {
+        return " (all zero: a row without an attitude leaves its quaternion columns empty or nan)"
+            .to_owned();
+    }
+    QUAT_FIXED_POINT
+        .iter()
+        .find(|k| (norm / **k - 1.0).abs() <= 0.02)
+        .map_or_else(String::new, |k| {
+            format!(" (written in fixed point? divide the quaternion columns by {k})")
+        })
+}

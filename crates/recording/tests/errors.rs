@@ -213,7 +213,14 @@ fn cases() -> Vec<Case> {
             input: b"mx,my,mz,qw,qx,qy,qz\n1,2,3,0,0,0,0\n",
             kind: |k| matches!(k, K::QuatNotUnit { .. }),
             prefix: "rec.csv:2: ",
-            says: "far from unit length",
+            says: "all zero: a row without an attitude leaves its quaternion columns empty or nan",
+        },
+        Case {
+            what: "a quaternion in a BNO055's fixed point (Q14)",
+            input: b"mx,my,mz,qw,qx,qy,qz\n1,2,3,16384,0,0,0\n",
+            kind: |k| matches!(k, K::QuatNotUnit { .. }),
+            prefix: "rec.csv:2: ",
+            says: "divide the quaternion columns by 16384",
         },
         Case {
             what: "metadata after the header",
