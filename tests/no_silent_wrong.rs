@@ -431,6 +431,24 @@ fn map_readings(text: &str, f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
     out
 }
 
+/// The field in the metadata of a recording's `text` (NED, µT).
+fn tumble_field(text: &str) -> [f64; 3] {
+    let ned: Vec<f64> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# field_ned_ut:"))
+        .expect("the simulator writes the field")
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    [ned[0], ned[1], ned[2]]
+}
+
+/// `--field-ned=` with the field `ned` times `scale`.
+fn field_ned_arg(ned: [f64; 3], scale: f64) -> String {
+    let [n, e, d] = ned.map(|v| v * scale);
+    format!("--field-ned={n},{e},{d}")
+}
+
 /// A simulated tumble with attitude and the field in its metadata (60 s), and its text.
 fn tumble(dir: &Path) -> (PathBuf, String) {
     let rec = simulate(dir, "tumble.csv", &["--duration", "60"]);
@@ -515,19 +533,7 @@ fn a_rotation_an_export_leaves_out_is_warned() {
 fn a_field_of_the_wrong_size_is_warned() {
     let dir = tempfile::tempdir().unwrap();
     let (rec, text) = tumble(dir.path());
-    let ned: Vec<f64> = text
-        .lines()
-        .find_map(|l| l.strip_prefix("# field_ned_ut:"))
-        .expect("the simulator writes the field")
-        .split(',')
-        .map(|v| v.trim().parse().unwrap())
-        .collect();
-    let half = format!(
-        "--field-ned={},{},{}",
-        ned[0] / 2.0,
-        ned[1] / 2.0,
-        ned[2] / 2.0
-    );
+    let half = field_ned_arg(tumble_field(&text), 0.5);
     for (extra, warned) in [(Some(half.as_str()), true), (None, false)] {
         let mut args = vec![rec.to_str().unwrap(), "--no-diagnose"];
         args.extend(extra);
@@ -930,21 +936,10 @@ fn outputs_that_cannot_be_made_are_refused_before_the_fit() {
 fn a_field_given_in_nt_or_gauss_is_refused_saying_so() {
     let dir = tempfile::tempdir().unwrap();
     let (rec, text) = tumble(dir.path());
-    let ned: Vec<f64> = text
-        .lines()
-        .find_map(|l| l.strip_prefix("# field_ned_ut:"))
-        .expect("the simulator writes the field")
-        .split(',')
-        .map(|v| v.trim().parse().unwrap())
-        .collect();
+    let ned = tumble_field(&text);
     let in_ut = format!("{:.2},{:.2},{:.2}", ned[0], ned[1], ned[2]);
     for (scale, unit) in [(1000.0, "nT"), (0.01, "gauss")] {
-        let given = format!(
-            "--field-ned={},{},{}",
-            ned[0] * scale,
-            ned[1] * scale,
-            ned[2] * scale
-        );
+        let given = field_ned_arg(ned, scale);
         let json = dir.path().join(format!("{unit}.json"));
         let out = magcal_fit(&[
             rec.to_str().unwrap(),
