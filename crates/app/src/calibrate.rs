@@ -870,39 +870,34 @@ fn quaternion_like_columns(rec: &Recording) -> Option<String> {
     if rec.quat.is_some() {
         return None;
     }
-    let split = |name: &str| {
-        let name = name.trim().to_lowercase();
-        let last = name.chars().last()?;
-        let family = if ('0'..='4').contains(&last) {
-            0
-        } else if "wxyz".contains(last) {
-            1
-        } else {
-            return None;
+    // The columns by what their names share: the name less its last character, and that character's kind.
+    let mut groups: Vec<((String, bool), Vec<(char, &str)>)> = Vec::new();
+    for c in &rec.extra {
+        let name = c.name.trim();
+        let lower = name.to_lowercase();
+        let Some(last) = lower.chars().last() else {
+            continue;
         };
-        let prefix = name[..name.len() - 1]
-            .trim_end_matches(['_', '.', ' '])
-            .to_owned();
-        prefix.contains('q').then_some((prefix, family, last))
-    };
-    let parts: Vec<(String, i32, char)> = rec.extra.iter().filter_map(|c| split(&c.name)).collect();
-    let (prefix, family, _) = parts.iter().find(|(p, f, _)| {
-        let mut ends: Vec<char> = parts
-            .iter()
-            .filter(|(q, g, _)| q == p && g == f)
-            .map(|x| x.2)
-            .collect();
+        let digit = ('0'..='4').contains(&last);
+        if !digit && !"wxyz".contains(last) {
+            continue;
+        }
+        let prefix = lower[..lower.len() - 1].trim_end_matches(['_', '.', ' ']);
+        if !prefix.contains('q') {
+            continue;
+        }
+        let key = (prefix.to_owned(), digit);
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, members)) => members.push((last, name)),
+            None => groups.push((key, vec![(last, name)])),
+        }
+    }
+    groups.into_iter().find_map(|(_, members)| {
+        let mut ends: Vec<char> = members.iter().map(|m| m.0).collect();
         ends.sort_unstable();
         ends.dedup();
-        ends.len() == 4
-    })?;
-    let names: Vec<&str> = rec
-        .extra
-        .iter()
-        .filter(|c| split(&c.name).is_some_and(|(p, f, _)| &p == prefix && f == *family))
-        .map(|c| c.name.trim())
-        .collect();
-    Some(names.join(", "))
+        (ends.len() == 4).then(|| members.iter().map(|m| m.1).collect::<Vec<_>>().join(", "))
+    })
 }
 
 /// Carried-along columns that look like an attitude in angles (roll, pitch and yaw, heading or azimuth, with any
