@@ -870,8 +870,10 @@ fn quaternion_like_columns(rec: &Recording) -> Option<String> {
     if rec.quat.is_some() {
         return None;
     }
-    // The columns by what their names share: the name less its last character, and that character's kind.
-    let mut groups: Vec<((String, bool), Vec<(char, &str)>)> = Vec::new();
+    // The columns by what their names share: the name less its last character, and that character's kind (a digit
+    // or a letter); each with its last characters and names.
+    type Group<'a> = ((String, bool), Vec<(char, &'a str)>);
+    let mut groups: Vec<Group> = Vec::new();
     for c in &rec.extra {
         let name = c.name.trim();
         let lower = name.to_lowercase();
