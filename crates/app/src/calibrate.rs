@@ -10,7 +10,7 @@ use std::borrow::Cow;
 
 use magcal_calib::coverage::CoverageError;
 use magcal_calib::faults;
-use magcal_calib::robust::{self, RobustProblem};
+use magcal_calib::robust;
 use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Frame, Inputs, Model};
@@ -826,9 +826,8 @@ pub fn calibrate(
         } else {
             // A diagnosis that cannot be made leaves the calibration as it is, said so: the base fit stands on its
             // own (a recording it calibrates is not refused for what the diagnosis could not do).
-            match diagnosis::diagnose(&diagnosis_input(rec, &cal, &cal.robust.kept)?, &model) {
-                Ok(first) => {
-                    let d = around_spans(rec, &cal, first)?;
+            match diagnose_refitted(rec, &cal, &model)? {
+                Ok(d) => {
                     cal.warnings.extend(other_offset_state(&d, rec));
                     cal.diagnosis = Some(d);
                     // The rows the final model used, as the sensor would have read them without the body-fixed
@@ -1144,121 +1143,41 @@ pub fn noise_source(noise: &NoiseFloor) -> String {
     }
 }
 
-/// The diagnosis again when the first left out rows the base fit kept (spans it located around those the robust
-/// fit excluded, with their fading edges): on the base method's fit without them, so that what the report says is left
-/// out of the calibration is. The base fit itself stays what it was, for the comparison.
-fn around_spans(
+/// The diagnosis of `rec` against its base calibration `cal` (whose model is `model`), refitted around the spans it
+/// locates ([`diagnosis::diagnose_around_spans`]): the base method's problem for the refit is made only when needed.
+fn diagnose_refitted(
     rec: &Recording,
     cal: &Calibration,
-    first: Diagnosis,
-) -> Result<Diagnosis, CalibrateError> {
-    let mut kept = cal.robust.kept.clone();
-    let r = &first.residuals;
-    for (&row, _) in r.rows.iter().zip(&r.excluded).filter(|(_, x)| **x) {
-        kept[row] = false;
-    }
-    if kept == cal.robust.kept {
-        return Ok(first);
-    }
+    model: &Model,
+) -> Result<Result<Diagnosis, FitError>, CalibrateError> {
+    let input = diagnosis_input(rec, cal, &cal.robust.kept)?;
     let noise_var = cal.noise.floor_ut.map(|f| f * f);
-    let refit = match &cal.fit {
-        Fit::Vector(v) => {
-            let problem = VectorProblem {
-                raw_ut: Cow::Borrowed(&rec.mag_ut),
-                expected_ut: expected_field(rec, &cal.field)?,
-                raw_noise_var_ut2: noise_var,
-            };
-            refit_if_better(&problem, &cal.robust.kept, &kept, v)
-        }
-        Fit::Scalar(s) => {
-            let problem = ScalarProblem {
-                raw_ut: Cow::Borrowed(&rec.mag_ut),
-                field_ut: cal.field.magnitude(),
-                raw_noise_var_ut2: noise_var,
-            };
-            refit_if_better(&problem, &cal.robust.kept, &kept, s)
-        }
-    };
-    // Without the rows, the fit is not determined or predicts the clean rows worse: the first diagnosis stands, and
-    // the rows it located that the base fit kept stay in the calibration. The first diagnosis ran on these rows and
-    // more: if the second cannot, the first stands.
-    let (mut d, kept) = match refit {
-        Some((model, kept)) => {
-            match diagnosis::diagnose(&diagnosis_input(rec, cal, &kept)?, &model) {
-                Ok(d) => (d, kept),
-                Err(_) => (first, cal.robust.kept.clone()),
-            }
-        }
-        None => (first, cal.robust.kept.clone()),
-    };
-    d.kept_after_all(&kept);
-    Ok(d)
-}
-
-/// A stretch whose residual RMS is within this factor of the clean rows' is as clean, not disturbed.
-const NOISE_LIKE: f64 = 2.0;
-/// Time blocks of the held-out comparison: fits on every other block predict the rest.
-const HELD_OUT_BLOCKS: usize = 10;
-
-/// The fit on the rows `kept` (from `start`), if it predicts the rows both masks keep better, held out, than the
-/// fit on the rows `before`: each fitted on every other time block of [`HELD_OUT_BLOCKS`] and evaluated on the
-/// others, both ways.
-fn refit_if_better<P: RobustProblem>(
-    problem: &P,
-    before: &[bool],
-    kept: &[bool],
-    start: &P::Fit,
-) -> Option<(Model, Vec<bool>)> {
-    let n = kept.len();
-    // Only stretches the base fit leaves well above its residual on the rows both keep go: a stretch at that level
-    // is as clean, and the directions it covers would be missed.
-    let e0 = problem.residuals(start);
-    let mean_square = |rows: &mut dyn Iterator<Item = f64>| {
-        let (ss, m) = rows
-            .filter(|e| e.is_finite())
-            .fold((0.0, 0usize), |(s, m), e| (s + e * e, m + 1));
-        ss / m.max(1) as f64
-    };
-    let clean = mean_square(&mut e0.iter().zip(kept).filter(|(_, k)| **k).map(|(e, _)| *e));
-    let mut kept = kept.to_vec();
-    let mut i = 0;
-    while i < n {
-        if before[i] == kept[i] {
-            i += 1;
-            continue;
-        }
-        let end = (i..n).find(|&j| before[j] == kept[j]).unwrap_or(n);
-        if mean_square(&mut e0[i..end].iter().copied()) <= NOISE_LIKE.powi(2) * clean {
-            kept[i..end].fill(true);
-        }
-        i = end;
-    }
-    if kept == before {
-        return None;
-    }
-    let block = |i: usize| i * HELD_OUT_BLOCKS / n.max(1) % 2;
-    let held_out_rss = |rows: &[bool]| -> Option<f64> {
-        let mut rss = 0.0;
-        for fold in 0..2 {
-            let weights: Vec<f64> = (0..n)
-                .map(|i| f64::from(u8::from(rows[i] && block(i) == fold)))
-                .collect();
-            let fit = problem.quick_fit(&weights, Some(start)).ok()?;
-            let e = problem.residuals(&fit);
-            rss += (0..n)
-                .filter(|&i| kept[i] && block(i) != fold && e[i].is_finite())
-                .map(|i| e[i] * e[i])
-                .sum::<f64>();
-        }
-        Some(rss)
-    };
-    // As for an effect: a gain nobody would notice is not worth the rows.
-    let (old, new) = (held_out_rss(before)?, held_out_rss(&kept)?);
-    if new.sqrt() > (1.0 - diagnosis::NOTICEABLE_GAIN) * old.sqrt() {
-        return None;
-    }
-    let fit = problem.final_fit(&kept, Some(start)).ok()?;
-    Some((P::model(&fit), kept))
+    Ok(match &cal.fit {
+        Fit::Vector(v) => diagnosis::diagnose_around_spans(
+            &input,
+            model,
+            || {
+                Some(VectorProblem {
+                    raw_ut: Cow::Borrowed(&rec.mag_ut),
+                    expected_ut: expected_field(rec, &cal.field).ok()?,
+                    raw_noise_var_ut2: noise_var,
+                })
+            },
+            v,
+        ),
+        Fit::Scalar(s) => diagnosis::diagnose_around_spans(
+            &input,
+            model,
+            || {
+                Some(ScalarProblem {
+                    raw_ut: Cow::Borrowed(&rec.mag_ut),
+                    field_ut: cal.field.magnitude(),
+                    raw_noise_var_ut2: noise_var,
+                })
+            },
+            s,
+        ),
+    })
 }
 
 /// What the diagnosis needs from a recording and its base calibration, with the rows the base fit `kept`.

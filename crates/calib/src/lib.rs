@@ -36,6 +36,8 @@ pub mod robust;
 #[cfg(feature = "std")]
 pub mod scalar;
 #[cfg(feature = "std")]
+mod scan;
+#[cfg(feature = "std")]
 pub mod sphere;
 #[cfg(feature = "std")]
 pub mod vector;

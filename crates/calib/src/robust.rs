@@ -678,8 +678,7 @@ pub fn shifted_windows(
         let mean = values().sum::<f64>() / m;
         let sigma2 = values().map(|x| (x - mean).powi(2)).sum::<f64>() / m;
         let sigma2 = sigma2.max(long_run_variance(values().map(|x| x - mean)));
-        let Some(found) = crate::diagnosis::scan::window_with_directions(e, u, &free, sigma2)
-        else {
+        let Some(found) = crate::scan::window_with_directions(e, u, &free, sigma2) else {
             break;
         };
         let (a, b) = (found.scan.start, found.scan.end);

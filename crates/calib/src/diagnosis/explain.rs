@@ -5,6 +5,8 @@ use crate::coverage::describe;
 use crate::effects::{Effect, EffectId};
 use crate::frames;
 
+use super::gross::{Declined, Span, SpanKind};
+
 /// A direction and size: "0.31 µT/°C along +X", or along a direction when no axis dominates.
 fn along(v: [f64; 3], unit: &str) -> String {
     let m = frames::norm(v);
@@ -163,4 +165,84 @@ pub(crate) fn separate(a: EffectId, b: EffectId) -> (String, String) {
         )
     };
     (format!("{} and {}: {why}", a, b), experiment.to_owned())
+}
+
+/// A gross span in words (`when`: its time or samples), with the reason it was left out when it was.
+pub(crate) fn span(sp: &Span, when: &str, vector: bool) -> String {
+    match sp.kind {
+        SpanKind::SensorFixed { offset_ut, .. }
+        | SpanKind::RoomFixed {
+            field_ned_ut: offset_ut,
+        } if !sp.turned => {
+            format!(
+                "{when}: a constant field of {:.1} µT while the sensor hardly turned (fixed to the sensor or to \
+                 the room: they cannot be told apart, nor from something that moved) — left out of the calibration",
+                frames::norm(offset_ut)
+            )
+        }
+        SpanKind::SensorFixed {
+            offset_ut,
+            told_apart: true,
+        }
+        | SpanKind::RoomFixed {
+            field_ned_ut: offset_ut,
+        } if sp.declined.is_some() => format!(
+            "{when}: a field of {:.1} µT fixed to the {} — left out of the calibration: {}",
+            frames::norm(offset_ut),
+            if matches!(sp.kind, SpanKind::RoomFixed { .. }) {
+                "room"
+            } else {
+                "sensor"
+            },
+            match sp.declined {
+                Some(Declined::Undetermined) => {
+                    "modelled, it left the fit without a solution"
+                }
+                _ =>
+                    "with its samples kept and modelled, the clean part fitted no better on held-out data",
+            }
+        ),
+        SpanKind::SensorFixed {
+            offset_ut,
+            told_apart: true,
+        } => format!(
+            "{when}: a field of {:.1} µT fixed to the sensor — modelled (bias_window), the samples it explains kept",
+            frames::norm(offset_ut)
+        ),
+        SpanKind::SensorFixed { offset_ut, .. } => format!(
+            "{when}: a constant field of {:.1} µT, fixed to the sensor or to the room: the two cannot be told apart \
+             here{} — left out of the calibration",
+            frames::norm(offset_ut),
+            if vector {
+                ""
+            } else {
+                " (the magnitude alone does not show the frame)"
+            }
+        ),
+        SpanKind::RoomFixed { field_ned_ut } => format!(
+            "{when}: a field of {:.1} µT fixed in the room — modelled (disturbance), the samples it explains kept",
+            frames::norm(field_ned_ut)
+        ),
+        SpanKind::MagnitudeShift { shift_ut } => format!(
+            "{when}: the field's magnitude {} by {:.1} µT throughout while the sensor turned — a field fixed in \
+             the room (a magnet or steel placed nearby, then taken away); left out of the calibration",
+            if shift_ut > 0.0 { "raised" } else { "lowered" },
+            shift_ut.abs()
+        ),
+        SpanKind::Moving => format!(
+            "{when}: up to {:.1} µT, changing as the sensor moved — a magnet or steel nearby; left out of the \
+             calibration",
+            sp.peak_ut
+        ),
+        SpanKind::Unexplained => format!(
+            "{when}: up to {:.1} µT, {} — left out of the calibration",
+            sp.peak_ut,
+            if sp.end - sp.start <= 3 {
+                "a glitch of a few samples"
+            } else {
+                "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
+                 it)"
+            }
+        ),
+    }
 }

@@ -23,10 +23,13 @@
 //! part of the span's energy). The frame is told by the attitude: when the sensor hardly turned during the span the
 //! two constants are the same, and the span is modelled as fixed to the sensor with that said.
 
+use crate::effects::Effect;
 use crate::frames;
+use crate::scan;
 
+use super::candidates::{self, ScanTimes};
 use super::samples::Attitudes;
-use super::scan;
+use super::setup::Setup;
 
 /// A constant explains a span when it leaves at most this many times the scale's variance per axis…
 const EXPLAINED_SCALES2: f64 = 4.0;
@@ -178,6 +181,106 @@ pub(crate) fn explained_at(
         _ => return false,
     };
     left <= KEPT_SCALES * scale_ut * residual.dims().sqrt()
+}
+
+/// Stages 2 and 3's hand-off: the classified spans, which samples the fits include and which are clean, and the
+/// modelled spans' effects.
+pub(crate) struct GrossStage {
+    /// The gross spans, in time order.
+    pub spans: Vec<Span>,
+    /// Per sample: in the fits (clean, or in a modelled span's window and explained by its constant).
+    pub included: Vec<bool>,
+    /// Per sample: outside every gross span.
+    pub clean: Vec<bool>,
+    /// The modelled spans' effects (`bias_window` or `disturbance`) with their times set, and the times' intervals.
+    pub span_effects: Vec<(Effect, ScanTimes)>,
+}
+
+/// Stages 2 and 3: the spans of `residual`'s gross samples (those not `kept`; `scale` the residual's), classified;
+/// the spans overlapping `left_out` are not modelled, for the reason given there.
+pub(crate) fn stage(
+    setup: &Setup<'_>,
+    residual: &[[f64; 3]],
+    kept: &[bool],
+    scale: f64,
+    left_out: &[(usize, usize, Declined)],
+) -> GrossStage {
+    let s = setup.samples;
+    let n = s.len();
+    let rho: Vec<f64> = if setup.vector {
+        Vec::new()
+    } else {
+        residual.iter().map(|e| e[0]).collect()
+    };
+    let view = if setup.vector {
+        Residual::Vector {
+            e: residual,
+            rot: s.rot(),
+        }
+    } else {
+        Residual::Magnitude {
+            rho: &rho,
+            unit: &setup.unit,
+            field_ut: setup.field_ut,
+        }
+    };
+    let mut spans = spans(&view, kept, scale, &setup.unit);
+    let mut included = vec![true; n];
+    let mut clean = vec![true; n];
+    let mut span_effects = Vec::new();
+    for span in &mut spans {
+        clean[span.start..span.end].fill(false);
+        included[span.start..span.end].fill(false);
+        if let Some(&(_, _, why)) = left_out
+            .iter()
+            .find(|&&(a, b, _)| a < span.end && span.start < b)
+        {
+            span.declined = Some(why);
+        }
+        if !span.modelled() || !s.has_time {
+            continue;
+        }
+        let (a, b) = if setup.vector {
+            refine_edges(span, residual, s.rot(), scale)
+        } else {
+            (span.start, span.end)
+        };
+        for (i, inc) in included.iter_mut().enumerate().take(b).skip(a) {
+            *inc = explained_at(&view, &span.kind, i, scale);
+        }
+        span_effects.push(span_effect(setup, span, a, b));
+    }
+    GrossStage {
+        spans,
+        included,
+        clean,
+        span_effects,
+    }
+}
+
+/// A modelled span's effect over samples `[a, b)` — a `disturbance` for a field fixed in the room, a `bias_window`
+/// for one fixed to the sensor — with its times, known to the sample.
+fn span_effect(setup: &Setup<'_>, span: &Span, a: usize, b: usize) -> (Effect, ScanTimes) {
+    let s = setup.samples;
+    let (t0_s, t1_s) = (candidates::between(s, a), candidates::between(s, b));
+    let effect = match span.kind {
+        SpanKind::RoomFixed { .. } => Effect::Disturbance {
+            t0_s,
+            t1_s,
+            field_ned_ut: [0.0; 3],
+        },
+        _ => Effect::BiasWindow {
+            t0_s,
+            t1_s,
+            offset_ut: [0.0; 3],
+        },
+    };
+    let times = ScanTimes {
+        start_s: (t0_s, t0_s),
+        end_s: Some((t1_s, t1_s)),
+        sample_interval_s: candidates::sample_interval_s(s),
+    };
+    (effect, times)
 }
 
 /// The gross spans (the runs of samples not `kept`: the robust fit's spans, merged and widened there), classified.

@@ -14,10 +14,15 @@
 //!   bent to it (on simulated disturbed benches such an effect fitted a magnet's tails and fitted a clean recording
 //!   of the same bench worse).
 
-use crate::effects::{Context, Effect, EffectId};
+use crate::effects::{Context, Effect, EffectId, Frame};
 use crate::frames::Mat3;
 
+use super::findings::Rejected;
+use super::fitted::linear_of;
+use super::rounds::Round;
 use super::samples::Samples;
+use super::setup::Setup;
+use super::stats::Rows;
 
 /// A non-linearity may be worth at most this share of the field at full field.
 pub(crate) const NONLINEARITY_MAX_SHARE: f64 = 0.03;
@@ -29,6 +34,136 @@ pub(crate) const MAX_GAIN_CHANGE: f64 = 0.05;
 pub const NOTICEABLE_GAIN: f64 = 0.02;
 /// Samples looked at for the invertibility check.
 const CHECKED_SAMPLES: usize = 2_000;
+
+/// Stage 6: drops the chosen effects that make the model unphysical, then, while the clean held-out samples fit
+/// worse than with the base fit alone, the catalogue's effects last first (each with why, into `rejected`). Returns
+/// whether the modelled spans themselves are not worth their rows (then they are to be left out): see
+/// [`spans_worth_their_rows`].
+pub(crate) fn guard(setup: &Setup<'_>, round: &mut Round, rejected: &mut Vec<Rejected>) -> bool {
+    let linear: Vec<usize> = (0..setup.n_base).collect();
+    let Some(base12) = round.problem.solve_on(Rows::Clean, &linear, None, true) else {
+        return false;
+    };
+    let (a_base, _) = linear_of(&base12, setup.vector, &setup.base, setup.raw_mean);
+    loop {
+        let chosen = round.chosen_steps();
+        let drop = unphysical(setup, round, &chosen)
+            .or_else(|| unnoticeable_guess(round, &chosen))
+            .or_else(|| gains_moved(setup, round, &chosen, &linear, a_base))
+            .or_else(|| harms_clean(round, &chosen, &linear));
+        let Some((c, why)) = drop else {
+            return !spans_worth_their_rows(round);
+        };
+        rejected.push(Rejected {
+            id: round.cands[c].id(),
+            why,
+        });
+        round.remove(c);
+    }
+}
+
+/// The first chosen effect that would make the model unphysical ([`implausible`]), with why.
+fn unphysical(setup: &Setup<'_>, round: &Round, chosen: &[usize]) -> Option<(usize, String)> {
+    chosen.iter().find_map(|&c| {
+        let effect = round.fitted_effect(c, &round.sel.last);
+        implausible(&effect, setup.samples, setup.field_ut).map(|why| (c, why))
+    })
+}
+
+/// The first chosen effect that another explains about as well and that lowers the held-out residual by less
+/// than [`NOTICEABLE_GAIN`], with why.
+fn unnoticeable_guess(round: &Round, chosen: &[usize]) -> Option<(usize, String)> {
+    chosen.iter().find_map(|&c| {
+        let &(_, other) = round.sel.ambiguous.iter().find(|(a, _)| *a == c)?;
+        let step = round.sel.steps.iter().find(|s| s.cand == c)?;
+        let rows = round.problem.clean_total.rows.max(1) as f64;
+        let (before, after) = ((step.cv.0 / rows).sqrt(), (step.cv.1 / rows).sqrt());
+        (before - after < NOTICEABLE_GAIN * before).then(|| {
+            let ids = (round.cands[c].id(), round.cands[other].id());
+            (c, guess_why(ids.0, ids.1, before, after))
+        })
+    })
+}
+
+/// The last chosen effect, when the gains of the model with the chosen effects move by more than
+/// [`MAX_GAIN_CHANGE`] from the base fit's (`a_base`, on the clean rows' `linear` columns), with why.
+fn gains_moved(
+    setup: &Setup<'_>,
+    round: &Round,
+    chosen: &[usize],
+    linear: &[usize],
+    a_base: Mat3,
+) -> Option<(usize, String)> {
+    let &last = chosen.last()?;
+    let (a, _) = linear_of(&round.sel.last, setup.vector, &setup.base, setup.raw_mean);
+    // A timing effect corrects the reference, not the sensor: the gains are judged against the base fit with it (a
+    // lag of 64 ms bends the base fit's gains by more than the rule allows).
+    let timing: Vec<usize> = chosen
+        .iter()
+        .filter(|&&c| round.cands[c].id().frame() == Frame::Timing)
+        .flat_map(|&c| round.cands[c].columns())
+        .collect();
+    let a_base = if timing.is_empty() {
+        a_base
+    } else {
+        let columns: Vec<usize> = linear.iter().copied().chain(timing).collect();
+        match round.problem.solve_on(Rows::Clean, &columns, None, true) {
+            Some(fit) => linear_of(&fit, setup.vector, &setup.base, setup.raw_mean).0,
+            None => a_base,
+        }
+    };
+    let change = gain_change(&a, &a_base);
+    (change > MAX_GAIN_CHANGE).then(|| (last, gains_why(change)))
+}
+
+/// The last chosen effect, while the clean held-out samples fit worse than with the base fit (its `linear`
+/// columns) alone, with why. Without one, the modelled spans answer for it ([`spans_worth_their_rows`]: a span
+/// worse than the base is not worth its rows either).
+fn harms_clean(round: &Round, chosen: &[usize], linear: &[usize]) -> Option<(usize, String)> {
+    let &last = chosen.last()?;
+    let problem = &round.problem;
+    let cv_base = problem.cv_rss_on(Rows::Clean, linear)?;
+    let cv_final = problem.cv_rss(&round.sel.last.columns)?;
+    (cv_final > cv_base).then(|| {
+        let rows = problem.clean_total.rows.max(1) as f64;
+        let rms = |x: f64| (x / rows).sqrt();
+        let id = round.cands[last].id();
+        (last, harm_why(id, rms(cv_final), rms(cv_base)))
+    })
+}
+
+/// Whether the modelled spans' rows are worth keeping: with them, the clean rows' held-out residual is noticeably
+/// ([`NOTICEABLE_GAIN`]) lower than with the same model fitted on the clean rows alone. A gain nobody would notice
+/// does not pay for a constant fitted to a disturbance whose edges and shape are only estimated (true when no span
+/// is modelled).
+pub(crate) fn spans_worth_their_rows(round: &Round) -> bool {
+    if !round.spans.iter().any(|s| s.modelled()) {
+        return true;
+    }
+    let forced: Vec<usize> = round
+        .cands
+        .iter()
+        .filter(|c| c.forced)
+        .flat_map(|c| c.columns())
+        .collect();
+    let without: Vec<usize> = round
+        .sel
+        .last
+        .columns
+        .iter()
+        .copied()
+        .filter(|c| !forced.contains(c))
+        .collect();
+    match (
+        round.problem.cv_rss(&round.sel.last.columns),
+        round.problem.cv_rss_on(Rows::Clean, &without),
+    ) {
+        (Some(with), Some(alone)) => with.sqrt() <= (1.0 - NOTICEABLE_GAIN) * alone.sqrt(),
+        // Without the spans' rows the model cannot be fitted: they are needed.
+        (Some(_), None) => true,
+        _ => false,
+    }
+}
 
 /// Why a found body-fixed effect would make the model unphysical, if it would.
 pub(crate) fn implausible(effect: &Effect, samples: &Samples, field_ut: f64) -> Option<String> {
@@ -46,7 +181,7 @@ pub(crate) fn implausible(effect: &Effect, samples: &Samples, field_ut: f64) -> 
             ));
         }
     }
-    if effect.id().frame() != crate::effects::Frame::Body || effect.id().is_transient() {
+    if effect.id().frame() != Frame::Body || effect.id().is_transient() {
         return None;
     }
     let stride = (samples.len() / CHECKED_SAMPLES).max(1);

@@ -19,7 +19,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::FitError;
+
 use super::candidates::Candidate;
+use super::setup::Setup;
 use super::stats::{Problem, Solution};
 
 /// Below this unabsorbed fraction a candidate is "absorbed — not testable with this data".
@@ -112,6 +115,34 @@ impl Trial {
     }
 }
 
+/// Stage 5 for a round: the base columns with the forced candidates' (the modelled spans'), then [`select`] with
+/// the method's share of the excess.
+pub(crate) fn stage(
+    setup: &Setup<'_>,
+    problem: &Problem,
+    cands: &[Candidate],
+) -> Result<Selection, FitError> {
+    let mut base_columns: Vec<usize> = (0..setup.n_base).collect();
+    for c in cands.iter().filter(|c| c.forced) {
+        base_columns.extend(c.columns());
+    }
+    select(
+        problem,
+        &base_columns,
+        cands,
+        &setup.a_columns(),
+        setup.noise_floor_ut.powi(2),
+        if setup.vector {
+            MIN_EXCESS_SHARE
+        } else {
+            MIN_EXCESS_SHARE_MAGNITUDE
+        },
+    )
+    .ok_or(FitError::Singular(
+        "the diagnosis' base problem has no solution",
+    ))
+}
+
 /// Selects effects; `floor2` is the noise floor's variance per row (µT²), `min_excess_share` the share of the
 /// excess over it a candidate must explain ([`MIN_EXCESS_SHARE`] or [`MIN_EXCESS_SHARE_MAGNITUDE`]).
 pub(crate) fn select(
@@ -122,120 +153,41 @@ pub(crate) fn select(
     floor2: f64,
     min_excess_share: f64,
 ) -> Option<Selection> {
-    let rows = problem.total.rows as f64;
     let base = problem.solve(base_columns, None, true)?;
     let base_cv = problem.cv_rss(base_columns)?;
-
-    let mut set_aside = Vec::new();
-    let mut eligible = Vec::new();
-    for (c, cand) in cands.iter().enumerate().filter(|(_, c)| !c.forced) {
-        let cols: Vec<usize> = cand.columns().collect();
-        let energy: f64 = cols.iter().map(|&i| problem.total.xtx[(i, i)]).sum();
-        if energy <= 1e-18 * rows {
-            set_aside.push((c, SetAside::NotExcited));
-            continue;
-        }
-        let unabsorbed = problem.unabsorbed_fraction(base_columns, &cols);
-        if unabsorbed < ABSORBED_BELOW {
-            let takes_up = takes_up(problem, base_columns, &cols, a_columns);
-            set_aside.push((
-                c,
-                SetAside::Absorbed {
-                    unabsorbed,
-                    takes_up,
-                },
-            ));
-        } else {
-            eligible.push(c);
-        }
-    }
-
+    let (eligible, set_aside) = eligible(problem, base_columns, cands, a_columns);
+    let trials = Trials { problem, cands };
     let mut columns = base_columns.to_vec();
     let (mut current, mut current_cv) = (base.clone(), base_cv);
     let mut chosen: Vec<usize> = Vec::new();
     let mut steps = Vec::new();
     let mut ambiguous = Vec::new();
-    let try_add = |columns: &[usize], chosen: &[usize], c: usize| -> Option<Trial> {
-        let cand = &cands[c];
-        let replaced = cand
-            .supersedes
-            .and_then(|id| chosen.iter().copied().find(|&k| cands[k].id() == id));
-        let mut cols: Vec<usize> = columns
-            .iter()
-            .copied()
-            .filter(|i| replaced.is_none_or(|r| !cands[r].columns().contains(i)))
-            .collect();
-        cols.extend(cand.columns());
-        let sol = problem.solve(&cols, None, true)?;
-        let extra = cand.n as f64 - replaced.map_or(0.0, |r| cands[r].n as f64);
-        let wald = wald(&sol, cand, replaced.is_some(), rows);
-        let tau = problem.autocorrelation(&sol);
-        let cv = problem.cv_rss(&cols)?;
-        Some(Trial {
-            cand: c,
-            replaced,
-            columns: cols,
-            sol,
-            cv,
-            wald,
-            extra,
-            tau,
-            evidence: f64::NAN,
-        })
-    };
     loop {
-        let mut trials: Vec<Trial> = eligible
+        let mut round: Vec<Trial> = eligible
             .iter()
             .copied()
             .filter(|c| !chosen.contains(c))
-            .filter_map(|c| try_add(&columns, &chosen, c))
+            .filter_map(|c| trials.try_add(&columns, &chosen, c))
             .collect();
         // One autocorrelation factor per round, so that candidates are compared on equal terms (each trial's own
         // estimate is noisy, ±15 % on white noise): the whitest residual's, that of the best explanation.
-        let tau = trials.iter().map(|t| t.tau).fold(f64::INFINITY, f64::min);
-        for t in &mut trials {
-            t.judge(tau, rows, cands[t.cand].scan_penalty);
+        let tau = round.iter().map(|t| t.tau).fold(f64::INFINITY, f64::min);
+        for t in &mut round {
+            t.judge(tau, trials.rows(), cands[t.cand].scan_penalty);
         }
-        let significant: Vec<Trial> = trials.into_iter().filter(|t| t.evidence > 0.0).collect();
-        let clean_rows = problem.clean_total.rows.max(1) as f64;
-        let excess = (current_cv / clean_rows - floor2).max(0.0);
-        // The reference's own error with the candidate in the model: what would remain beyond the noise (less the
-        // noise floor's own uncertainty).
-        let reference2 = |t: &Trial| {
-            (problem.clean_rss(&t.sol) / clean_rows - (1.0 + NOISE_FLOOR_SLACK) * floor2).max(0.0)
-        };
-        let material = |t: &Trial| {
-            let gain = current_cv - t.cv;
-            gain / clean_rows >= min_excess_share * excess
-                && gain >= MIN_GAIN_SHARE * current_cv
-                && (!cands[t.cand].local()
-                    || size2(&t.sol, &cands[t.cand], problem)
-                        >= LOCAL_OVER_REFERENCE.powi(2) * reference2(t))
-        };
+        let significant: Vec<Trial> = round.into_iter().filter(|t| t.evidence > 0.0).collect();
         let Some(best) = significant
             .iter()
-            .filter(|t| t.cv < current_cv && material(t))
+            .filter(|t| {
+                t.cv < current_cv && trials.material(t, current_cv, floor2, min_excess_share)
+            })
             .max_by(|a, b| a.evidence.total_cmp(&b.evidence))
         else {
             break;
         };
-        // An alternative about as strong as the chosen one (or stronger, but not borne out on held-out data) that
-        // the chosen one explains away, or that fails cross-validation, explains the same residual: ambiguous.
         for alt in significant.iter().filter(|t| t.cand != best.cand) {
-            let close =
-                best.evidence - alt.evidence < AMBIGUITY_MARGIN + AMBIGUITY_SHARE * best.evidence;
-            let nested = cands[alt.cand].supersedes == Some(cands[best.cand].id())
-                || cands[best.cand].supersedes == Some(cands[alt.cand].id());
-            if close && !nested {
-                let mut with_best = chosen.clone();
-                with_best.push(best.cand);
-                let explained = try_add(&best.columns, &with_best, alt.cand).is_none_or(|mut t| {
-                    t.judge(tau, rows, cands[alt.cand].scan_penalty);
-                    t.evidence <= 0.0
-                });
-                if explained || alt.cv >= current_cv {
-                    ambiguous.push((best.cand, alt.cand));
-                }
+            if trials.explains_the_same(best, alt, &chosen, tau, current_cv) {
+                ambiguous.push((best.cand, alt.cand));
             }
         }
         steps.push(Step {
@@ -262,6 +214,135 @@ pub(crate) fn select(
         last: current,
         last_cv: current_cv,
     })
+}
+
+/// The candidates that may be selected, and those set aside: not excited (their regressors are zero throughout), or
+/// absorbed by the base model (`base_columns`; `a_columns` are `A`'s, to say which part takes them up).
+fn eligible(
+    problem: &Problem,
+    base_columns: &[usize],
+    cands: &[Candidate],
+    a_columns: &[usize],
+) -> (Vec<usize>, Vec<(usize, SetAside)>) {
+    let rows = problem.total.rows as f64;
+    let mut set_aside = Vec::new();
+    let mut eligible = Vec::new();
+    for (c, cand) in cands.iter().enumerate().filter(|(_, c)| !c.forced) {
+        let cols: Vec<usize> = cand.columns().collect();
+        let energy: f64 = cols.iter().map(|&i| problem.total.xtx[(i, i)]).sum();
+        if energy <= 1e-18 * rows {
+            set_aside.push((c, SetAside::NotExcited));
+            continue;
+        }
+        let unabsorbed = problem.unabsorbed_fraction(base_columns, &cols);
+        if unabsorbed < ABSORBED_BELOW {
+            let takes_up = takes_up(problem, base_columns, &cols, a_columns);
+            set_aside.push((
+                c,
+                SetAside::Absorbed {
+                    unabsorbed,
+                    takes_up,
+                },
+            ));
+        } else {
+            eligible.push(c);
+        }
+    }
+    (eligible, set_aside)
+}
+
+/// Trial fits of candidates added to a model.
+struct Trials<'p> {
+    problem: &'p Problem,
+    cands: &'p [Candidate],
+}
+
+impl Trials<'_> {
+    /// Rows of the problem.
+    fn rows(&self) -> f64 {
+        self.problem.total.rows as f64
+    }
+
+    /// Candidate `c` added to the model of `columns` (the `chosen` candidates'), replacing the one it generalises.
+    fn try_add(&self, columns: &[usize], chosen: &[usize], c: usize) -> Option<Trial> {
+        let (problem, cands) = (self.problem, self.cands);
+        let cand = &cands[c];
+        let replaced = cand
+            .supersedes
+            .and_then(|id| chosen.iter().copied().find(|&k| cands[k].id() == id));
+        let mut cols: Vec<usize> = columns
+            .iter()
+            .copied()
+            .filter(|i| replaced.is_none_or(|r| !cands[r].columns().contains(i)))
+            .collect();
+        cols.extend(cand.columns());
+        let sol = problem.solve(&cols, None, true)?;
+        let extra = cand.n as f64 - replaced.map_or(0.0, |r| cands[r].n as f64);
+        let wald = wald(&sol, cand, replaced.is_some(), self.rows());
+        let tau = problem.autocorrelation(&sol);
+        let cv = problem.cv_rss(&cols)?;
+        Some(Trial {
+            cand: c,
+            replaced,
+            columns: cols,
+            sol,
+            cv,
+            wald,
+            extra,
+            tau,
+            evidence: f64::NAN,
+        })
+    }
+
+    /// Whether a trial is material, beyond significant, against the model's held-out residual `current_cv`: it
+    /// explains [`MIN_EXCESS_SHARE`] (or `min_excess_share`) of the excess over the noise floor `floor2` and
+    /// [`MIN_GAIN_SHARE`] of the residual itself, and a local effect stands [`LOCAL_OVER_REFERENCE`] times above
+    /// the reference's own error.
+    fn material(&self, t: &Trial, current_cv: f64, floor2: f64, min_excess_share: f64) -> bool {
+        let problem = self.problem;
+        let clean_rows = problem.clean_total.rows.max(1) as f64;
+        let excess = (current_cv / clean_rows - floor2).max(0.0);
+        // The reference's own error with the candidate in the model: what would remain beyond the noise (less the
+        // noise floor's own uncertainty).
+        let reference2 =
+            (problem.clean_rss(&t.sol) / clean_rows - (1.0 + NOISE_FLOOR_SLACK) * floor2).max(0.0);
+        let gain = current_cv - t.cv;
+        gain / clean_rows >= min_excess_share * excess
+            && gain >= MIN_GAIN_SHARE * current_cv
+            && (!self.cands[t.cand].local()
+                || size2(&t.sol, &self.cands[t.cand], problem)
+                    >= LOCAL_OVER_REFERENCE.powi(2) * reference2)
+    }
+
+    /// Whether `alt` explains the same residual as `best`, chosen over it: about as strong as the chosen one (or
+    /// stronger, but not borne out on held-out data against `current_cv`), and explained away by it or failing
+    /// cross-validation. A candidate that generalises the other is not an alternative.
+    fn explains_the_same(
+        &self,
+        best: &Trial,
+        alt: &Trial,
+        chosen: &[usize],
+        tau: f64,
+        current_cv: f64,
+    ) -> bool {
+        let cands = self.cands;
+        let close =
+            best.evidence - alt.evidence < AMBIGUITY_MARGIN + AMBIGUITY_SHARE * best.evidence;
+        let nested = cands[alt.cand].supersedes == Some(cands[best.cand].id())
+            || cands[best.cand].supersedes == Some(cands[alt.cand].id());
+        if !close || nested {
+            return false;
+        }
+        let mut with_best = chosen.to_vec();
+        with_best.push(best.cand);
+        let explained = self
+            .try_add(&best.columns, &with_best, alt.cand)
+            .is_none_or(|mut t| {
+                t.judge(tau, self.rows(), cands[alt.cand].scan_penalty);
+                t.evidence <= 0.0
+            });
+        explained || alt.cv >= current_cv
+    }
 }
 
 /// The mean square per row of a candidate's perturbation in a fit, over the rows where it acts (µT²).

@@ -22,6 +22,21 @@ pub(crate) struct Scan {
     pub end_interval: (usize, usize),
 }
 
+impl Scan {
+    /// The scan of a subset of samples (`index`: each of its samples' index among all `n`) in the indices of all
+    /// of them; the subset's end is `n`.
+    pub(crate) fn through(self, index: &[usize], n: usize) -> Scan {
+        let back = |k: usize| index.get(k).copied().unwrap_or(n);
+        Scan {
+            start: back(self.start),
+            end: back(self.end),
+            stat: self.stat,
+            start_interval: (back(self.start_interval.0), back(self.start_interval.1)),
+            end_interval: (back(self.end_interval.0), back(self.end_interval.1)),
+        }
+    }
+}
+
 /// Fewest samples on either side of a split.
 const MIN_SIDE: usize = 10;
 
