@@ -7,8 +7,9 @@
 use std::time::Duration;
 
 use criterion::Criterion;
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::Method;
 use magcal_calib::effects::EffectId;
 use magcal_recording::Recording;
 use magcal_sim::study::{random_effect, random_scenario, scale_to_rms};

@@ -11,8 +11,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use magcal_app::calibrate::{Method, calibrate, read_to_calibrate};
+use magcal_app::calibrate::{calibrate, read_to_calibrate};
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::Method;
 use magcal_recording::Recording;
 use magcal_sim::{ChipModel, Scenario, Trajectory, simulate};
 

@@ -19,8 +19,9 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use magcal_app::calibrate::{Fit, Method, calibrate, read_to_calibrate};
+use magcal_app::calibrate::{calibrate, read_to_calibrate};
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::{Fit, Method};
 use magcal_calib::frames;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

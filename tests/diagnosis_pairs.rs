@@ -4,8 +4,9 @@
 //! - one timing lag against per-axis (anisotropic) rate coupling;
 //! - a world-fixed field drift against a body-fixed offset drift.
 
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::Method;
 use magcal_calib::diagnosis::Diagnosis;
 use magcal_calib::effects::EffectId;
 use magcal_sim::study::{duration_s, random_effect, random_scenario, scale_to_rms};

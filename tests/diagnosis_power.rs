@@ -17,8 +17,9 @@ use magcal_app::effect_spec;
 use magcal_calib::diagnosis::{FoundEffect, ParamValue};
 use magcal_calib::effects::Effect;
 
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::Method;
 use magcal_calib::diagnosis::{Diagnosis, Verdict};
 use magcal_calib::effects::EffectId;
 use magcal_sim::study::{random_effect, random_scenario, scale_to_rms};

@@ -29,8 +29,9 @@ mod common;
 
 use std::sync::Mutex;
 
-use magcal_app::calibrate::{Calibration, Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::{Calibration, Method};
 use magcal_calib::diagnosis::{SpanKind, Verdict};
 use magcal_calib::effects::Effect;
 use magcal_calib::model::{Inputs, Model};

@@ -16,8 +16,9 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use common::{floats, magcal_fit, matrix};
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::Method;
 use magcal_app::record::sim::TruthFile;
 use magcal_calib::frames::{self, Mat3};
 use magcal_recording::{Metadata, Recording};

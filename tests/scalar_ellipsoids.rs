@@ -3,8 +3,9 @@
 
 mod common;
 
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
+use magcal_app::fit::Method;
 use magcal_calib::frames;
 use magcal_sim::{
     AttitudeOutput, ChipModel, Scenario, SensorTruth, Trajectory, simulate, stream_rng,

@@ -2,9 +2,10 @@
 //! on the stable toolchain. Each function panics only on a bug: an input that breaks a promise of the code under
 //! test.
 
-use magcal_app::calibrate::{Method, calibrate};
+use magcal_app::calibrate::calibrate;
 use magcal_app::export::{ExportFormat, export};
 use magcal_app::field::{FieldArgs, resolve};
+use magcal_app::fit::Method;
 use magcal_app::params::ParamsFile;
 use magcal_app::report::Report;
 use magcal_app::summary::summary;

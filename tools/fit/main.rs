@@ -6,20 +6,18 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{
-    Method, attitude_worth_checking, calibrate, drop_faulty, read_to_calibrate,
-};
 use magcal_app::cli::{WorldFieldOpts, exit};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
-use magcal_app::field::resolve;
 use magcal_app::files::{check_file_output, check_outputs, write_atomic};
+use magcal_app::fit::Method;
 use magcal_app::howto::{Target, how_to_apply};
 use magcal_app::params::ParamsFile;
 use magcal_app::plots::{write_plots, write_readings_plot};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
-use magcal_app::verdict::{Grade, assess, target_model};
+use magcal_app::verdict::{Grade, target_model};
+use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
 use magcal_app::writeback::write_back_calibration;
 use magcal_app::{say, tell, tellln};
 
@@ -132,36 +130,27 @@ fn run(args: Args) -> anyhow::Result<()> {
         bail!("--field-ut must be a positive number of µT, got {f}");
     }
     let field_args = args.field.field_args(args.field_ut);
-    let (mut rec, field) =
-        read_to_calibrate(&args.recording, args.method, !args.no_diagnose, |meta| {
-            Ok(resolve(&field_args, meta)?)
-        })?;
-    let mut faulty = drop_faulty(&mut rec);
-    let mut cal = match calibrate(&rec, args.method, field, !args.no_diagnose) {
-        Ok(cal) => cal,
-        Err(e) => {
+    let request = FitRequest {
+        method: args.method,
+        diagnose: !args.no_diagnose,
+        field: &field_args,
+        linear_only: args.export.is_some() || args.write_to.is_some(),
+    };
+    let Fitted {
+        rec,
+        cal,
+        assessment,
+    } = match fit_file(&args.recording, &request) {
+        Ok(fitted) => fitted,
+        Err(NotFitted::Unread(e)) => return Err(e),
+        Err(NotFitted::Refused { rec, error }) => {
             // A refused fit still shows its readings: a recording that did not turn enough is plain to see.
             if let Some(dir) = &args.plots {
                 tellln!("wrote {}", write_readings_plot(dir, &rec)?.display());
             }
-            return Err(e).with_context(|| format!("{name}: cannot calibrate"));
+            return Err(error).with_context(|| format!("{name}: cannot calibrate"));
         }
     };
-    // Without the diagnosis the quaternions were not kept: a fit that looks off is made again with them, and
-    // replaces the first if their convention is not magcal's.
-    if attitude_worth_checking(&cal, &rec) {
-        let (mut full, field) = read_to_calibrate(&args.recording, args.method, true, |meta| {
-            Ok(resolve(&field_args, meta)?)
-        })?;
-        let full_faulty = drop_faulty(&mut full);
-        if let Ok(again) = calibrate(&full, args.method, field, false)
-            && again.reference.convention.is_some()
-        {
-            (rec, cal, faulty) = (full, again, full_faulty);
-        }
-    }
-    cal.warnings.extend(faulty);
-    let assessment = assess(&cal, &rec, args.export.is_some() || args.write_to.is_some());
 
     // With the export on stdout, everything else goes to stderr.
     let export_to_stdout = args.export.is_some() && args.export_out.is_none();

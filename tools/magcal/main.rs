@@ -5,10 +5,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::calibrate::{Calibration, Fit, Method, calibrate, drop_faulty};
 use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
-use magcal_app::field::resolve;
+use magcal_app::fit::{Calibration, Fit, Method};
 use magcal_app::params::ParamsFile;
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
@@ -16,9 +15,8 @@ use magcal_app::record::{
 };
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
-use magcal_app::verdict::assess;
+use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
 use magcal_app::{say, sayln, tellln};
-use magcal_recording::Recording;
 
 /// The bench calibration workflow in one command: record the magnetometer through a routine, fit the calibration
 /// B = A·raw + b, print the summary, and write MAGCAL-OUT/recording.csv, params.toml and report.json.
@@ -145,14 +143,24 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
 
     // Fit.
-    let mut rec = Recording::read(&rec_path)?;
-    let faulty = drop_faulty(&mut rec);
     let name = rec_path.display().to_string();
-    let field = resolve(&args.field.field_args(None), &rec.meta)?;
-    let mut cal = calibrate(&rec, Method::Auto, field, true)
-        .with_context(|| format!("{name}: cannot calibrate"))?;
-    cal.warnings.extend(faulty);
-    let assessment = assess(&cal, &rec, false);
+    let request = FitRequest {
+        method: Method::Auto,
+        diagnose: true,
+        field: &args.field.field_args(None),
+        linear_only: false,
+    };
+    let Fitted {
+        rec,
+        cal,
+        assessment,
+    } = match fit_file(&rec_path, &request) {
+        Ok(fitted) => fitted,
+        Err(NotFitted::Unread(e)) => return Err(e),
+        Err(NotFitted::Refused { error, .. }) => {
+            return Err(error).with_context(|| format!("{name}: cannot calibrate"));
+        }
+    };
     say!("\n{}", summary(&cal, &assessment, &name))?;
     let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
     let report_path = args.out_dir.join(REPORT);

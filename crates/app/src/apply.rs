@@ -11,13 +11,13 @@
 use magcal_calib::coverage::Coverage;
 use magcal_calib::effects::EffectId;
 use magcal_calib::noise;
-use magcal_calib::{Inputs, Model, frames};
+use magcal_calib::{Model, frames};
 use magcal_recording::Recording;
 
-use crate::calibrate::{expected_field, noise_measurable};
 use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
 use crate::params::{Correction, ParamsFile};
+use crate::readings::{calibrate_rows, expected_field, noise_measurable};
 use crate::verdict::{Grade, Hints, Verdict, judge, judge_without_direction};
 
 /// What the residual is measured against.
@@ -96,28 +96,6 @@ pub fn model_for(params: &ParamsFile, rec: &Recording) -> Result<Model, ApplyErr
         ));
     }
     Ok(model)
-}
-
-/// Applies `model` to every row of `rec`.
-pub fn calibrate_rows(model: &Model, rec: &Recording) -> Vec<[f64; 3]> {
-    let mut currents = vec![0.0; rec.currents.len()];
-    (0..rec.len())
-        .map(|i| calibrate_row(model, rec, i, &mut currents))
-        .collect()
-}
-
-/// `model` applied to row `i` of `rec`, with its time, temperature and currents (`currents`: room for them, one per
-/// channel).
-pub fn calibrate_row(model: &Model, rec: &Recording, i: usize, currents: &mut [f64]) -> [f64; 3] {
-    for (c, ch) in currents.iter_mut().zip(&rec.currents) {
-        *c = ch.values[i];
-    }
-    let inputs = Inputs {
-        t_s: rec.t_s.as_ref().map_or(0.0, |t| t[i]),
-        temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[i]),
-        currents_a: currents,
-    };
-    model.apply(rec.mag_ut[i], &inputs)
 }
 
 fn rms(sum_sq: f64, n: usize) -> f64 {

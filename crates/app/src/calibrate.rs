@@ -4,125 +4,25 @@ use magcal_calib::convention;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::directions::fraction_of;
 use magcal_calib::frames;
-use magcal_calib::noise::{self, NoiseFloor, NoiseSource, rms3};
-use rayon::prelude::*;
+use magcal_calib::noise::{self, rms3};
 use std::borrow::Cow;
 
 use magcal_calib::coverage::CoverageError;
 use magcal_calib::faults;
 use magcal_calib::robust;
-use magcal_calib::scalar::{self, ScalarFit, ScalarProblem};
-use magcal_calib::vector::{VectorFit, VectorProblem};
-use magcal_calib::{FitError, Frame, Inputs, Model};
+use magcal_calib::scalar::{self, ScalarProblem};
+use magcal_calib::vector::VectorProblem;
+use magcal_calib::{FitError, Frame, Model};
 use magcal_recording::{AttitudeToReference, Metadata, ReadOptions, Recording};
 use std::path::Path;
 
 use crate::checks;
 use crate::field::ReferenceField;
-
-/// Which calibration method to use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum Method {
-    /// Vector when the recording has an attitude reference, scalar otherwise.
-    #[default]
-    Auto,
-    /// The seed paper's vector method (needs the expected field per sample).
-    Vector,
-    /// The ellipsoid (constant magnitude) method.
-    Scalar,
-}
-
-impl Method {
-    /// The name used in reports.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Method::Auto => "auto",
-            Method::Vector => "vector",
-            Method::Scalar => "scalar",
-        }
-    }
-}
-
-/// The fit itself, by method.
-#[allow(
-    clippy::large_enum_variant,
-    reason = "one per calibration; boxing buys nothing"
-)]
-#[derive(Clone, Debug, PartialEq)]
-pub enum Fit {
-    /// A vector fit.
-    Vector(VectorFit),
-    /// A scalar fit.
-    Scalar(ScalarFit),
-}
-
-/// How many samples went where.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct SampleCounts {
-    /// Rows in the recording.
-    pub total: usize,
-    /// Rows the fit used.
-    pub used: usize,
-    /// Rows left out because their attitude reference (vector method) or reading was missing.
-    pub missing_reference: usize,
-    /// Rows the robust base fit excluded as grossly off.
-    pub excluded: usize,
-}
-
-/// A fitted calibration and what was measured around it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Calibration {
-    /// The fit.
-    pub fit: Fit,
-    /// The field it was fitted against.
-    pub field: ReferenceField,
-    /// The raw readings' noise floor.
-    pub noise: NoiseFloor,
-    /// Residual RMS per axis (vector) or of the magnitude (scalar), µT.
-    pub residual_rms_ut: f64,
-    /// The noise floor to compare it with, in calibrated units, µT.
-    pub noise_floor_ut: f64,
-    /// Whether the sample-to-sample noise was measured. When not (rows that change orientation from one to the next:
-    /// their differences measure the rotation), the residual bounds it for the figures, and the verdict counts the
-    /// whole residual as error.
-    pub noise_measured: bool,
-    /// Fraction of the sphere of field directions the recording visited (100 cells).
-    pub sphere_coverage: f64,
-    /// Sample counts.
-    pub samples: SampleCounts,
-    /// Things the user should know (coverage warnings, what the method cannot see).
-    pub notes: Vec<String>,
-    /// Things the user must not miss: the calibration may be wrong or unusable as it stands, and what to do.
-    pub warnings: Vec<String>,
-    /// The raw readings are not µT (a warning says so): the offset is in their units, so exports and write-back,
-    /// which autopilots and devices read in their own units, would be wrong.
-    pub raw_not_ut: bool,
-    /// What the robust base fit left out.
-    pub robust: RobustSummary,
-    /// What the base model leaves out, when diagnosed.
-    pub diagnosis: Option<Diagnosis>,
-    /// Why the diagnosis, asked for, could not be made (the calibration is then the base fit).
-    pub diagnosis_failed: Option<String>,
-    /// What the reference was found to be instead of what it was taken for (a warning says so; the fit is then no
-    /// calibration).
-    pub reference: ReferenceDoubt,
-}
-
-/// What a vector fit's reference may be instead of what it was taken for ([`convention`]).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ReferenceDoubt {
-    /// The attitude in another convention.
-    pub convention: Option<convention::Better>,
-    /// The reference out of step with the readings (looked for when no other convention is found).
-    pub offset: Option<convention::OutOfStep>,
-}
-
-impl ReferenceDoubt {
-    /// Whether either was found.
-    pub fn is_some(&self) -> bool {
-        self.convention.is_some() || self.offset.is_some()
-    }
-}
+use crate::fit::{Calibration, Fit, Method, ReferenceDoubt, RobustSummary, SampleCounts};
+use crate::readings::{
+    MissingReference, calibrate_row, expected_field, noise_measurable, noise_source,
+    radial_floor_ut,
+};
 
 /// The attitude in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds), then,
 /// if the fit `looks_off`, the reference `expected_ut` shifted in time; each fitted from the samples the robust fit
@@ -145,194 +45,6 @@ fn reference_out_of_convention(
         _ => None,
     };
     ReferenceDoubt { convention, offset }
-}
-
-impl Calibration {
-    /// Whether the attitude reference is in another convention ([`convention`]) or off by a good part of the field
-    /// ([`checks::reference_off`]): `A` and `b` are then no calibration (a warning says so), and go to no target.
-    pub fn reference_doubtful(&self) -> bool {
-        self.reference.is_some() || checks::reference_off(&self.fit, &self.field).is_some()
-    }
-
-    /// The method that was used.
-    pub fn method(&self) -> Method {
-        match self.fit {
-            Fit::Vector(_) => Method::Vector,
-            Fit::Scalar(_) => Method::Scalar,
-        }
-    }
-
-    /// The final model: the diagnosis' extended model when there is one, the base fit otherwise.
-    pub fn model(&self) -> Model {
-        match &self.diagnosis {
-            Some(d) => d.model,
-            None => self.base_model(),
-        }
-    }
-
-    /// The base (12-parameter or scalar) fit.
-    pub fn base_model(&self) -> Model {
-        match &self.fit {
-            Fit::Vector(v) => v.model(),
-            Fit::Scalar(s) => s.model(),
-        }
-    }
-
-    /// Residual RMS of the final model (µT): the diagnosis' extended fit, or the base fit.
-    pub fn final_rms_ut(&self) -> f64 {
-        self.diagnosis
-            .as_ref()
-            .map_or(self.residual_rms_ut, |d| d.extended.rms_ut)
-    }
-
-    /// Standard errors of the offset `−A⁻¹·b` of the final model, µT: from the scalar fit's centre covariance, or
-    /// propagated through `dc = −A⁻¹·(dA·c + db)` from the vector fit's covariance (rows independent); for a model
-    /// extended by the diagnosis, the larger of that and the diagnosis' own (its problem's covariance, see
-    /// [`magcal_calib::diagnosis::LinearSe`]).
-    pub fn offset_se_ut(&self) -> [f64; 3] {
-        let base = self.base_offset_se_ut();
-        match self.diagnosis.as_ref().and_then(|d| d.extended.se) {
-            Some(se) => std::array::from_fn(|k| base[k].max(se.offset_ut[k])),
-            None => base,
-        }
-    }
-
-    /// [`Calibration::offset_se_ut`] of the base fit.
-    fn base_offset_se_ut(&self) -> [f64; 3] {
-        let model = self.base_model();
-        let c = scalar::centre(&model.a, model.b_ut);
-        let row_var: [f64; 3] = match &self.fit {
-            Fit::Scalar(s) => {
-                return std::array::from_fn(|k| s.centre_cov_ut2[k][k].sqrt());
-            }
-            Fit::Vector(v) => std::array::from_fn(|j| {
-                let g = [c[0], c[1], c[2], 1.0];
-                (0..4)
-                    .flat_map(|r| (0..4).map(move |s| (r, s)))
-                    .map(|(r, s)| g[r] * v.covariance[j][r][s] * g[s])
-                    .sum::<f64>()
-            }),
-        };
-        let a = nalgebra::Matrix3::from_fn(|j, k| model.a[j][k]);
-        let inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix3::zeros);
-        std::array::from_fn(|k| {
-            (0..3)
-                .map(|j| (inv[(k, j)].powi(2)) * row_var[j])
-                .sum::<f64>()
-                .sqrt()
-        })
-    }
-
-    /// Standard errors of the final model's `A` and `b`: the base fit's, or for a model extended by the diagnosis
-    /// the larger of those and the diagnosis' own.
-    pub fn standard_errors(&self) -> ([[f64; 3]; 3], [f64; 3]) {
-        let (a, b) = match &self.fit {
-            Fit::Vector(v) => (v.a_se, v.b_se_ut),
-            Fit::Scalar(s) => (s.a_se, s.b_se_ut),
-        };
-        match self.diagnosis.as_ref().and_then(|d| d.extended.se) {
-            Some(se) => (
-                std::array::from_fn(|j| std::array::from_fn(|k| a[j][k].max(se.a[j][k]))),
-                std::array::from_fn(|j| b[j].max(se.b_ut[j])),
-            ),
-            None => (a, b),
-        }
-    }
-}
-
-/// What the robust base fit left out: samples whose residual departs grossly from the rest (see
-/// [`magcal_calib::robust`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct RobustSummary {
-    /// Per recording row: kept by the base fit (rows it cannot use count as kept).
-    pub kept: Vec<bool>,
-    /// The residual's scale (a standard deviation per axis, or of |B|, from the median residual), µT.
-    pub scale_ut: f64,
-    /// The excluded spans: recording rows `[start, end)`, and their times when the recording has them, s.
-    pub spans: Vec<ExcludedSpan>,
-    /// Whether windows where the magnitude moved too little to be gross were looked for too (the scalar method on
-    /// a recording with time, [`robust::shifted_windows`]).
-    pub magnitude_windows: bool,
-}
-
-/// A span of rows the base fit excluded.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ExcludedSpan {
-    /// First row.
-    pub start: usize,
-    /// One past the last row.
-    pub end: usize,
-    /// Time of the first and last row, s (NaN without a time column).
-    pub t0_s: f64,
-    /// See `t0_s`.
-    pub t1_s: f64,
-    /// Rows excluded in it (a span may hold kept rows between excluded ones).
-    pub excluded: usize,
-}
-
-impl RobustSummary {
-    fn of(kept: Vec<bool>, scale_ut: f64, rec: &Recording, scalar: bool) -> RobustSummary {
-        let t = rec.t_s.as_deref();
-        let spans = robust::excluded_runs(&kept)
-            .into_iter()
-            .map(|(start, end)| ExcludedSpan {
-                start,
-                end,
-                t0_s: t.map_or(f64::NAN, |t| t[start]),
-                t1_s: t.map_or(f64::NAN, |t| t[end - 1]),
-                excluded: kept[start..end].iter().filter(|k| !**k).count(),
-            })
-            .collect();
-        RobustSummary {
-            kept,
-            scale_ut,
-            spans,
-            magnitude_windows: scalar && t.is_some(),
-        }
-    }
-
-    /// Rows excluded.
-    pub fn excluded(&self) -> usize {
-        self.spans.iter().map(|s| s.excluded).sum()
-    }
-
-    /// A note saying what was excluded, when anything was.
-    pub fn note(&self) -> Option<String> {
-        if self.spans.is_empty() {
-            return None;
-        }
-        const SHOWN: usize = 6;
-        let mut spans: Vec<String> = self
-            .spans
-            .iter()
-            .take(SHOWN)
-            .map(|s| {
-                if s.t0_s.is_finite() {
-                    format!("{:.1}–{:.1} s", s.t0_s, s.t1_s)
-                } else {
-                    format!("rows {}–{}", s.start + 1, s.end)
-                }
-            })
-            .collect();
-        if self.spans.len() > SHOWN {
-            spans.push(format!("and {} more", self.spans.len() - SHOWN));
-        }
-        let windows = if self.magnitude_windows {
-            format!(
-                " or in a window where |B| moved by more than {:.0} times the sensor's noise",
-                robust::SHIFT_MIN_NOISE
-            )
-        } else {
-            String::new()
-        };
-        Some(format!(
-            "{} samples left out of the base fit, their residual more than {:.0} times the typical {:.2} µT{windows}: {}",
-            self.excluded(),
-            robust::GROSS_SIGMA,
-            self.scale_ut,
-            spans.join(", ")
-        ))
-    }
 }
 
 /// Why a recording could not be calibrated.
@@ -385,6 +97,12 @@ pub enum CalibrateError {
     /// The fit failed.
     #[error(transparent)]
     Fit(#[from] FitError),
+}
+
+impl From<MissingReference> for CalibrateError {
+    fn from(m: MissingReference) -> CalibrateError {
+        CalibrateError::NoReference(m.0)
+    }
 }
 
 /// A reading of a magnitude below this is zero: no sensor in any unit reads a field that small.
@@ -454,31 +172,6 @@ fn refusal(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> Calibrate
     }
 }
 
-/// The expected field in sensor axes per sample (NaN where the reference is missing), if the recording has one:
-/// its `rx,ry,rz` columns borrowed, or its attitude turned.
-pub fn expected_field<'a>(
-    rec: &'a Recording,
-    field: &ReferenceField,
-) -> Result<Cow<'a, [[f64; 3]]>, CalibrateError> {
-    if let Some(r) = &rec.ref_ut {
-        return Ok(Cow::Borrowed(r));
-    }
-    let Some(q) = &rec.quat else {
-        return Err(CalibrateError::NoReference("this recording has neither"));
-    };
-    let Some(f) = field.vector() else {
-        return Err(CalibrateError::NoReference(
-            "this recording has the attitude but no world field vector",
-        ));
-    };
-    Ok(Cow::Owned(
-        q.par_iter()
-            .with_min_len(1 << 12)
-            .map(|q| frames::expected_sensor_field(*q, f))
-            .collect(),
-    ))
-}
-
 /// Reads a recording to calibrate it with `method` against the field `resolve` finds for its metadata. Without the
 /// diagnosis, a vector fit sees the attitude only through the expected field, so the quaternions are turned into it
 /// as the rows are read (the recording then has `ref_ut` and no `quat`): 24 bytes a row kept instead of 32, and no
@@ -532,7 +225,7 @@ pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
             cal.samples.total,
             cal.residual_rms_ut,
             cal.noise_floor_ut,
-        ) || checks::reference_off(&cal.fit, &cal.field).is_some())
+        ) || cal.fit.reference_off(&cal.field).is_some())
 }
 
 /// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
@@ -611,20 +304,10 @@ fn without_corrections(model: &Model, rec: &Recording, i: usize) -> [f64; 3] {
         return raw;
     };
     let mut currents = vec![0.0; rec.currents.len()];
-    let calibrated = crate::apply::calibrate_row(model, rec, i, &mut currents);
+    let calibrated = calibrate_row(model, rec, i, &mut currents);
     let field = frames::sub(calibrated, model.b_ut);
     let m = a_inv * nalgebra::Vector3::from(field);
     [m.x, m.y, m.z]
-}
-
-/// A noise floor from the readings' differences above the fit's residual by more than `1 / this` is not the noise:
-/// the rows change orientation from one to the next, and the differences measure the rotation.
-const UNMEASURED_NOISE_BOUND: f64 = 0.8;
-
-/// Whether `floor_ut`, the noise the readings' differences give (calibrated units), can be the noise of a fit that
-/// leaves `residual_ut` ([`UNMEASURED_NOISE_BOUND`]).
-pub fn noise_measurable(floor_ut: f64, residual_ut: f64) -> bool {
-    !(floor_ut > 0.0 && residual_ut < UNMEASURED_NOISE_BOUND * floor_ut)
 }
 
 /// Calibrates a recording and, with `diagnose`, looks for what the base model leaves out. The coverage figure is the
@@ -1111,36 +794,6 @@ fn other_offset_state(d: &Diagnosis, rec: &Recording) -> Option<String> {
         100.0 * share,
         when.join(", ")
     ))
-}
-
-/// The noise of |B| in calibrated units: the calibrated noise along the field direction, averaged over the
-/// recording (at most ~10 000 readings looked at).
-pub fn radial_floor_ut(noise: &NoiseFloor, model: &Model, raw_ut: &[[f64; 3]]) -> f64 {
-    let f = noise.floor_ut;
-    let stride = (raw_ut.len() / 10_000).max(1);
-    let (sum, count) = raw_ut
-        .iter()
-        .step_by(stride)
-        .map(|m| model.apply(*m, &Inputs::NONE))
-        .filter(|b| b.iter().all(|v| v.is_finite()) && frames::norm(*b) > 0.0)
-        .map(|b| {
-            let u = frames::scale(b, 1.0 / frames::norm(b));
-            let au = frames::mat_t_vec(&model.a, u);
-            (0..3).map(|k| (au[k] * f[k]).powi(2)).sum::<f64>()
-        })
-        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    (sum / count.max(1) as f64).sqrt()
-}
-
-/// Where a noise figure came from, in words.
-pub fn noise_source(noise: &NoiseFloor) -> String {
-    match noise.source {
-        NoiseSource::Poses { runs, dof } => {
-            format!("the spread within {runs} poses ({dof} degrees of freedom)")
-        }
-        NoiseSource::Still { start, end } => format!("still segment, samples {start}–{end}"),
-        NoiseSource::Differences { order } => format!("differences of order {order}"),
-    }
 }
 
 /// The diagnosis of `rec` against its base calibration `cal` (whose model is `model`), refitted around the spans it

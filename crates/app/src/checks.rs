@@ -7,8 +7,8 @@ use magcal_calib::scalar::centre;
 use magcal_calib::{FitError, Model, frames};
 use nalgebra::Matrix3;
 
-use crate::calibrate::{Fit, ReferenceDoubt};
 use crate::field::ReferenceField;
+use crate::fit::{Fit, ReferenceDoubt};
 
 /// The range of the Earth's field at its surface, µT (the World Magnetic Model's extremes, rounded out).
 pub const EARTH_FIELD_UT: (f64, f64) = (22.0, 67.0);
@@ -16,9 +16,6 @@ pub const EARTH_FIELD_UT: (f64, f64) = (22.0, 67.0);
 const GAIN_SPREAD_WARN: f64 = 1.5;
 /// Below this ratio of the smallest to the largest singular value, `A` is as good as singular: refused.
 const GAIN_SPREAD_REFUSE: f64 = 1e-3;
-/// A vector fit whose residual (RMS per axis) exceeds this share of the field is no calibration's misfit: the
-/// attitude reference is in another convention, or off in time.
-const REFERENCE_OFF_SHARE: f64 = 0.1;
 /// Readings in µT whose mean gain against a given field is off by more than this factor (either way): a sensor's
 /// sensitivity is within 10–20 % of its datasheet's, so the field given is more likely wrong.
 const MEAN_GAIN_WARN: f64 = 1.3;
@@ -67,7 +64,7 @@ pub fn check(
     }
     let mut warnings = Vec::new();
     // A reference off by a good part of the field bends A every way: that, not the gains, is what to say.
-    let reference_off = reference_off(fit, field);
+    let reference_off = fit.reference_off(field);
     if let Some(b) = &reference.convention {
         warnings.push(convention_warning(b));
     } else if let Some(o) = &reference.offset {
@@ -105,12 +102,11 @@ pub fn check(
         .filter(|r| r.is_finite())
         .collect();
     let raw_radius = median(&mut radii);
-    let calibrated = match fit {
-        Fit::Scalar(s) => s.field_ut,
-        Fit::Vector(_) => field
+    let calibrated = fit.face().magnitude_ut().unwrap_or_else(|| {
+        field
             .magnitude()
-            .unwrap_or(raw_radius * (sv.iter().product::<f64>()).cbrt()),
-    };
+            .unwrap_or(raw_radius * (sv.iter().product::<f64>()).cbrt())
+    });
     let (low, high) = EARTH_FIELD_UT;
     let raw_in_range = (0.5 * low..=1.5 * high).contains(&raw_radius);
     let known = match fit {
@@ -141,7 +137,7 @@ pub fn check(
             field.source()
         ));
     }
-    if matches!(fit, Fit::Vector(_)) && !reference_doubtful && a.determinant() < 0.0 {
+    if fit.is_vector() && !reference_doubtful && a.determinant() < 0.0 {
         warnings.push(
             "A mirrors the axes (its determinant is negative): the readings' axes are left-handed against the \
              attitude reference's — two axes swapped or one reversed (a wiring or a driver's axis map). A as fitted \
@@ -196,18 +192,6 @@ pub fn offset_warning(o: &OutOfStep) -> String {
         o.given.median_ut,
         1000.0 * o.offset_s
     )
-}
-
-/// A vector fit's residual (RMS per axis, µT) and the field's magnitude when the residual exceeds
-/// [`REFERENCE_OFF_SHARE`] of it: the attitude reference is not in magcal's convention, or off in time.
-pub fn reference_off(fit: &Fit, field: &ReferenceField) -> Option<(f64, f64)> {
-    match (fit, field.magnitude()) {
-        (Fit::Vector(v), Some(f)) => {
-            let rms = magcal_calib::noise::rms3(v.residual_rms_ut);
-            (rms > REFERENCE_OFF_SHARE * f).then_some((rms, f))
-        }
-        _ => None,
-    }
 }
 
 /// What raw readings of this radius look like, and the scale that would make them µT (exact when the field's

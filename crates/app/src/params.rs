@@ -236,7 +236,7 @@ impl ParamsFile {
 
     /// The parameters file of a calibration of `rec` (named `recording` in the file): its final model.
     pub fn of(
-        cal: &crate::calibrate::Calibration,
+        cal: &crate::fit::Calibration,
         rec: &magcal_recording::Recording,
         recording: &str,
     ) -> ParamsFile {

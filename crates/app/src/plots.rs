@@ -24,9 +24,10 @@ use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use crate::apply::calibrate_rows;
-use crate::calibrate::{Calibration, Fit, expected_field};
+use crate::fit::{Calibration, Fit};
 use crate::heading::{Face, HeadingErrors};
+use crate::readings::calibrate_rows;
+use crate::readings::expected_field;
 use crate::verdict::Assessment;
 
 /// Time bins of the residual-against-time plot.
@@ -308,9 +309,12 @@ fn readings(path: &Path, rec: &Recording, cal: Option<&Calibration>) -> PlotResu
     let rows = if cal.is_some() { 2 } else { 1 };
     let root = SVGBackend::new(path, (3 * panel_w, LEGEND_PX + rows * panel_h)).into_drawing_area();
     let raw = thin(&rec.mag_ut, PROJECTION_POINTS);
-    let field_ut = cal.map(|c| match &c.fit {
-        Fit::Scalar(s) => s.field_ut,
-        Fit::Vector(_) => c.field.magnitude().unwrap_or(f64::NAN),
+    let field_ut = cal.map(|c| {
+        c.fit
+            .face()
+            .magnitude_ut()
+            .or(c.field.magnitude())
+            .unwrap_or(f64::NAN)
     });
     let mut entries = vec![(Mark::Dot(POINTS), "readings (µT, sensor axes)".to_owned())];
     if let Some(f) = field_ut {
@@ -610,10 +614,11 @@ impl Series {
                 }
             }
             (fit, _) => {
-                let field_ut = match fit {
-                    Fit::Scalar(s) => s.field_ut,
-                    Fit::Vector(_) => cal.field.magnitude().unwrap_or(0.0),
-                };
+                let field_ut = fit
+                    .face()
+                    .magnitude_ut()
+                    .or(cal.field.magnitude())
+                    .unwrap_or(0.0);
                 for i in 0..rec.len() {
                     let c = cal_ut(i);
                     let n = frames::norm(c);

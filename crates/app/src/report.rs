@@ -7,7 +7,7 @@ use magcal_calib::diagnosis::{Components, Diagnosis, FoundEffect, ParamValue, Sp
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
-use crate::calibrate::{Calibration, Fit};
+use crate::fit::{Calibration, Fit};
 use crate::params::Correction;
 use crate::verdict::{Assessment, GOOD_DEG, USABLE_DEG};
 
@@ -538,14 +538,8 @@ impl Report {
     pub fn new(cal: &Calibration, recording: &str, channels: &[String]) -> Report {
         let model = cal.model();
         let (a_se, b_se_ut) = cal.standard_errors();
-        let coverage = match &cal.fit {
-            Fit::Vector(v) => v.coverage,
-            Fit::Scalar(s) => s.coverage,
-        };
-        let magnitude_ut = cal.field.magnitude().or(match &cal.fit {
-            Fit::Scalar(s) => Some(s.field_ut),
-            Fit::Vector(_) => None,
-        });
+        let coverage = cal.fit.face().coverage();
+        let magnitude_ut = cal.field.magnitude().or(cal.fit.face().magnitude_ut());
         let rms_axis_ut = match &cal.fit {
             Fit::Vector(v) => Some(v.residual_rms_ut),
             Fit::Scalar(_) => None,
@@ -601,7 +595,7 @@ impl Report {
                 sigma_ut: cal.noise.sigma_ut,
                 lsb_ut: cal.noise.lsb_ut,
                 floor_ut: cal.noise.floor_ut,
-                source: crate::calibrate::noise_source(&cal.noise),
+                source: crate::readings::noise_source(&cal.noise),
             },
             samples: SamplesReport {
                 total: cal.samples.total,

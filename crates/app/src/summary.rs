@@ -8,8 +8,8 @@ use magcal_calib::diagnosis::{
 };
 
 use crate::apply::{Against, Check};
-use crate::calibrate::{Calibration, Fit, Method};
 use crate::field::ReferenceField;
+use crate::fit::{Calibration, Method};
 use crate::heading::HeadingErrors;
 use crate::params::ParamsFile;
 use crate::verdict::{Assessment, GOOD_DEG, USABLE_DEG, Verdict, fmt_deg};
@@ -292,10 +292,7 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
             "  residual RMS {rms:.3} µT {what}, the sensor's noise not measured (the note below says why)"
         );
     }
-    let cov = match &cal.fit {
-        Fit::Vector(v) => v.coverage,
-        Fit::Scalar(s) => s.coverage,
-    };
+    let cov = cal.fit.face().coverage();
     let _ = writeln!(
         out,
         "  coverage: {:.0}% of the sphere of directions; spread {:.1} / {:.1} / {:.1} µT",
@@ -308,8 +305,8 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         let _ = writeln!(out, "  note: {note}");
     }
     if let Some(d) = &cal.diagnosis {
-        let reference_off = crate::checks::reference_off(&cal.fit, &cal.field).is_some();
-        out += &diagnosis(d, matches!(cal.fit, Fit::Scalar(_)), reference_off);
+        let reference_off = cal.fit.reference_off(&cal.field).is_some();
+        out += &diagnosis(d, !cal.fit.is_vector(), reference_off);
     }
     out
 }

@@ -14,6 +14,8 @@ use magcal_calib::frames::{self, Mat3};
 use magcal_calib::scalar::{SYM, ScalarFit};
 use magcal_calib::vector::VectorFit;
 
+use crate::fit::Fit;
+
 /// The covariance of the calibrated field as a function of the raw reading.
 #[derive(Clone, Debug)]
 pub enum FieldUncertainty {
@@ -37,6 +39,14 @@ pub struct ScalarParts {
 }
 
 impl FieldUncertainty {
+    /// From a fit of either method.
+    pub fn of(fit: &Fit) -> FieldUncertainty {
+        match fit {
+            Fit::Vector(v) => FieldUncertainty::vector(v),
+            Fit::Scalar(s) => FieldUncertainty::scalar(s),
+        }
+    }
+
     /// From a vector fit.
     pub fn vector(fit: &VectorFit) -> FieldUncertainty {
         FieldUncertainty::Vector(Box::new(fit.clone()))
@@ -113,8 +123,9 @@ mod tests {
     /// between `A`'s entries and the centre costs on a well-covered sphere.
     #[test]
     fn at_zero_the_scalar_propagation_gives_the_standard_errors_of_b() {
-        use crate::calibrate::{Fit, Method, calibrate};
+        use crate::calibrate::calibrate;
         use crate::field::ReferenceField;
+        use crate::fit::{Fit, Method};
         use magcal_sim::AttitudeOutput;
 
         let chip = ChipModel::by_name("lis3mdl").unwrap();
@@ -158,8 +169,9 @@ mod tests {
     #[test]
     #[ignore = "statistics over 120 simulated recordings: run in release"]
     fn predicted_errors_match_the_spread_of_fits_over_seeds() {
-        use crate::calibrate::{Fit, Method, calibrate};
+        use crate::calibrate::calibrate;
         use crate::field::ReferenceField;
+        use crate::fit::{Fit, Method};
         use crate::heading::{Face, LocalField};
         use magcal_sim::AttitudeOutput;
 

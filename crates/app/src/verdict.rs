@@ -14,7 +14,7 @@ use magcal_calib::effects::Effect;
 use magcal_calib::frames;
 use magcal_recording::Recording;
 
-use crate::calibrate::{Calibration, Fit};
+use crate::fit::Calibration;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
 use crate::uncertainty::FieldUncertainty;
 
@@ -274,9 +274,8 @@ fn declination_off_deg(d: &Diagnosis) -> Option<f64> {
 /// The magnitude of the field in the model's calibrated units, µT: the field vector's, the scalar fit's target, or
 /// the mean of the expected field (`rx,ry,rz`).
 fn model_field_ut(cal: &Calibration, rec: &Recording) -> Option<f64> {
-    match &cal.fit {
-        Fit::Scalar(s) => Some(s.field_ut),
-        Fit::Vector(_) => cal.field.magnitude().or_else(|| {
+    cal.fit.face().magnitude_ut().or_else(|| {
+        cal.field.magnitude().or_else(|| {
             let r = rec.ref_ut.as_ref()?;
             let norms: Vec<f64> = r
                 .iter()
@@ -284,8 +283,8 @@ fn model_field_ut(cal: &Calibration, rec: &Recording) -> Option<f64> {
                 .filter(|n| n.is_finite())
                 .collect();
             (!norms.is_empty()).then(|| norms.iter().sum::<f64>() / norms.len() as f64)
-        }),
-    }
+        })
+    })
 }
 
 /// The model an export or a device gets: the final model when it has no body-fixed corrections, the base fit
@@ -309,10 +308,7 @@ const SPAN_SHARE: f64 = 0.5;
 /// `b` fitted without the corrections, with the residual they leave ([`target_model`]).
 pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessment {
     let model = cal.model();
-    let uncertainty = match &cal.fit {
-        Fit::Vector(v) => Some(FieldUncertainty::vector(v)),
-        Fit::Scalar(s) => Some(FieldUncertainty::scalar(s)),
-    };
+    let uncertainty = Some(FieldUncertainty::of(&cal.fit));
     // A noise that could not be measured explains none of the residual.
     let measured = |floor_ut: f64| if cal.noise_measured { floor_ut } else { 0.0 };
     let (residual_rms_ut, noise_floor_ut) = match &cal.diagnosis {
@@ -331,7 +327,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
     });
     let covered: f64 = spans_s.iter().map(|(a, b)| b - a).sum();
     let hints = Hints {
-        vector: matches!(cal.fit, Fit::Vector(_)),
+        vector: cal.fit.is_vector(),
         spans_s: if covered < SPAN_SHARE * duration_s {
             spans_s
         } else {
@@ -417,7 +413,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
                 .to_owned(),
         };
     } else if verdict.grade != Grade::Good
-        && let Some((rms_ut, field_ut)) = crate::checks::reference_off(&cal.fit, &cal.field)
+        && let Some((rms_ut, field_ut)) = cal.fit.reference_off(&cal.field)
     {
         let left_deg = match &chosen {
             Ok(h) => h.left.worst_deg,

@@ -19,8 +19,8 @@ use magcal_driver::{ChipKind, Error as ChipError, HardIronOffset, Lis2mdl, Magne
 use magcal_mockhw::{SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
-use crate::calibrate::{Calibration, Fit};
 use crate::device::DeviceSpec;
+use crate::fit::Calibration;
 use crate::record::sim::bench_config;
 
 /// How long the firmware gets to echo a calibration (Adafruit's sketches echo about once a second).
@@ -106,10 +106,7 @@ pub fn write_back_calibration(
         }
     }
     let model = crate::verdict::target_model(cal);
-    let field_ut = cal.field.magnitude().or(match &cal.fit {
-        Fit::Scalar(s) => Some(s.field_ut),
-        Fit::Vector(_) => None,
-    });
+    let field_ut = cal.field.magnitude().or(cal.fit.face().magnitude_ut());
     let mut lines = write_back(spec, &model.a, &model.b_ut, field_ut)?;
     let corrections = cal.model().corrections().count();
     if corrections > 0 {

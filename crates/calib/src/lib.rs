@@ -30,6 +30,8 @@ mod error;
 #[cfg(feature = "std")]
 pub mod faults;
 #[cfg(feature = "std")]
+pub mod fit;
+#[cfg(feature = "std")]
 pub mod noise;
 #[cfg(feature = "std")]
 pub mod robust;
