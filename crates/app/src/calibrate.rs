@@ -4,7 +4,7 @@ use magcal_calib::convention;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::directions::fraction_of;
 use magcal_calib::frames;
-use magcal_calib::noise::{self, rms3};
+use magcal_calib::noise::{self, NoiseFloor, rms3};
 use std::borrow::Cow;
 
 use magcal_calib::coverage::CoverageError;
@@ -319,140 +319,208 @@ pub fn calibrate(
     field: ReferenceField,
     diagnose: bool,
 ) -> Result<Calibration, CalibrateError> {
-    let has_reference = rec.ref_ut.is_some() || (rec.quat.is_some() && field.vector().is_some());
     let mut warnings = Vec::new();
-    let method = match method {
-        Method::Auto if has_reference => Method::Vector,
-        Method::Auto => {
-            // A magnitude alone comes from --field-ut (see crate::field::resolve).
-            if rec.quat.is_some() && matches!(field, ReferenceField::Magnitude { .. }) {
-                warnings.push(
-                    "only the magnitude was fitted (scalar method: misalignment unobserved) though the recording has \
-                     attitude quaternions: --field-ut gives a magnitude alone and replaces any field vector the \
-                     recording's metadata holds. Drop --field-ut to use that vector, or give --field-ned N,E,D (µT), \
-                     to fit every component (vector method)"
-                        .to_owned(),
-                );
-            } else if let Some(columns) = quaternion_like_columns(rec) {
-                warnings.push(format!(
-                    "only the magnitude was fitted (scalar method: misalignment unobserved): the recording's columns \
-                     {columns} look like an attitude quaternion, but magcal reads the attitude from columns named \
-                     qw,qx,qy,qz (scalar first, turning sensor axes into NED). Named so, with the world field, they give \
-                     the vector method, which fits every component"
-                ));
-            } else if let Some(columns) = euler_like_columns(rec) {
-                warnings.push(format!(
-                    "only the magnitude was fitted (scalar method: misalignment unobserved): the recording's columns \
-                     {columns} look like an attitude in angles, which magcal does not read (their order and axes \
-                     differ from one program to the next). Written as a quaternion qw,qx,qy,qz (scalar first, turning \
-                     sensor axes into NED), with the world field, the attitude gives the vector method, which fits \
-                     every component"
-                ));
-            } else if rec.quat.is_some() {
-                warnings.push(format!(
-                    "the recording has attitude quaternions but no world field vector, so only the magnitude was \
-                     fitted (scalar method: misalignment unobserved). Give the field with --field-ned N,E,D (µT), or \
-                     --location LAT,LON,ALT --date YYYY-MM-DD, or a field_ned_ut line in the recording's metadata, \
-                     to fit every component (vector method){}",
-                    unread_field_keys(&rec.meta)
-                ));
-            }
-            Method::Scalar
-        }
-        m => m,
-    };
+    let method = chosen_method(rec, method, &field, &mut warnings);
     warnings.extend(units_unread(&rec.meta));
     warnings.extend(time_unit_mismatch(rec));
     let mut notes = Vec::new();
-    let (fit, mut noise, used, robust, rows_coverage, reference) = match method {
-        Method::Vector => {
-            let expected = expected_field(rec, &field)?;
-            let noise = noise::estimate(&rec.mag_ut, Some(&expected));
-            let problem = VectorProblem {
-                raw_ut: Cow::Borrowed(&rec.mag_ut),
-                expected_ut: expected,
-                raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-            };
-            let r = robust::fit(&problem, rec.t_s.as_deref())
-                .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-            // The rows the fit used: kept, with a reference.
-            let e = &problem.expected_ut;
-            let rows_coverage = fraction_of(e.len(), |i| {
-                (r.kept[i] && e[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
-            });
-            // The search for a reference out of step is not made for a fit that fits (it takes about as long as the
-            // fit of 10⁶ rows).
-            let excluded = r.kept.iter().filter(|k| !**k).count();
-            let looks_off = fit_looks_off(
-                excluded,
-                r.kept.len(),
-                rms3(r.fit.residual_rms_ut),
-                rms3(noise.floor_ut),
-            );
-            let reference = reference_out_of_convention(rec, e, &field, &r.kept, looks_off);
-            let n = r.fit.n;
-            let (fit, kept) = (
-                Fit::Vector(r.fit),
-                RobustSummary::of(r.kept, r.sigma_ut, rec, false),
-            );
-            (fit, noise, n, kept, rows_coverage, reference)
-        }
-        _ => {
-            let noise = noise::estimate(&rec.mag_ut, None);
-            let r = robust::fit(
-                &ScalarProblem {
-                    raw_ut: Cow::Borrowed(&rec.mag_ut),
-                    field_ut: field.magnitude(),
-                    raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
-                },
-                rec.t_s.as_deref(),
-            )
-            .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-            warnings.extend(mixed_states(&r.mixed, rec));
-            let s = r.fit;
-            notes.push(format!(
-                "rotation not observable: {}",
-                scalar::ROTATION_NOTE
-            ));
-            if !s.field_given {
-                notes.push(format!(
-                    "field magnitude unknown: the calibrated sphere keeps the raw ellipsoid's mean radius, {:.2} µT \
-                     (give --field-ut, --field-ned or --location/--date for absolute scale)",
-                    s.field_ut
-                ));
-            }
-            warnings.extend(s.warning());
-            let rows_coverage =
-                fraction_of(rec.mag_ut.len(), |i| r.kept[i].then_some(rec.mag_ut[i]));
-            let n = s.n;
-            (
-                Fit::Scalar(s),
-                noise,
-                n,
-                RobustSummary::of(r.kept, r.sigma_ut, rec, true),
-                rows_coverage,
-                ReferenceDoubt::default(),
-            )
-        }
+    let base = match method {
+        Method::Vector => vector_base(rec, &field)?,
+        _ => scalar_base(rec, &field, &mut notes, &mut warnings)?,
     };
+    let mut cal = measured(rec, base, field, notes, warnings)?;
+    if diagnose {
+        diagnose_into(rec, &mut cal)?;
+    }
+    Ok(cal)
+}
+
+/// The method `asked` for: auto is the vector method when the recording has a reference (`rx,ry,rz`, or the
+/// attitude and a world field vector), and the scalar one otherwise — with a warning when the recording looks as if
+/// it had meant to give one (into `warnings`).
+fn chosen_method(
+    rec: &Recording,
+    asked: Method,
+    field: &ReferenceField,
+    warnings: &mut Vec<String>,
+) -> Method {
+    let has_reference = rec.ref_ut.is_some() || (rec.quat.is_some() && field.vector().is_some());
+    match asked {
+        Method::Auto if has_reference => Method::Vector,
+        Method::Auto => {
+            warnings.extend(no_reference_warning(rec, field));
+            Method::Scalar
+        }
+        m => m,
+    }
+}
+
+/// Why a recording fitted by the scalar method for want of a reference may have meant to give one, if it may: an
+/// attitude with a magnitude alone given, quaternions or angles under other names than magcal's, or quaternions
+/// without a world field vector.
+fn no_reference_warning(rec: &Recording, field: &ReferenceField) -> Option<String> {
+    // A magnitude alone comes from --field-ut (see crate::field::resolve).
+    if rec.quat.is_some() && matches!(field, ReferenceField::Magnitude { .. }) {
+        Some(
+            "only the magnitude was fitted (scalar method: misalignment unobserved) though the recording has \
+             attitude quaternions: --field-ut gives a magnitude alone and replaces any field vector the \
+             recording's metadata holds. Drop --field-ut to use that vector, or give --field-ned N,E,D (µT), \
+             to fit every component (vector method)"
+                .to_owned(),
+        )
+    } else if let Some(columns) = quaternion_like_columns(rec) {
+        Some(format!(
+            "only the magnitude was fitted (scalar method: misalignment unobserved): the recording's columns \
+             {columns} look like an attitude quaternion, but magcal reads the attitude from columns named \
+             qw,qx,qy,qz (scalar first, turning sensor axes into NED). Named so, with the world field, they give \
+             the vector method, which fits every component"
+        ))
+    } else if let Some(columns) = euler_like_columns(rec) {
+        Some(format!(
+            "only the magnitude was fitted (scalar method: misalignment unobserved): the recording's columns \
+             {columns} look like an attitude in angles, which magcal does not read (their order and axes \
+             differ from one program to the next). Written as a quaternion qw,qx,qy,qz (scalar first, turning \
+             sensor axes into NED), with the world field, the attitude gives the vector method, which fits \
+             every component"
+        ))
+    } else if rec.quat.is_some() {
+        Some(format!(
+            "the recording has attitude quaternions but no world field vector, so only the magnitude was \
+             fitted (scalar method: misalignment unobserved). Give the field with --field-ned N,E,D (µT), or \
+             --location LAT,LON,ALT --date YYYY-MM-DD, or a field_ned_ut line in the recording's metadata, \
+             to fit every component (vector method){}",
+            unread_field_keys(&rec.meta)
+        ))
+    } else {
+        None
+    }
+}
+
+/// The robust base fit and what was measured with it, before the checks.
+struct Base {
+    fit: Fit,
+    /// The raw readings' noise floor.
+    noise: NoiseFloor,
+    /// Rows the fit used.
+    used: usize,
+    robust: RobustSummary,
+    /// The coverage of the sphere of directions by the rows the fit used.
+    rows_coverage: f64,
+    reference: ReferenceDoubt,
+}
+
+/// The vector method's robust base fit against the expected field per row, and the reference checked for another
+/// convention or clock when the fit looks off.
+fn vector_base(rec: &Recording, field: &ReferenceField) -> Result<Base, CalibrateError> {
+    let expected = expected_field(rec, field)?;
+    let noise = noise::estimate(&rec.mag_ut, Some(&expected));
+    let problem = VectorProblem {
+        raw_ut: Cow::Borrowed(&rec.mag_ut),
+        expected_ut: expected,
+        raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+    };
+    let r = robust::fit(&problem, rec.t_s.as_deref())
+        .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+    // The rows the fit used: kept, with a reference.
+    let e = &problem.expected_ut;
+    let rows_coverage = fraction_of(e.len(), |i| {
+        (r.kept[i] && e[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
+    });
+    // The search for a reference out of step is not made for a fit that fits (it takes about as long as the fit of
+    // 10⁶ rows).
+    let excluded = r.kept.iter().filter(|k| !**k).count();
+    let looks_off = fit_looks_off(
+        excluded,
+        r.kept.len(),
+        rms3(r.fit.residual_rms_ut),
+        rms3(noise.floor_ut),
+    );
+    let reference = reference_out_of_convention(rec, e, field, &r.kept, looks_off);
+    Ok(Base {
+        used: r.fit.n,
+        fit: Fit::Vector(r.fit),
+        noise,
+        robust: RobustSummary::of(r.kept, r.sigma_ut, rec, false),
+        rows_coverage,
+        reference,
+    })
+}
+
+/// The scalar method's robust base fit against the field's magnitude (given, or the raw ellipsoid's mean radius),
+/// with what the method cannot see said in `notes` and what the fit kept though it looks like two states in
+/// `warnings`.
+fn scalar_base(
+    rec: &Recording,
+    field: &ReferenceField,
+    notes: &mut Vec<String>,
+    warnings: &mut Vec<String>,
+) -> Result<Base, CalibrateError> {
+    let noise = noise::estimate(&rec.mag_ut, None);
+    let r = robust::fit(
+        &ScalarProblem {
+            raw_ut: Cow::Borrowed(&rec.mag_ut),
+            field_ut: field.magnitude(),
+            raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
+        },
+        rec.t_s.as_deref(),
+    )
+    .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+    warnings.extend(mixed_states(&r.mixed, rec));
+    let s = r.fit;
+    notes.push(format!(
+        "rotation not observable: {}",
+        scalar::ROTATION_NOTE
+    ));
+    if !s.field_given {
+        notes.push(format!(
+            "field magnitude unknown: the calibrated sphere keeps the raw ellipsoid's mean radius, {:.2} µT \
+             (give --field-ut, --field-ned or --location/--date for absolute scale)",
+            s.field_ut
+        ));
+    }
+    warnings.extend(s.warning());
+    let rows_coverage = fraction_of(rec.mag_ut.len(), |i| r.kept[i].then_some(rec.mag_ut[i]));
+    Ok(Base {
+        used: s.n,
+        fit: Fit::Scalar(s),
+        noise,
+        robust: RobustSummary::of(r.kept, r.sigma_ut, rec, true),
+        rows_coverage,
+        reference: ReferenceDoubt::default(),
+    })
+}
+
+/// The calibration of a base fit: what it left out and how well it covers, the noise (bounded by the residual when
+/// the readings' differences cannot measure it), and the last checks on the fit.
+fn measured(
+    rec: &Recording,
+    base: Base,
+    field: ReferenceField,
+    mut notes: Vec<String>,
+    mut warnings: Vec<String>,
+) -> Result<Calibration, CalibrateError> {
+    let Base {
+        fit,
+        mut noise,
+        used,
+        robust,
+        rows_coverage,
+        reference,
+    } = base;
     if let Some(note) = robust.note() {
         notes.push(note);
     }
-    let (coverage, residual_rms_ut) = match &fit {
-        Fit::Vector(v) => (v.coverage, rms3(v.residual_rms_ut)),
-        Fit::Scalar(s) => (s.coverage, s.residual_rms_ut),
-    };
-    notes.extend(coverage.warning());
-    let model = match &fit {
-        Fit::Vector(v) => v.model(),
-        Fit::Scalar(s) => s.model(),
+    let face = fit.face();
+    let residual_rms_ut = face.residual_rms_ut();
+    notes.extend(face.coverage().warning());
+    let model = face.model();
+    let floor_of = |noise: &NoiseFloor| match &fit {
+        Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
+        Fit::Scalar(_) => radial_floor_ut(noise, &model, &rec.mag_ut),
     };
     // The sample-to-sample noise cannot exceed what the residual holds: rows that change pose every sample (or are
     // shuffled) make the differences measure the rotation, not the noise.
-    let floor_now = match &fit {
-        Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
-        Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
-    };
+    let floor_now = floor_of(&noise);
     let noise_measured = noise_measurable(floor_now, residual_rms_ut);
     if !noise_measured {
         notes.push(format!(
@@ -466,11 +534,8 @@ pub fn calibrate(
     }
     let checked = checks::check(&model, &fit, &field, &rec.mag_ut, &robust.kept, &reference)?;
     warnings.extend(checked.warnings);
-    let noise_floor_ut = match &fit {
-        Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),
-        Fit::Scalar(_) => radial_floor_ut(&noise, &model, &rec.mag_ut),
-    };
-    let mut cal = Calibration {
+    let noise_floor_ut = floor_of(&noise);
+    Ok(Calibration {
         fit,
         field,
         noise,
@@ -491,58 +556,63 @@ pub fn calibrate(
         diagnosis: None,
         diagnosis_failed: None,
         reference,
-    };
-    if diagnose {
-        if cal.reference.is_some() {
-            cal.notes.push(
-                "not diagnosed: the attitude reference fits far better in another convention or shifted in time \
-                 (the WARNING says how); against it as given, the diagnosis would find disturbances that are not \
-                 there"
-                    .to_owned(),
-            );
-        } else if used < diagnosis::MIN_SAMPLES {
+    })
+}
+
+/// The diagnosis of a calibration, into it: not made against a reference in another convention or for too few
+/// samples (a note says so); a diagnosis that cannot be made leaves the calibration as it is, said so: the base fit
+/// stands on its own (a recording it calibrates is not refused for what the diagnosis could not do).
+fn diagnose_into(rec: &Recording, cal: &mut Calibration) -> Result<(), CalibrateError> {
+    let used = cal.samples.used;
+    if cal.reference.is_some() {
+        cal.notes.push(
+            "not diagnosed: the attitude reference fits far better in another convention or shifted in time (the \
+             WARNING says how); against it as given, the diagnosis would find disturbances that are not there"
+                .to_owned(),
+        );
+        return Ok(());
+    }
+    if used < diagnosis::MIN_SAMPLES {
+        cal.notes.push(format!(
+            "not diagnosed: the diagnosis needs at least {} samples and this recording has {used}; the calibration \
+             above stands on its own",
+            diagnosis::MIN_SAMPLES
+        ));
+        return Ok(());
+    }
+    match diagnose_refitted(rec, cal, &cal.base_model())? {
+        Ok(d) => {
+            cal.warnings.extend(other_offset_state(&d, rec));
+            cal.sphere_coverage = used_coverage(rec, d.model, &d);
+            cal.diagnosis = Some(d);
+        }
+        Err(e) => {
             cal.notes.push(format!(
-                "not diagnosed: the diagnosis needs at least {} samples and this recording has {used}; the \
-                 calibration above stands on its own",
-                diagnosis::MIN_SAMPLES
+                "not diagnosed: {e}; the calibration above is the robust base fit, standing on its own"
             ));
-        } else {
-            // A diagnosis that cannot be made leaves the calibration as it is, said so: the base fit stands on its
-            // own (a recording it calibrates is not refused for what the diagnosis could not do).
-            match diagnose_refitted(rec, &cal, &model)? {
-                Ok(d) => {
-                    cal.warnings.extend(other_offset_state(&d, rec));
-                    cal.diagnosis = Some(d);
-                    // The rows the final model used, as the sensor would have read them without the body-fixed
-                    // effects it models, one-off windows included (a magnet on the board for a third of BROAD 33 is
-                    // counted where its rows point, not 27 µT off the sphere).
-                    let d = cal.diagnosis.as_ref().expect("just set");
-                    let mut model = cal.model();
-                    for found in d
-                        .effects
-                        .iter()
-                        .filter(|f| f.effect.id().frame() == Frame::Body)
-                    {
-                        if !model.corrections().any(|c| *c == found.effect) {
-                            let _ = model.add_correction(found.effect);
-                        }
-                    }
-                    let r = &d.residuals;
-                    let coverage = fraction_of(r.rows.len(), |k| {
-                        (!r.excluded[k]).then(|| without_corrections(&model, rec, r.rows[k]))
-                    });
-                    cal.sphere_coverage = coverage;
-                }
-                Err(e) => {
-                    cal.notes.push(format!(
-                        "not diagnosed: {e}; the calibration above is the robust base fit, standing on its own"
-                    ));
-                    cal.diagnosis_failed = Some(e.to_string());
-                }
-            }
+            cal.diagnosis_failed = Some(e.to_string());
         }
     }
-    Ok(cal)
+    Ok(())
+}
+
+/// The coverage of the rows the final model of a diagnosis `d` used, as the sensor would have read them without
+/// the body-fixed effects it models, one-off windows included (a magnet on the board for a third of BROAD 33 is
+/// counted where its rows point, not 27 µT off the sphere); `model` is the calibration's final model.
+fn used_coverage(rec: &Recording, mut model: Model, d: &Diagnosis) -> f64 {
+    for found in d
+        .effects
+        .iter()
+        .filter(|f| f.effect.id().frame() == Frame::Body)
+    {
+        if !model.corrections().any(|c| *c == found.effect) {
+            let _ = model.add_correction(found.effect);
+        }
+    }
+    let r = &d.residuals;
+    fraction_of(r.rows.len(), |k| {
+        (!r.excluded[k]).then(|| without_corrections(&model, rec, r.rows[k]))
+    })
 }
 
 /// Four carried-along columns that look like an attitude quaternion under other names than magcal's (`q0`…`q3`,

@@ -157,9 +157,27 @@ pub fn check_summary(
 
 /// The summary of a calibration of `recording`, with its heading figures and verdict.
 pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> String {
+    let mut out = samples_line(cal, recording);
+    out += &heading_block(cal, assessment);
+    for w in &cal.warnings {
+        let _ = writeln!(out, "  WARNING: {w}");
+    }
+    out += &field_line(&cal.field);
+    out += &model_lines(cal);
+    out += &residual_lines(cal);
+    for note in &cal.notes {
+        let _ = writeln!(out, "  note: {note}");
+    }
+    if let Some(d) = &cal.diagnosis {
+        let reference_off = cal.fit.reference_off(&cal.field).is_some();
+        out += &diagnosis(d, !cal.fit.is_vector(), reference_off);
+    }
+    out
+}
+
+/// The summary's first line: the recording, the method and the samples it used.
+fn samples_line(cal: &Calibration, recording: &str) -> String {
     let mut out = String::new();
-    let model = cal.model();
-    let (a_se, b_se) = cal.standard_errors();
     let method = match cal.method() {
         Method::Vector => "vector calibration, against the attitude reference",
         _ => "scalar calibration (ellipsoid fit: the field's magnitude only)",
@@ -200,6 +218,12 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         None => {}
     }
     out.push('\n');
+    out
+}
+
+/// The heading figures (and those of `A` and `b` alone, when the model has corrections) and the verdict.
+fn heading_block(cal: &Calibration, assessment: &Assessment) -> String {
+    let mut out = String::new();
     match &assessment.heading {
         Some(h) => out += &heading_lines(h, cal.method() == Method::Scalar, cal.noise_measured),
         None => {
@@ -227,27 +251,29 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         _ => {}
     }
     out += &verdict_line(&assessment.verdict);
-    for w in &cal.warnings {
-        let _ = writeln!(out, "  WARNING: {w}");
+    out
+}
+
+/// The field the fit was made against, and where it came from.
+fn field_line(field: &ReferenceField) -> String {
+    match (field.vector(), field.magnitude()) {
+        (Some(f), Some(m)) => format!(
+            "  field: [{:.2}, {:.2}, {:.2}] µT NED, |B| {m:.2} µT ({})\n",
+            f[0],
+            f[1],
+            f[2],
+            field.source()
+        ),
+        (None, Some(m)) => format!("  field: |B| {m:.2} µT ({})\n", field.source()),
+        _ => "  field: unknown\n".to_owned(),
     }
-    match (cal.field.vector(), cal.field.magnitude()) {
-        (Some(f), Some(m)) => {
-            let _ = writeln!(
-                out,
-                "  field: [{:.2}, {:.2}, {:.2}] µT NED, |B| {m:.2} µT ({})",
-                f[0],
-                f[1],
-                f[2],
-                cal.field.source()
-            );
-        }
-        (None, Some(m)) => {
-            let _ = writeln!(out, "  field: |B| {m:.2} µT ({})", cal.field.source());
-        }
-        _ => {
-            let _ = writeln!(out, "  field: unknown");
-        }
-    }
+}
+
+/// `A` and `b` of the final model with their standard errors, and the offset.
+fn model_lines(cal: &Calibration) -> String {
+    let mut out = String::new();
+    let model = cal.model();
+    let (a_se, b_se) = cal.standard_errors();
     let cells: Vec<Vec<String>> = (0..3)
         .map(|j| (0..3).map(|k| fmt_se(model.a[j][k], a_se[j][k])).collect())
         .collect();
@@ -272,6 +298,12 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         centre[1],
         centre[2]
     );
+    out
+}
+
+/// The residual against the noise floor, and the coverage of the sphere of directions.
+fn residual_lines(cal: &Calibration) -> String {
+    let mut out = String::new();
     let what = match cal.method() {
         Method::Vector => "per axis",
         _ => "of |B|",
@@ -301,13 +333,6 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         cov.spread_ut[1],
         cov.spread_ut[2]
     );
-    for note in &cal.notes {
-        let _ = writeln!(out, "  note: {note}");
-    }
-    if let Some(d) = &cal.diagnosis {
-        let reference_off = cal.fit.reference_off(&cal.field).is_some();
-        out += &diagnosis(d, !cal.fit.is_vector(), reference_off);
-    }
     out
 }
 
@@ -339,26 +364,7 @@ fn spans_fate(spans: &[GrossSpan]) -> String {
 /// WARNING above says).
 fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
     let mut out = String::new();
-    let reference = if d.reference_floor_ut <= 0.5 * d.noise_floor_ut {
-        String::new()
-    } else if reference_off {
-        format!(
-            " (the residual beyond the sensor's noise, {:.2} µT, is no error a reference has in magcal's convention: \
-             see the WARNING above)",
-            d.reference_floor_ut
-        )
-    } else if scalar {
-        format!(
-            " (the residual beyond the sensor's noise, {:.2} µT, is left unexplained: the field's own variation where \
-             the sensor moved, or something none of the effects tested accounts for)",
-            d.reference_floor_ut
-        )
-    } else {
-        format!(
-            " (the residual beyond the sensor's noise, {:.2} µT, is the reference's own error)",
-            d.reference_floor_ut
-        )
-    };
+    let reference = reference_clause(d, scalar, reference_off);
     let verdict = match d.verdict {
         Finding::Consistent if reference_off => {
             format!(
@@ -385,33 +391,96 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
             d.spans.len() - SPANS_SHOWN
         );
     }
+    out += &located_line(d);
+    out += &effect_lines(d);
+    if !d.effects.is_empty() {
+        let _ = writeln!(
+            out,
+            "  model: residual {:.3} → {:.3} µT, on data the fit did not see {:.3} → {:.3} µT, noise {:.3} µT{}",
+            d.base.rms_ut,
+            d.extended.rms_ut,
+            d.base.holdout_rms_ut,
+            d.extended.holdout_rms_ut,
+            d.noise_floor_ut,
+            match (reference.is_empty(), scalar) {
+                (true, _) => String::new(),
+                (false, true) => format!(
+                    ", unexplained beyond the noise {:.3} µT",
+                    d.reference_floor_ut
+                ),
+                (false, false) =>
+                    format!(", the reference's own error {:.3} µT", d.reference_floor_ut),
+            }
+        );
+    }
+    if !d.untestable.is_empty() {
+        let _ = writeln!(
+            out,
+            "  not tested: {} effects this recording cannot show (which and why: the --report JSON)",
+            d.untestable.len()
+        );
+    }
+    out
+}
+
+/// What the residual beyond the sensor's noise is, as a clause to append (empty when it is within half the noise).
+fn reference_clause(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
+    if d.reference_floor_ut <= 0.5 * d.noise_floor_ut {
+        String::new()
+    } else if reference_off {
+        format!(
+            " (the residual beyond the sensor's noise, {:.2} µT, is no error a reference has in magcal's convention: \
+             see the WARNING above)",
+            d.reference_floor_ut
+        )
+    } else if scalar {
+        format!(
+            " (the residual beyond the sensor's noise, {:.2} µT, is left unexplained: the field's own variation where \
+             the sensor moved, or something none of the effects tested accounts for)",
+            d.reference_floor_ut
+        )
+    } else {
+        format!(
+            " (the residual beyond the sensor's noise, {:.2} µT, is the reference's own error)",
+            d.reference_floor_ut
+        )
+    }
+}
+
+/// Where the residual departs from the noise (axes, orientation, channel), when the diagnosis says it does.
+fn located_line(d: &Diagnosis) -> String {
     let l = &d.located;
     let channel = l
         .channel
         .as_ref()
         .filter(|_| l.channel_share >= CHANNEL_SHARE_SHOWN);
-    // Where the residual departs from the noise is only worth saying when the diagnosis says it does.
-    if d.verdict == Finding::Mismatch
-        && (!l.axes.is_empty() || channel.is_some() || l.orientation.is_some())
+    if d.verdict != Finding::Mismatch
+        || (l.axes.is_empty() && channel.is_none() && l.orientation.is_none())
     {
-        let mut parts = Vec::new();
-        if !l.axes.is_empty() {
-            parts.push(format!("axes {}", l.axes.join(", ")));
-        }
-        if let Some(o) = l.orientation {
-            parts.push(format!(
-                "worst with the field along {} ({:.3} against {:.3} µT)",
-                o.direction, o.rms_ut, o.elsewhere_rms_ut
-            ));
-        }
-        if let Some(c) = channel {
-            parts.push(format!(
-                "follows {c} ({:.0} % of the residual's variance)",
-                100.0 * l.channel_share
-            ));
-        }
-        let _ = writeln!(out, "  located: {}", parts.join("; "));
+        return String::new();
     }
+    let mut parts = Vec::new();
+    if !l.axes.is_empty() {
+        parts.push(format!("axes {}", l.axes.join(", ")));
+    }
+    if let Some(o) = l.orientation {
+        parts.push(format!(
+            "worst with the field along {} ({:.3} against {:.3} µT)",
+            o.direction, o.rms_ut, o.elsewhere_rms_ut
+        ));
+    }
+    if let Some(c) = channel {
+        parts.push(format!(
+            "follows {c} ({:.0} % of the residual's variance)",
+            100.0 * l.channel_share
+        ));
+    }
+    format!("  located: {}\n", parts.join("; "))
+}
+
+/// The effects found (the noticeable ones one a line, the others on one), the ambiguities and the effects rejected.
+fn effect_lines(d: &Diagnosis) -> String {
+    let mut out = String::new();
     let (shown, small): (Vec<&FoundEffect>, Vec<&FoundEffect>) =
         d.effects.iter().partition(|e| noticeable(e));
     for e in &shown {
@@ -445,33 +514,6 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
     }
     for r in &d.rejected {
         let _ = writeln!(out, "  not modelled, {}: {}", r.id, r.why);
-    }
-    if !d.effects.is_empty() {
-        let _ = writeln!(
-            out,
-            "  model: residual {:.3} → {:.3} µT, on data the fit did not see {:.3} → {:.3} µT, noise {:.3} µT{}",
-            d.base.rms_ut,
-            d.extended.rms_ut,
-            d.base.holdout_rms_ut,
-            d.extended.holdout_rms_ut,
-            d.noise_floor_ut,
-            match (reference.is_empty(), scalar) {
-                (true, _) => String::new(),
-                (false, true) => format!(
-                    ", unexplained beyond the noise {:.3} µT",
-                    d.reference_floor_ut
-                ),
-                (false, false) =>
-                    format!(", the reference's own error {:.3} µT", d.reference_floor_ut),
-            }
-        );
-    }
-    if !d.untestable.is_empty() {
-        let _ = writeln!(
-            out,
-            "  not tested: {} effects this recording cannot show (which and why: the --report JSON)",
-            d.untestable.len()
-        );
     }
     out
 }

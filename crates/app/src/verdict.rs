@@ -308,13 +308,51 @@ const SPAN_SHARE: f64 = 0.5;
 /// `b` fitted without the corrections, with the residual they leave ([`target_model`]).
 pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessment {
     let model = cal.model();
-    let uncertainty = Some(FieldUncertainty::of(&cal.fit));
     // A noise that could not be measured explains none of the residual.
     let measured = |floor_ut: f64| if cal.noise_measured { floor_ut } else { 0.0 };
     let (residual_rms_ut, noise_floor_ut) = match &cal.diagnosis {
         Some(d) => (d.extended.rms_ut, measured(d.noise_floor_ut)),
         None => (cal.residual_rms_ut, measured(cal.noise_floor_ut)),
     };
+    let hints = hints(cal, rec);
+    let figures = Figures {
+        uncertainty: FieldUncertainty::of(&cal.fit),
+        magnitude_ut: model_field_ut(cal, rec).unwrap_or(f64::NAN),
+        inclination_deg: cal.field.vector().map(|f| frames::field_angles(f).1),
+    };
+    let corrections = model.corrections().count();
+    let without_corrections = (corrections > 0).then(|| {
+        let base = cal.base_model();
+        (
+            corrections,
+            figures.of(
+                base.a,
+                base.b_ut,
+                cal.residual_rms_ut,
+                measured(cal.noise_floor_ut),
+            ),
+        )
+    });
+    let linear_only = linear_only && without_corrections.is_some();
+    let chosen = match (&without_corrections, linear_only) {
+        (Some((_, f)), true) => f.clone(),
+        _ => figures.of(model.a, model.b_ut, residual_rms_ut, noise_floor_ut),
+    };
+    let verdict = match &chosen {
+        Ok(h) => judge(h, &hints),
+        Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
+    };
+    let verdict = overruled(verdict, cal, rec, &chosen);
+    Assessment {
+        heading: chosen.ok(),
+        without_corrections: without_corrections.map(|(n, f)| (n, f.ok())),
+        linear_only,
+        verdict,
+    }
+}
+
+/// What the verdict's advice can point at in a calibration of `rec`.
+fn hints(cal: &Calibration, rec: &Recording) -> Hints {
     let spans_s: Vec<(f64, f64)> = cal.diagnosis.as_ref().map_or_else(Vec::new, |d| {
         d.located
             .segments
@@ -326,7 +364,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0)
     });
     let covered: f64 = spans_s.iter().map(|(a, b)| b - a).sum();
-    let hints = Hints {
+    Hints {
         vector: cal.fit.is_vector(),
         spans_s: if covered < SPAN_SHARE * duration_s {
             spans_s
@@ -339,51 +377,59 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
         declination_off_deg: cal.diagnosis.as_ref().and_then(declination_off_deg),
         excluded_share: cal.samples.excluded as f64
             / (cal.samples.used + cal.samples.excluded).max(1) as f64,
-    };
-    let magnitude_ut = model_field_ut(cal, rec).unwrap_or(f64::NAN);
-    let direction = cal.field.vector().map(|f| frames::field_angles(f).1);
-    let figures = |a, b_ut, residual_rms_ut, noise_floor_ut| {
+    }
+}
+
+/// What the heading figures of a model are taken with: the fit's uncertainty and the local field.
+struct Figures {
+    uncertainty: FieldUncertainty,
+    /// The field's magnitude in the model's units, µT.
+    magnitude_ut: f64,
+    /// The field's inclination, when its direction is known, degrees.
+    inclination_deg: Option<f64>,
+}
+
+impl Figures {
+    /// The heading figures of the model `(a, b_ut)` leaving `residual_rms_ut` over a noise of `noise_floor_ut`; without
+    /// the field's direction, the least error any field can give (all of it horizontal), degrees.
+    fn of(
+        &self,
+        a: frames::Mat3,
+        b_ut: [f64; 3],
+        residual_rms_ut: f64,
+        noise_floor_ut: f64,
+    ) -> Result<HeadingErrors, f64> {
         let input = |field| HeadingInput {
             a,
             b_ut,
             field,
-            uncertainty: uncertainty.as_ref(),
+            uncertainty: Some(&self.uncertainty),
             residual_rms_ut,
             noise_floor_ut,
         };
-        match direction {
+        match self.inclination_deg {
             Some(inclination_deg) => Ok(heading_errors(&input(LocalField::new(
                 inclination_deg,
-                magnitude_ut,
+                self.magnitude_ut,
             )))),
-            // The least error any field can give: all of it horizontal.
-            None => Err(heading_errors(&input(LocalField::new(0.0, magnitude_ut)))
-                .left
-                .worst_deg),
-        }
-    };
-    let corrections = model.corrections().count();
-    let without_corrections = (corrections > 0).then(|| {
-        let base = cal.base_model();
-        (
-            corrections,
-            figures(
-                base.a,
-                base.b_ut,
-                cal.residual_rms_ut,
-                measured(cal.noise_floor_ut),
+            None => Err(
+                heading_errors(&input(LocalField::new(0.0, self.magnitude_ut)))
+                    .left
+                    .worst_deg,
             ),
-        )
-    });
-    let linear_only = linear_only && without_corrections.is_some();
-    let chosen = match (&without_corrections, linear_only) {
-        (Some((_, f)), true) => f.clone(),
-        _ => figures(model.a, model.b_ut, residual_rms_ut, noise_floor_ut),
-    };
-    let mut verdict = match &chosen {
-        Ok(h) => judge(h, &hints),
-        Err(lower_bound_deg) => judge_without_direction(*lower_bound_deg, &hints),
-    };
+        }
+    }
+}
+
+/// The verdict the heading figures gave, overruled where they do not tell the story: a reference in another
+/// convention or out of step, or off by a good part of the field; a calibration of the state between two stretches
+/// on another offset; a fit the last checks warn about.
+fn overruled(
+    mut verdict: Verdict,
+    cal: &Calibration,
+    rec: &Recording,
+    chosen: &Result<HeadingErrors, f64>,
+) -> Verdict {
     // A reference in another convention: its warning says what to try, not more recording.
     if let Some(b) = &cal.reference.convention {
         verdict = Verdict {
@@ -415,7 +461,7 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
     } else if verdict.grade != Grade::Good
         && let Some((rms_ut, field_ut)) = cal.fit.reference_off(&cal.field)
     {
-        let left_deg = match &chosen {
+        let left_deg = match chosen {
             Ok(h) => h.left.worst_deg,
             Err(lower_bound_deg) => *lower_bound_deg,
         };
@@ -463,10 +509,5 @@ pub fn assess(cal: &Calibration, rec: &Recording, linear_only: bool) -> Assessme
             cal.warnings.len()
         );
     }
-    Assessment {
-        heading: chosen.ok(),
-        without_corrections: without_corrections.map(|(n, f)| (n, f.ok())),
-        linear_only,
-        verdict,
-    }
+    verdict
 }
