@@ -9,8 +9,9 @@
 //! parameters file, so it is not included).
 
 use magcal_calib::coverage::Coverage;
+use magcal_calib::diagnosis::{self, DiagnosisInput, Disturbed, GrossSpan, Reference};
 use magcal_calib::effects::EffectId;
-use magcal_calib::noise;
+use magcal_calib::noise::{self, NoiseFloor};
 use magcal_calib::{Model, frames};
 use magcal_recording::Recording;
 
@@ -68,6 +69,10 @@ pub struct Check {
     pub verdict: Verdict,
     /// What the user must not miss: the parameters may not hold here for a reason the figures do not show.
     pub warnings: Vec<String>,
+    /// The spans the parameters leave grossly off, left out of the figures.
+    pub disturbed: Vec<GrossSpan>,
+    /// Rows in them.
+    pub samples_left_out: usize,
 }
 
 /// Why a parameters file cannot be applied to a recording.
@@ -124,15 +129,18 @@ pub struct Misfit {
     pub samples_used: usize,
 }
 
-/// The misfit of `calibrated_ut` (one per row of `rec`; non-finite rows are left out) against the expected field per
-/// row when given, otherwise against the magnitude `field_ut` (or, without it, the mean calibrated magnitude).
+/// The misfit of `calibrated_ut` (one per row of `rec`; non-finite rows and those `left_out` are left out) against
+/// the expected field per row when given, otherwise against the magnitude `field_ut` (or, without it, the mean
+/// calibrated magnitude).
 pub fn misfit(
     calibrated_ut: &[[f64; 3]],
     rec: &Recording,
     expected: Option<&[[f64; 3]]>,
     field_ut: Option<f64>,
+    left_out: Option<&[bool]>,
 ) -> Misfit {
-    let ok = |i: usize| calibrated_ut[i].iter().all(|v| v.is_finite());
+    let ok =
+        |i: usize| calibrated_ut[i].iter().all(|v| v.is_finite()) && left_out.is_none_or(|l| !l[i]);
     match expected {
         Some(e) => {
             let rows: Vec<usize> = (0..rec.len())
@@ -182,7 +190,8 @@ pub fn misfit(
 
 /// Applies `params` to `rec` and measures the fit; `field` is the world field (from the command line or the
 /// recording's metadata); `fitted_on_it`: `rec` is the recording the parameters were fitted on (corrections tied to
-/// its clock hold there).
+/// its clock hold there). The spans the parameters leave grossly off (a magnet on the board or near the bench) are
+/// located and left out of the figures, as a fit leaves them out ([`magcal_calib::diagnosis::disturbed`]).
 pub fn check(
     params: &ParamsFile,
     rec: &Recording,
@@ -192,47 +201,137 @@ pub fn check(
     let model = model_for(params, rec)?;
     let calibrated_ut = calibrate_rows(&model, rec);
     let expected = expected_field(rec, field).ok();
-    let Misfit {
-        against,
-        residual_rms_ut,
-        raw_residual_rms_ut,
-        samples_used,
-    } = misfit(&calibrated_ut, rec, expected.as_deref(), field.magnitude());
-    let noise_floor_ut =
-        noise::estimate(&rec.mag_ut, expected.as_deref()).calibrated_rms_ut(&model.a);
+    let noise = noise::estimate(&rec.mag_ut, expected.as_deref());
+    let disturbed = disturbed_spans(rec, field, &calibrated_ut, &model, noise);
+    let left_out = disturbed.as_ref().map(|d| d.left_out.as_slice());
+    let misfit = misfit(
+        &calibrated_ut,
+        rec,
+        expected.as_deref(),
+        field.magnitude(),
+        left_out,
+    );
+    let noise_floor_ut = noise.calibrated_rms_ut(&model.a);
     // Differences above the residual measure the rotation, not the noise: it then explains none of the residual.
-    let noise_unmeasured = !noise_measurable(noise_floor_ut, residual_rms_ut);
+    let noise_unmeasured = !noise_measurable(noise_floor_ut, misfit.residual_rms_ut);
     let noise_floor_ut = if noise_unmeasured {
         0.0
     } else {
         noise_floor_ut
     };
     let measured = match (&rec.quat, field.vector()) {
-        (Some(q), Some(f)) => measured_heading(q, f, &rec.mag_ut, &calibrated_ut),
+        (Some(q), Some(f)) => measured_heading(q, f, &rec.mag_ut, &calibrated_ut, left_out),
         _ => None,
     };
-    let magnitude_ut = match &against {
+    let magnitude_ut = match &misfit.against {
         Against::Magnitude { field_ut, .. } => *field_ut,
-        Against::Vector => field.magnitude().unwrap_or_else(|| {
-            let e = expected.as_deref().unwrap_or_default();
-            let n: Vec<f64> = e
-                .iter()
-                .map(|v| frames::norm(*v))
-                .filter(|n| n.is_finite())
-                .collect();
-            n.iter().sum::<f64>() / n.len().max(1) as f64
-        }),
+        Against::Vector => field
+            .magnitude()
+            .unwrap_or_else(|| mean_magnitude(expected.as_deref().unwrap_or_default())),
     };
+    let (heading, verdict) = graded(
+        &model,
+        &misfit,
+        field,
+        magnitude_ut,
+        (noise_floor_ut, noise_unmeasured),
+    );
+    let (spans, samples_left_out) = disturbed.map_or((Vec::new(), 0), |d| {
+        let n = d.rows_left_out();
+        (d.spans, n)
+    });
+    let mut warnings = apply_warnings(params, &misfit.against, fitted_on_it);
+    warnings.extend(left_out_warning(samples_left_out, rec.len(), spans.len()));
+    let verdict = overruled(verdict, &misfit, &calibrated_ut, rec, &warnings);
+    Ok(Check {
+        calibrated_ut,
+        against: misfit.against,
+        samples_used: misfit.samples_used,
+        residual_rms_ut: misfit.residual_rms_ut,
+        raw_residual_rms_ut: misfit.raw_residual_rms_ut,
+        noise_floor_ut,
+        measured,
+        heading,
+        verdict,
+        warnings,
+        disturbed: spans,
+        samples_left_out,
+    })
+}
+
+/// The spans the model leaves grossly off in `rec` (the calibrated readings `calibrated_ut`), against the expected
+/// field per row when the recording gives it, else the field's magnitude (given, or the calibrated readings' median
+/// magnitude); `None` when the recording is too short to tell.
+fn disturbed_spans(
+    rec: &Recording,
+    field: &ReferenceField,
+    calibrated_ut: &[[f64; 3]],
+    model: &Model,
+    noise: NoiseFloor,
+) -> Option<Disturbed> {
+    let reference = match (&rec.ref_ut, &rec.quat, field.vector()) {
+        (Some(r), _, _) => Reference::Field { expected_ut: r },
+        (None, Some(q), Some(f)) => Reference::Attitude {
+            quat: q,
+            field_ned_ut: f,
+        },
+        _ => Reference::Magnitude {
+            field_ut: field.magnitude().unwrap_or_else(|| {
+                let mut norms: Vec<f64> = calibrated_ut
+                    .iter()
+                    .map(|m| frames::norm(*m))
+                    .filter(|n| n.is_finite())
+                    .collect();
+                crate::checks::median(&mut norms)
+            }),
+        },
+    };
+    let input = DiagnosisInput {
+        raw_ut: &rec.mag_ut,
+        t_s: rec.t_s.as_deref(),
+        temp_c: rec.temp_c.as_deref(),
+        currents: rec
+            .currents
+            .iter()
+            .map(|c| (c.name.as_str(), c.values.as_slice()))
+            .collect(),
+        reference,
+        noise,
+        kept: None,
+        scale_ut: f64::NAN,
+    };
+    diagnosis::disturbed(&input, model).ok()
+}
+
+/// The mean magnitude of the finite vectors among `v`, µT.
+fn mean_magnitude(v: &[[f64; 3]]) -> f64 {
+    let n: Vec<f64> = v
+        .iter()
+        .map(|v| frames::norm(*v))
+        .filter(|n| n.is_finite())
+        .collect();
+    n.iter().sum::<f64>() / n.len().max(1) as f64
+}
+
+/// The heading figures of `model` on the recording (when the field's direction is known) and the verdict they give,
+/// with the misfit measured and the noise floor (`noise_floor_ut`, zero when not measured, and whether it was not).
+fn graded(
+    model: &Model,
+    misfit: &Misfit,
+    field: &ReferenceField,
+    magnitude_ut: f64,
+    (noise_floor_ut, noise_unmeasured): (f64, bool),
+) -> (Option<HeadingErrors>, Verdict) {
     let input = |field| HeadingInput {
         a: model.a,
         b_ut: model.b_ut,
         field,
         uncertainty: None,
-        residual_rms_ut,
+        residual_rms_ut: misfit.residual_rms_ut,
         noise_floor_ut,
     };
     let hints = Hints {
-        vector: against == Against::Vector,
+        vector: misfit.against == Against::Vector,
         spans_s: Vec::new(),
         coverage: 1.0,
         diagnosis_skipped: false,
@@ -240,7 +339,7 @@ pub fn check(
         declination_off_deg: None,
         excluded_share: 0.0,
     };
-    let (heading, mut verdict) = match field.vector() {
+    match field.vector() {
         Some(f) => {
             let (_, inclination_deg, _) = frames::field_angles(f);
             let h = heading_errors(&input(LocalField::new(inclination_deg, magnitude_ut)));
@@ -251,7 +350,20 @@ pub fn check(
             let lower = heading_errors(&input(LocalField::new(0.0, magnitude_ut)));
             (None, judge_without_direction(lower.left.worst_deg, &hints))
         }
-    };
+    }
+}
+
+/// The verdict the heading figures gave, overruled where they do not tell the story: parameters that fit worse than
+/// none, a calibrated field far outside the Earth's, readings that hardly turn, `warnings` on a good check.
+fn overruled(
+    mut verdict: Verdict,
+    misfit: &Misfit,
+    calibrated_ut: &[[f64; 3]],
+    rec: &Recording,
+    warnings: &[String],
+) -> Verdict {
+    let (residual_rms_ut, raw_residual_rms_ut) =
+        (misfit.residual_rms_ut, misfit.raw_residual_rms_ut);
     // Parameters that leave more misfit than none at all are another sensor's (or another state's).
     if verdict.grade != Grade::Good && residual_rms_ut > raw_residual_rms_ut {
         verdict.todo = format!(
@@ -260,10 +372,9 @@ pub fn check(
              this recording with magcal-fit instead"
         );
     }
-    let warnings = apply_warnings(params, &against, fitted_on_it);
     // A calibrated field far outside the Earth's range is no calibration of these readings, however round it is.
     let (low, high) = crate::checks::EARTH_FIELD_UT;
-    if let Against::Magnitude { field_ut, .. } = against
+    if let Against::Magnitude { field_ut, .. } = misfit.against
         && !(0.5 * low..=1.5 * high).contains(&field_ut)
     {
         verdict = Verdict {
@@ -276,7 +387,7 @@ pub fn check(
                     .to_owned(),
         };
     }
-    if let Some(flat) = hardly_turns(&calibrated_ut, &rec.mag_ut) {
+    if let Some(flat) = hardly_turns(calibrated_ut, &rec.mag_ut) {
         verdict = flat;
     }
     if verdict.grade == Grade::Good && !warnings.is_empty() {
@@ -293,17 +404,22 @@ pub fn check(
     if verdict.grade == Grade::Good {
         "use them: they hold on this recording too".clone_into(&mut verdict.todo);
     }
-    Ok(Check {
-        calibrated_ut,
-        against,
-        samples_used,
-        residual_rms_ut,
-        raw_residual_rms_ut,
-        noise_floor_ut,
-        measured,
-        heading,
-        verdict,
-        warnings,
+    verdict
+}
+
+/// From this share of a recording's rows in disturbed spans, the check leaves out enough to say so in a warning.
+pub const LEFT_OUT_WARNED: f64 = 0.1;
+
+/// A warning when the disturbed spans left out of the check hold [`LEFT_OUT_WARNED`] of the `rows` or more.
+fn left_out_warning(left_out: usize, rows: usize, spans: usize) -> Option<String> {
+    let share = left_out as f64 / rows.max(1) as f64;
+    (share >= LEFT_OUT_WARNED).then(|| {
+        format!(
+            "{left_out} samples ({:.0} % of the recording) in {spans} disturbed span(s), listed below, were left out \
+             of the check: the parameters were judged on the rest. Check them again on a recording made away from \
+             magnets and metal to judge them on all of it",
+            100.0 * share
+        )
     })
 }
 
@@ -395,18 +511,22 @@ fn apply_warnings(params: &ParamsFile, against: &Against, fitted_on_it: bool) ->
     warnings
 }
 
-/// The heading error per sample with the attitude: the azimuth of the reading turned into NED minus the field's.
+/// The heading error per sample with the attitude (but those `left_out`): the azimuth of the reading turned into
+/// NED minus the field's.
 fn measured_heading(
     quat: &[[f64; 4]],
     field_ned_ut: [f64; 3],
     raw_ut: &[[f64; 3]],
     calibrated_ut: &[[f64; 3]],
+    left_out: Option<&[bool]>,
 ) -> Option<MeasuredHeading> {
     let north = azimuth(field_ned_ut);
     let mut raw_errors = Vec::new();
     let mut errors = Vec::new();
-    for ((q, raw), cal) in quat.iter().zip(raw_ut).zip(calibrated_ut) {
-        if !(q.iter().all(|v| v.is_finite()) && cal.iter().all(|v| v.is_finite())) {
+    for (i, ((q, raw), cal)) in quat.iter().zip(raw_ut).zip(calibrated_ut).enumerate() {
+        if !(q.iter().all(|v| v.is_finite()) && cal.iter().all(|v| v.is_finite()))
+            || left_out.is_some_and(|l| l[i])
+        {
             continue;
         }
         let r = frames::quat_to_matrix(*q);

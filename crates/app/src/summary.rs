@@ -105,9 +105,17 @@ pub fn check_summary(
             }
         ),
     };
+    let left_out = if c.samples_left_out > 0 {
+        format!(
+            " ({} in disturbed spans left out of the check)",
+            c.samples_left_out
+        )
+    } else {
+        String::new()
+    };
     let _ = writeln!(
         out,
-        "{recording}: {} parameters{fitted_on}; {} samples {against}",
+        "{recording}: {} parameters{fitted_on}; {} samples {against}{left_out}",
         params.method, c.samples_used
     );
     let what = match c.against {
@@ -151,6 +159,17 @@ pub fn check_summary(
     out += &verdict_line(&c.verdict);
     for w in &c.warnings {
         let _ = writeln!(out, "  WARNING: {w}");
+    }
+    const SPANS_SHOWN: usize = 6;
+    for sp in c.disturbed.iter().take(SPANS_SHOWN) {
+        let _ = writeln!(out, "  disturbance {}", sp.explanation);
+    }
+    if c.disturbed.len() > SPANS_SHOWN {
+        let _ = writeln!(
+            out,
+            "  and {} more disturbances",
+            c.disturbed.len() - SPANS_SHOWN
+        );
     }
     out
 }

@@ -167,82 +167,131 @@ pub(crate) fn separate(a: EffectId, b: EffectId) -> (String, String) {
     (format!("{} and {}: {why}", a, b), experiment.to_owned())
 }
 
-/// A gross span in words (`when`: its time or samples), with the reason it was left out when it was.
-pub(crate) fn span(sp: &Span, when: &str, vector: bool) -> String {
+/// What became of a gross span, for its wording.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Fate {
+    /// The calibration's: modelled, or left out of it (with the reason when modelling it was declined).
+    Calibration,
+    /// A check of parameters fitted elsewhere: left out of the check.
+    Check,
+}
+
+/// A gross span in words (`when`: its time or samples): what it was, and what became of it.
+pub(crate) fn span(sp: &Span, when: &str, vector: bool, fate: Fate) -> String {
+    let (what, sep, in_calibration) = span_parts(sp, vector);
+    match fate {
+        Fate::Calibration => format!("{when}: {what}{sep}{in_calibration}"),
+        Fate::Check => format!("{when}: {what}{sep}left out of the check"),
+    }
+}
+
+/// A gross span's description, the separator before its fate, and its fate in the calibration (with the reason it
+/// was left out when modelling it was declined).
+fn span_parts(sp: &Span, vector: bool) -> (String, &'static str, String) {
+    const LEFT_OUT: &str = "left out of the calibration";
     match sp.kind {
         SpanKind::SensorFixed { offset_ut, .. }
         | SpanKind::RoomFixed {
             field_ned_ut: offset_ut,
-        } if !sp.turned => {
+        } if !sp.turned => (
             format!(
-                "{when}: a constant field of {:.1} µT while the sensor hardly turned (fixed to the sensor or to \
-                 the room: they cannot be told apart, nor from something that moved) — left out of the calibration",
+                "a constant field of {:.1} µT while the sensor hardly turned (fixed to the sensor or to the room: \
+                 they cannot be told apart, nor from something that moved)",
                 frames::norm(offset_ut)
-            )
-        }
+            ),
+            " — ",
+            LEFT_OUT.to_owned(),
+        ),
         SpanKind::SensorFixed {
             offset_ut,
             told_apart: true,
         }
         | SpanKind::RoomFixed {
             field_ned_ut: offset_ut,
-        } if sp.declined.is_some() => format!(
-            "{when}: a field of {:.1} µT fixed to the {} — left out of the calibration: {}",
-            frames::norm(offset_ut),
-            if matches!(sp.kind, SpanKind::RoomFixed { .. }) {
-                "room"
-            } else {
-                "sensor"
-            },
-            match sp.declined {
-                Some(Declined::Undetermined) => {
-                    "modelled, it left the fit without a solution"
+        } if sp.declined.is_some() => (
+            format!(
+                "a field of {:.1} µT fixed to the {}",
+                frames::norm(offset_ut),
+                if matches!(sp.kind, SpanKind::RoomFixed { .. }) {
+                    "room"
+                } else {
+                    "sensor"
                 }
-                _ =>
-                    "with its samples kept and modelled, the clean part fitted no better on held-out data",
-            }
+            ),
+            " — ",
+            format!(
+                "{LEFT_OUT}: {}",
+                match sp.declined {
+                    Some(Declined::Undetermined) => "modelled, it left the fit without a solution",
+                    _ =>
+                        "with its samples kept and modelled, the clean part fitted no better on held-out data",
+                }
+            ),
         ),
         SpanKind::SensorFixed {
             offset_ut,
             told_apart: true,
-        } => format!(
-            "{when}: a field of {:.1} µT fixed to the sensor — modelled (bias_window), the samples it explains kept",
-            frames::norm(offset_ut)
+        } => (
+            format!(
+                "a field of {:.1} µT fixed to the sensor",
+                frames::norm(offset_ut)
+            ),
+            " — ",
+            "modelled (bias_window), the samples it explains kept".to_owned(),
         ),
-        SpanKind::SensorFixed { offset_ut, .. } => format!(
-            "{when}: a constant field of {:.1} µT, fixed to the sensor or to the room: the two cannot be told apart \
-             here{} — left out of the calibration",
-            frames::norm(offset_ut),
-            if vector {
-                ""
-            } else {
-                " (the magnitude alone does not show the frame)"
-            }
+        SpanKind::SensorFixed { offset_ut, .. } => (
+            format!(
+                "a constant field of {:.1} µT, fixed to the sensor or to the room: the two cannot be told apart \
+                 here{}",
+                frames::norm(offset_ut),
+                if vector {
+                    ""
+                } else {
+                    " (the magnitude alone does not show the frame)"
+                }
+            ),
+            " — ",
+            LEFT_OUT.to_owned(),
         ),
-        SpanKind::RoomFixed { field_ned_ut } => format!(
-            "{when}: a field of {:.1} µT fixed in the room — modelled (disturbance), the samples it explains kept",
-            frames::norm(field_ned_ut)
+        SpanKind::RoomFixed { field_ned_ut } => (
+            format!(
+                "a field of {:.1} µT fixed in the room",
+                frames::norm(field_ned_ut)
+            ),
+            " — ",
+            "modelled (disturbance), the samples it explains kept".to_owned(),
         ),
-        SpanKind::MagnitudeShift { shift_ut } => format!(
-            "{when}: the field's magnitude {} by {:.1} µT throughout while the sensor turned — a field fixed in \
-             the room (a magnet or steel placed nearby, then taken away); left out of the calibration",
-            if shift_ut > 0.0 { "raised" } else { "lowered" },
-            shift_ut.abs()
+        SpanKind::MagnitudeShift { shift_ut } => (
+            format!(
+                "the field's magnitude {} by {:.1} µT throughout while the sensor turned — a field fixed in the room \
+                 (a magnet or steel placed nearby, then taken away)",
+                if shift_ut > 0.0 { "raised" } else { "lowered" },
+                shift_ut.abs()
+            ),
+            "; ",
+            LEFT_OUT.to_owned(),
         ),
-        SpanKind::Moving => format!(
-            "{when}: up to {:.1} µT, changing as the sensor moved — a magnet or steel nearby; left out of the \
-             calibration",
-            sp.peak_ut
+        SpanKind::Moving => (
+            format!(
+                "up to {:.1} µT, changing as the sensor moved — a magnet or steel nearby",
+                sp.peak_ut
+            ),
+            "; ",
+            LEFT_OUT.to_owned(),
         ),
-        SpanKind::Unexplained => format!(
-            "{when}: up to {:.1} µT, {} — left out of the calibration",
-            sp.peak_ut,
-            if sp.end - sp.start <= 3 {
-                "a glitch of a few samples"
-            } else {
-                "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
-                 it)"
-            }
+        SpanKind::Unexplained => (
+            format!(
+                "up to {:.1} µT, {}",
+                sp.peak_ut,
+                if sp.end - sp.start <= 3 {
+                    "a glitch of a few samples"
+                } else {
+                    "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
+                     it)"
+                }
+            ),
+            " — ",
+            LEFT_OUT.to_owned(),
         ),
     }
 }

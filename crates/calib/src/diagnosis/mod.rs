@@ -32,11 +32,15 @@
 //! 8. **Refit around the spans** ([`refit`]): when the diagnosis left out rows the base fit kept, the base fit
 //!    again without them — if that predicts held-out rows better — and the diagnosis again on it.
 //!
+//! Parameters fitted elsewhere are checked on a recording through stages 1–3 with the model fixed
+//! ([`disturbed()`]): the spans it leaves grossly off, classified and worded the same way, left out of the check.
+//!
 //! The vector method's problem has three rows per sample (`A·B̂ + b − Σ G·θ = B0`, the raw readings centred and the
 //! errors-in-variables correction applied as in [`crate::vector`]); the scalar method's has one (the magnitude
 //! residual linearised at the base fit, so body-fixed effects enter through `u·δ`, `u` the field direction).
 
 mod candidates;
+mod disturbed;
 mod explain;
 mod findings;
 mod fitted;
@@ -54,6 +58,7 @@ mod stats;
 mod timing;
 
 pub use candidates::Untestable;
+pub use disturbed::{Disturbed, disturbed};
 pub use findings::{
     Ambiguity, Diagnosis, FitSummary, FoundEffect, GrossSpan, LinearSe, Param, ParamValue,
     Rejected, Residuals, Verdict,

@@ -10,7 +10,7 @@ use crate::model::Model;
 use crate::scan;
 
 use super::candidates::{self, Candidate, Untestable};
-use super::explain;
+use super::explain::{self, Fate};
 use super::findings::{
     Ambiguity, Diagnosis, FitSummary, FoundEffect, GrossSpan, Rejected, Residuals, Verdict,
 };
@@ -135,7 +135,11 @@ pub(crate) fn report(
     let untestable = untestable(&mut round);
     let channels = setup.channels();
     let (located, base_rows, used) = located(setup, &round, base_residual, &channels);
-    let spans: Vec<GrossSpan> = round.spans.iter().map(|sp| gross_span(setup, sp)).collect();
+    let spans: Vec<GrossSpan> = round
+        .spans
+        .iter()
+        .map(|sp| gross_span(setup, sp, Fate::Calibration))
+        .collect();
     let located = Located {
         segments: spans
             .iter()
@@ -538,8 +542,8 @@ fn sizes(setup: &Setup<'_>, chosen: &[Chosen], residual: &[[f64; 3]]) -> Vec<(f6
         .collect()
 }
 
-/// A span as the report gives it, in words ([`explain::span`]).
-fn gross_span(setup: &Setup<'_>, sp: &Span) -> GrossSpan {
+/// A span as the report gives it, in words ([`explain::span`]), with its `fate`.
+pub(crate) fn gross_span(setup: &Setup<'_>, sp: &Span, fate: Fate) -> GrossSpan {
     let s = setup.samples;
     let (t0_s, t1_s) = span_time(s, sp);
     let when = if s.has_time {
@@ -554,8 +558,8 @@ fn gross_span(setup: &Setup<'_>, sp: &Span) -> GrossSpan {
         peak_ut: sp.peak_ut,
         rms_ut: sp.rms_ut,
         kind: sp.kind,
-        modelled: sp.modelled(),
-        explanation: explain::span(sp, &when, setup.vector),
+        modelled: fate == Fate::Calibration && sp.modelled(),
+        explanation: explain::span(sp, &when, setup.vector, fate),
         kept_samples: 0,
     }
 }

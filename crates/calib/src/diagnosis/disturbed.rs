@@ -1,0 +1,75 @@
+//! The disturbed spans of a recording under a model fitted elsewhere — how a calibration is checked on a second
+//! recording: stages 1–3 of the diagnosis with the model fixed. The rows its residual leaves grossly off make the
+//! spans, as the robust fit's do in a fit ([`crate::robust::gross_spans`]), and each is classified and worded as the
+//! diagnosis does (a field fixed to the sensor, to the room, one that moved with the sensor…); all of them are left
+//! out of the check, since nothing is modelled there.
+
+use crate::FitError;
+use crate::effects::Effect;
+use crate::model::Model;
+use crate::robust::{self, RobustProblem};
+use crate::scalar::ScalarProblem;
+use crate::vector::VectorProblem;
+
+use super::explain::Fate;
+use super::findings::GrossSpan;
+use super::report::gross_span;
+use super::samples::Samples;
+use super::setup::Setup;
+use super::{DiagnosisInput, MIN_SAMPLES, gross};
+
+/// What a model fitted elsewhere leaves disturbed in a recording.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Disturbed {
+    /// The spans, in time order, in words.
+    pub spans: Vec<GrossSpan>,
+    /// Per recording row, whether it lies in one of them (and is left out of the check).
+    pub left_out: Vec<bool>,
+}
+
+impl Disturbed {
+    /// Rows left out.
+    pub fn rows_left_out(&self) -> usize {
+        self.left_out.iter().filter(|l| **l).count()
+    }
+}
+
+/// The spans `model` leaves grossly off in the recording of `input` (its `kept` and `scale_ut` are not used: the
+/// gross rows and their scale are this model's).
+pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed, FitError> {
+    let samples = Samples::gather(input, model, false);
+    if samples.len() < MIN_SAMPLES {
+        return Err(FitError::TooFewSamples {
+            needed: MIN_SAMPLES,
+            got: samples.len(),
+        });
+    }
+    let setup = Setup::new(input, &samples, model);
+    let corrections: Vec<Effect> = model.corrections().copied().collect();
+    let residual = setup.residual(&model.a, model.b_ut, &corrections);
+    let scale = setup.scale(&residual);
+    let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
+    let times = samples.has_time.then_some(&samples.t[..]);
+    let tail = if setup.vector {
+        VectorProblem::RAMP_TAIL
+    } else {
+        ScalarProblem::RAMP_TAIL
+    };
+    let kept = robust::outside(
+        &robust::gross_spans(&sizes, scale, times, tail),
+        sizes.len(),
+    );
+    let stage = gross::stage(&setup, &residual, &kept, scale, &[]);
+    let mut left_out = vec![false; input.raw_ut.len()];
+    for (k, &row) in samples.rows.iter().enumerate() {
+        left_out[row] = !stage.clean[k];
+    }
+    Ok(Disturbed {
+        spans: stage
+            .spans
+            .iter()
+            .map(|sp| gross_span(&setup, sp, Fate::Check))
+            .collect(),
+        left_out,
+    })
+}
