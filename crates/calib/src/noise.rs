@@ -146,6 +146,8 @@ fn binomial(n: usize, k: usize) -> f64 {
 
 /// Orders of the differences tried.
 const ORDERS: usize = 4;
+/// Truncating a Gaussian at ±4σ keeps 99.893 % of its variance.
+const KEPT_AT_4_SIGMA: f64 = 0.998_93;
 
 /// The noise σ per axis from the 1st to 4th differences, robust to jumps: per order, the median absolute
 /// difference sets a scale, and the RMS of the differences within four of that scale (a Gaussian loses 0.1 % of its
@@ -155,115 +157,18 @@ const ORDERS: usize = 4;
 /// ([`DIFFERENCES_MOST`] samples); NaN for an order the readings are too few for.
 fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
     let n = raw_ut.len();
-    let usable = |o: usize| n > o + 3;
-    let count = |o: usize| n.saturating_sub(o + 1);
-    // Order o + 1's differences at i: Σ_j (−1)^j·C(o + 1, j)·x[i + j], j = 0..=o + 1, from the five readings there.
-    fn taps<const T: usize>(c: [f64; T], w: &[[f64; 3]; 5]) -> [f64; 3] {
-        std::array::from_fn(|k| c.iter().zip(w).map(|(c, v)| c * v[k]).sum())
-    }
-    let window = |i: usize| -> [[f64; 3]; 5] {
-        std::array::from_fn(|j| raw_ut.get(i + j).copied().unwrap_or([f64::NAN; 3]))
-    };
-    // Order o + 1 alone (the probes), and every order at once (the pass).
-    let order = |o: usize, w: &[[f64; 3]; 5]| match o {
-        0 => taps([1.0, -1.0], w),
-        1 => taps([1.0, -2.0, 1.0], w),
-        2 => taps([1.0, -3.0, 3.0, -1.0], w),
-        _ => taps([1.0, -4.0, 6.0, -4.0, 1.0], w),
-    };
-    let diffs = |w: &[[f64; 3]; 5]| -> [[f64; 3]; ORDERS] { std::array::from_fn(|o| order(o, w)) };
-    let diff = |o: usize, i: usize| order(o, &window(i));
-    type Sums = [([f64; 3], [usize; 3]); ORDERS];
-    let rms_within = |limit: &[[f64; 3]; ORDERS]| -> [[f64; 3]; ORDERS] {
-        let sums: Sums = chunks::fold_spread(
-            count(0),
-            DIFFERENCES_MOST,
-            |range| {
-                let mut sums: Sums = [([0.0; 3], [0usize; 3]); ORDERS];
-                // The differences of the orders that exist at a sample, added in sample order.
-                let mut add = |all: [[f64; 3]; ORDERS], orders: usize| {
-                    for ((sum, m), (d, limit)) in
-                        sums.iter_mut().zip(all.iter().zip(limit)).take(orders)
-                    {
-                        for k in 0..3 {
-                            let within = d[k].abs() <= limit[k];
-                            sum[k] += if within { d[k] * d[k] } else { 0.0 };
-                            m[k] += usize::from(within);
-                        }
-                    }
-                };
-                // Where all five readings exist, straight from the slice; the last few samples the long way.
-                let inner = range.start..range.end.min(n.saturating_sub(ORDERS)).max(range.start);
-                if !inner.is_empty() {
-                    for w in raw_ut[inner.start..inner.end + ORDERS].windows(ORDERS + 1) {
-                        add(diffs(w.try_into().expect("five readings")), ORDERS);
-                    }
-                }
-                for i in inner.end..range.end {
-                    add(
-                        diffs(&window(i)),
-                        (0..ORDERS).filter(|&o| i < count(o)).count(),
-                    );
-                }
-                sums
-            },
-            |a, b| {
-                std::array::from_fn(|o| {
-                    (
-                        std::array::from_fn(|k| a[o].0[k] + b[o].0[k]),
-                        std::array::from_fn(|k| a[o].1[k] + b[o].1[k]),
-                    )
-                })
-            },
-        )
-        .unwrap_or([([0.0; 3], [0usize; 3]); ORDERS]);
-        sums.map(|(sum, m)| {
-            std::array::from_fn(|k| {
-                if m[k] == 0 {
-                    0.0
-                } else {
-                    (sum[k] / m[k] as f64).sqrt()
-                }
-            })
-        })
-    };
-    let mad = chunks::parts(ORDERS, |o| {
-        if !usable(o) {
-            return [f64::NAN; 3];
-        }
-        // One axis at a time, so that the probe is one column of values.
-        let stride = count(o).div_ceil(MEDIAN_PROBE).max(1);
-        std::array::from_fn(|k| {
-            let abs: Vec<f64> = (0..count(o))
-                .step_by(stride)
-                .map(|i| diff(o, i)[k].abs())
-                .collect();
-            robust::median(&abs)
-        })
-    });
-    let mad: [[f64; 3]; ORDERS] = std::array::from_fn(|o| mad[o]);
-    // Truncating a Gaussian at ±4σ keeps 99.893 % of its variance.
-    const KEPT_AT_4_SIGMA: f64 = 0.998_93;
-    let limit = mad.map(|m| {
-        m.map(|m| {
-            if m > 0.0 {
-                4.0 * m / 0.674_489_75
-            } else {
-                f64::INFINITY
-            }
-        })
-    });
-    let within = rms_within(&limit);
+    let mad = median_abs_differences(raw_ut);
+    let within = rms_within(raw_ut, &four_sigma_limits(&mad));
     let coarse = if (0..ORDERS)
-        .filter(|&o| usable(o))
+        .filter(|&o| order_usable(n, o))
         .any(|o| mad[o].iter().any(|m| m.is_nan() || *m <= 0.0))
     {
-        rms_within(&within.map(|w| w.map(|r| 5.0 * r)))
+        rms_within(raw_ut, &within.map(|w| w.map(|r| 5.0 * r)))
     } else {
         [[0.0; 3]; ORDERS]
     };
     std::array::from_fn(|o| {
-        if !usable(o) {
+        if !order_usable(n, o) {
             return [f64::NAN; 3];
         }
         let norm = binomial(2 * (o + 1), o + 1).sqrt();
@@ -275,6 +180,164 @@ fn difference_sigmas(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
             }
         })
     })
+}
+
+/// Whether `n` readings are enough for order `o + 1`'s figure.
+fn order_usable(n: usize, o: usize) -> bool {
+    n > o + 3
+}
+
+/// The number of order `o + 1`'s differences of `n` readings.
+fn difference_count(n: usize, o: usize) -> usize {
+    n.saturating_sub(o + 1)
+}
+
+/// The taps `c` applied to the first readings of `w`, per axis.
+#[inline]
+fn taps<const T: usize>(c: [f64; T], w: &[[f64; 3]; 5]) -> [f64; 3] {
+    std::array::from_fn(|k| c.iter().zip(w).map(|(c, v)| c * v[k]).sum())
+}
+
+/// Order `o + 1`'s difference at the first of the five readings `w`: `Σ_j (−1)^j·C(o + 1, j)·w[j]`, `j = 0..=o + 1`.
+#[inline]
+fn difference(o: usize, w: &[[f64; 3]; 5]) -> [f64; 3] {
+    match o {
+        0 => taps([1.0, -1.0], w),
+        1 => taps([1.0, -2.0, 1.0], w),
+        2 => taps([1.0, -3.0, 3.0, -1.0], w),
+        _ => taps([1.0, -4.0, 6.0, -4.0, 1.0], w),
+    }
+}
+
+/// Every order's difference at the first of the five readings `w`.
+#[inline]
+fn differences(w: &[[f64; 3]; 5]) -> [[f64; 3]; ORDERS] {
+    std::array::from_fn(|o| difference(o, w))
+}
+
+/// The five readings from sample `i` on, NaN past the end.
+#[inline]
+fn window(raw_ut: &[[f64; 3]], i: usize) -> [[f64; 3]; 5] {
+    std::array::from_fn(|j| raw_ut.get(i + j).copied().unwrap_or([f64::NAN; 3]))
+}
+
+/// Per order and axis, the median absolute difference, from at most [`MEDIAN_PROBE`] differences strided evenly
+/// over the readings (NaN for an order the readings are too few for); the orders on all threads.
+fn median_abs_differences(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
+    let n = raw_ut.len();
+    let mad = chunks::parts(ORDERS, |o| {
+        if !order_usable(n, o) {
+            return [f64::NAN; 3];
+        }
+        // One axis at a time, so that the probe is one column of values.
+        let count = difference_count(n, o);
+        let stride = count.div_ceil(MEDIAN_PROBE).max(1);
+        std::array::from_fn(|k| {
+            let abs: Vec<f64> = (0..count)
+                .step_by(stride)
+                .map(|i| difference(o, &window(raw_ut, i))[k].abs())
+                .collect();
+            robust::median(&abs)
+        })
+    });
+    std::array::from_fn(|o| mad[o])
+}
+
+/// The limits within which differences count: four standard deviations of a Gaussian whose median absolute value
+/// is `mad`, or none where `mad` is not positive.
+fn four_sigma_limits(mad: &[[f64; 3]; ORDERS]) -> [[f64; 3]; ORDERS] {
+    mad.map(|m| {
+        m.map(|m| {
+            if m > 0.0 {
+                4.0 * m / 0.674_489_75
+            } else {
+                f64::INFINITY
+            }
+        })
+    })
+}
+
+/// Per axis, the sum of the squares of one order's differences within their limit, and how many there are.
+#[derive(Clone, Copy, Debug, Default)]
+struct WithinSums {
+    /// Sum of the squared differences within the limit, µT².
+    sum_sq: [f64; 3],
+    /// Differences within the limit.
+    count: [usize; 3],
+}
+
+impl WithinSums {
+    /// Adds the difference `d` where it lies within `limit`, per axis.
+    #[inline]
+    fn add(&mut self, d: &[f64; 3], limit: &[f64; 3]) {
+        for k in 0..3 {
+            let within = d[k].abs() <= limit[k];
+            self.sum_sq[k] += if within { d[k] * d[k] } else { 0.0 };
+            self.count[k] += usize::from(within);
+        }
+    }
+
+    /// The sums of two runs of samples, `self`'s first.
+    fn merge(self, o: WithinSums) -> WithinSums {
+        WithinSums {
+            sum_sq: std::array::from_fn(|k| self.sum_sq[k] + o.sum_sq[k]),
+            count: std::array::from_fn(|k| self.count[k] + o.count[k]),
+        }
+    }
+
+    /// The RMS of the differences within the limit per axis, µT (zero where none is).
+    fn rms(&self) -> [f64; 3] {
+        std::array::from_fn(|k| {
+            if self.count[k] == 0 {
+                0.0
+            } else {
+                (self.sum_sq[k] / self.count[k] as f64).sqrt()
+            }
+        })
+    }
+}
+
+/// Per order and axis, the RMS of the differences within `limit`, from one pass for every order at once on all
+/// threads, over the readings or blocks spread evenly over them ([`DIFFERENCES_MOST`] samples).
+fn rms_within(raw_ut: &[[f64; 3]], limit: &[[f64; 3]; ORDERS]) -> [[f64; 3]; ORDERS] {
+    chunks::fold_spread(
+        difference_count(raw_ut.len(), 0),
+        DIFFERENCES_MOST,
+        |range| sums_within(raw_ut, range, limit),
+        |a, b| std::array::from_fn(|o| a[o].merge(b[o])),
+    )
+    .unwrap_or([WithinSums::default(); ORDERS])
+    .map(|sums| sums.rms())
+}
+
+/// Per order, the sums of the differences within `limit` at the samples of `range`: the differences of the orders
+/// that exist at a sample, added in sample order.
+fn sums_within(
+    raw_ut: &[[f64; 3]],
+    range: std::ops::Range<usize>,
+    limit: &[[f64; 3]; ORDERS],
+) -> [WithinSums; ORDERS] {
+    let n = raw_ut.len();
+    let mut sums = [WithinSums::default(); ORDERS];
+    let mut add = |all: [[f64; 3]; ORDERS], orders: usize| {
+        for (sum, (d, limit)) in sums.iter_mut().zip(all.iter().zip(limit)).take(orders) {
+            sum.add(d, limit);
+        }
+    };
+    // Where all five readings exist, straight from the slice; the last few samples the long way.
+    let inner = range.start..range.end.min(n.saturating_sub(ORDERS)).max(range.start);
+    if !inner.is_empty() {
+        for w in raw_ut[inner.start..inner.end + ORDERS].windows(ORDERS + 1) {
+            add(differences(w.try_into().expect("five readings")), ORDERS);
+        }
+    }
+    for i in inner.end..range.end {
+        add(
+            differences(&window(raw_ut, i)),
+            (0..ORDERS).filter(|&o| i < difference_count(n, o)).count(),
+        );
+    }
+    sums
 }
 
 /// The pooled spread inside runs of consecutive samples whose reference is identical, if they give enough degrees of

@@ -155,36 +155,87 @@ impl<F> Robust<F> {
 
 /// The robust fit of a problem (see the module docs); `t_s` is each sample's time, when known.
 pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<P::Fit>, FitError> {
-    let n = problem.len();
-    let stride = n.div_ceil(SEED_SAMPLES).max(1);
+    let Some(seed) = best_seed(problem) else {
+        // No seed could be fitted: the full data decides (and its error says why).
+        return fit_all(problem);
+    };
+    let (fit, residual_ut) = reweight_all(problem, seed);
+    let mut robust = exclude_gross_spans(problem, fit, residual_ut, t_s)?;
+    // Windows shifted too little to be gross (a field fixed in the room or to the sensor, in the magnitude) go too,
+    // when the samples are in time order.
+    if t_s.is_some() {
+        exclude_shifted_windows(problem, &mut robust);
+    }
+    // Samples the fit cannot use inside a span are not excluded by it.
+    for (k, e) in robust.kept.iter_mut().zip(&robust.residual_ut) {
+        *k |= !e.is_finite();
+    }
+    Ok(robust)
+}
+
+/// A seed's fit, the scale of its residual and how much of the sphere of directions the samples cover seen from it
+/// ([`RobustProblem::support`]).
+struct Seed<F> {
+    /// The seed's fit.
+    fit: F,
+    /// The scale of its residual (see [`scale`]).
+    scale: f64,
+    /// The share of the directions the samples cover seen from it.
+    support: f64,
+}
+
+/// The best seed (steps 1 and 2 of the module docs), fitted on a subsample of at most [`SEED_SAMPLES`] samples;
+/// `None` when no seed could be fitted.
+fn best_seed<P: RobustProblem>(problem: &P) -> Option<P::Fit> {
+    let stride = problem.len().div_ceil(SEED_SAMPLES).max(1);
     let sub = (stride > 1).then(|| problem.every(stride));
     let seeds = sub.as_ref().unwrap_or(problem);
+    let fitted = fit_seeds(seeds);
+    pick_seed(seeds, fitted)
+}
+
+/// Each seed's fit and the scale of its residual (`None` where it could not be fitted), on all threads: one per
+/// span of [`seed_spans`], then one from the problem's bulk weights when it has them.
+fn fit_seeds<P: RobustProblem>(seeds: &P) -> Vec<Option<(P::Fit, f64)>> {
     let m = seeds.len();
-    // The seeds are fitted on all threads, then compared in order.
     let spans = seed_spans(m);
     let bulk = seeds.bulk_weights();
-    let fitted = chunks::parts(spans.len() + usize::from(bulk.is_some()), |k| {
+    chunks::parts(spans.len() + usize::from(bulk.is_some()), |k| {
         let Some(&(a, b)) = spans.get(k) else {
             return reweight(seeds, bulk.as_deref()?, SEED_ITERATIONS);
         };
         let mut w = vec![0.0; m];
         w[a..b].fill(1.0);
         reweight(seeds, &w, SEED_ITERATIONS)
-    });
-    // Plausible seeds first, then those the samples support, then the smallest scale (see the module docs). Seeds
-    // compare in raw units: a fit that shrinks the readings (a scalar fit's huge sphere through a cap, at a tiny gain)
-    // shrinks its residuals with them.
-    let fitted: Vec<(P::Fit, f64, f64)> = fitted
+    })
+}
+
+/// The best of the `fitted` seeds, compared in order: plausible seeds first, then those the samples support, then
+/// the smallest scale (see the module docs).
+fn pick_seed<P: RobustProblem>(seeds: &P, fitted: Vec<Option<(P::Fit, f64)>>) -> Option<P::Fit> {
+    // Seeds compare in raw units: a fit that shrinks the readings (a scalar fit's huge sphere through a cap, at a
+    // tiny gain) shrinks its residuals with them.
+    let fitted: Vec<Seed<P::Fit>> = fitted
         .into_iter()
         .flatten()
         .map(|(fit, scale)| {
             let support = seeds.support(&fit);
-            (fit, scale, support)
+            Seed {
+                fit,
+                scale,
+                support,
+            }
         })
         .collect();
-    let most_support = fitted.iter().map(|f| f.2).fold(0.0, f64::max);
+    let most_support = fitted.iter().map(|s| s.support).fold(0.0, f64::max);
+    // The merit, compared in order: plausible, supported, the smallest scale in raw units.
     let mut best: Option<((bool, bool, f64), P::Fit)> = None;
-    for (fit, scale, support) in fitted {
+    for Seed {
+        fit,
+        scale,
+        support,
+    } in fitted
+    {
         let a = P::model(&fit).a;
         let merit = (
             plausible(&a),
@@ -195,23 +246,29 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             best = Some((merit, fit));
         }
     }
-    // No seed could be fitted: the full data decides (and its error says why).
-    let Some((_, seed)) = best else {
-        let fit = problem.final_fit(&vec![true; n], None)?;
-        let residual_ut = problem.residuals(&fit);
-        let sigma_ut = scale::<P>(&residual_ut);
-        return Ok(Robust {
-            fit,
-            kept: vec![true; n],
-            sigma_ut,
-            residual_ut,
-            mixed: Vec::new(),
-        });
-    };
-    // Reweight from the best seed on (at most [`REWEIGHT_SAMPLES`] of) all samples, then exclude the gross spans of
-    // all samples and fit the rest plainly.
+    best.map(|(_, fit)| fit)
+}
+
+/// The plain fit of all samples, nothing excluded: what is left when no seed could be fitted.
+fn fit_all<P: RobustProblem>(problem: &P) -> Result<Robust<P::Fit>, FitError> {
+    let n = problem.len();
+    let fit = problem.final_fit(&vec![true; n], None)?;
+    let residual_ut = problem.residuals(&fit);
+    let sigma_ut = scale::<P>(&residual_ut);
+    Ok(Robust {
+        fit,
+        kept: vec![true; n],
+        sigma_ut,
+        residual_ut,
+        mixed: Vec::new(),
+    })
+}
+
+/// From `seed`, a few reweighting passes on (at most [`REWEIGHT_SAMPLES`] of) all samples, until the weights
+/// settle: the fit, and the residuals of all samples under it.
+fn reweight_all<P: RobustProblem>(problem: &P, seed: P::Fit) -> (P::Fit, Vec<f64>) {
     let mut fit = seed;
-    let stride = n.div_ceil(REWEIGHT_SAMPLES).max(1);
+    let stride = problem.len().div_ceil(REWEIGHT_SAMPLES).max(1);
     let thin = (stride > 1).then(|| problem.every(stride));
     let reweighted = thin.as_ref().unwrap_or(problem);
     // Each per-sample vector is dropped before the next is made: memory stays at about two of them.
@@ -237,6 +294,19 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     if stride > 1 {
         refresh(problem, &fit, &mut residual_ut);
     }
+    (fit, residual_ut)
+}
+
+/// The gross spans of all samples under `fit` (whose residuals are `residual_ut`) excluded and the rest fitted
+/// plainly, from the fit before; again with the spans of the new fit, up to [`SPAN_PASSES`] times, until they
+/// settle. Nothing is mixed yet.
+fn exclude_gross_spans<P: RobustProblem>(
+    problem: &P,
+    fit: P::Fit,
+    mut residual_ut: Vec<f64>,
+    t_s: Option<&[f64]>,
+) -> Result<Robust<P::Fit>, FitError> {
+    let n = problem.len();
     let mut sigma_ut = scale::<P>(&residual_ut);
     let mut kept = outside(&gross_spans(&residual_ut, sigma_ut, t_s, P::RAMP_TAIL), n);
     let mut final_fit: Option<P::Fit> = None;
@@ -258,47 +328,43 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
             break;
         }
     }
-    // Windows shifted too little to be gross (a field fixed in the room or to the sensor, in the magnitude) go too,
-    // when the samples are in time order; the fit without them replaces the last one if it can be made.
-    let mut mixed = Vec::new();
-    if t_s.is_some() {
-        for _ in 0..SPAN_PASSES {
-            let fit = final_fit.as_ref().expect("at least one pass");
-            let windows = problem.shifted(fit, &kept);
-            if windows.is_empty() {
-                break;
-            }
-            let mut k = kept.clone();
-            for &(a, b) in &windows {
-                k[a..b].fill(false);
-            }
-
-            let Ok(f) = problem.final_fit(&k, Some(fit)) else {
-                break;
-            };
-            // Windows that hold most of the directions are where the recording calibrates: what is left of it,
-            // and the shift it shows against them, are those of a partial recording.
-            if problem.covered(&f, &k) < SHIFT_KEEP_COVERAGE * problem.covered(&f, &kept) {
-                mixed = windows;
-                break;
-            }
-            refresh(problem, &f, &mut residual_ut);
-            sigma_ut = scale::<P>(&residual_ut);
-            final_fit = Some(f);
-            kept = k;
-        }
-    }
-    // Samples the fit cannot use inside a span are not excluded by it.
-    for (k, e) in kept.iter_mut().zip(&residual_ut) {
-        *k |= !e.is_finite();
-    }
     Ok(Robust {
         fit: final_fit.expect("at least one pass"),
         kept,
         sigma_ut,
         residual_ut,
-        mixed,
+        mixed: Vec::new(),
     })
+}
+
+/// The windows of `robust`'s fit shifted too little to be gross ([`RobustProblem::shifted`]) excluded too, up to
+/// [`SPAN_PASSES`] times: the fit without them replaces the last one if it can be made, unless the samples left
+/// would cover too few of the directions ([`SHIFT_KEEP_COVERAGE`]); then the windows stay in, as `robust.mixed`.
+fn exclude_shifted_windows<P: RobustProblem>(problem: &P, robust: &mut Robust<P::Fit>) {
+    for _ in 0..SPAN_PASSES {
+        let windows = problem.shifted(&robust.fit, &robust.kept);
+        if windows.is_empty() {
+            break;
+        }
+        let mut k = robust.kept.clone();
+        for &(a, b) in &windows {
+            k[a..b].fill(false);
+        }
+
+        let Ok(f) = problem.final_fit(&k, Some(&robust.fit)) else {
+            break;
+        };
+        // Windows that hold most of the directions are where the recording calibrates: what is left of it,
+        // and the shift it shows against them, are those of a partial recording.
+        if problem.covered(&f, &k) < SHIFT_KEEP_COVERAGE * problem.covered(&f, &robust.kept) {
+            robust.mixed = windows;
+            break;
+        }
+        refresh(problem, &f, &mut robust.residual_ut);
+        robust.sigma_ut = scale::<P>(&robust.residual_ut);
+        robust.fit = f;
+        robust.kept = k;
+    }
 }
 
 /// `problem`'s residuals under `fit` in place of `e`, whose memory goes first (one per-sample vector at a time).

@@ -659,6 +659,37 @@ struct Solution {
     iterations: usize,
 }
 
+impl<'a> Problem<'a> {
+    /// The problem of the usable `readings`, their cells of direction taken about the sphere's centre `c0_ut`: it
+    /// aims at the magnitude `target` (µT) with the shape prior for the mean gain `gain`, and sums by group when
+    /// `grouped` (a full fit).
+    fn new(
+        readings: Usable<'a>,
+        c0_ut: &Vector3<f64>,
+        target: f64,
+        gain: f64,
+        grouped: bool,
+    ) -> Problem<'a> {
+        let Usable { raw, base, n } = readings;
+        let grid = SphereGrid::new(DIRECTION_CELLS);
+        let (w, cell, cells) = direction_weights(&raw, &base, c0_ut, &grid);
+        let w_sum =
+            chunks::fold(w.len(), |r| w[r].iter().sum::<f64>(), |x, y| x + y).unwrap_or_default();
+        Problem {
+            raw,
+            w,
+            w_sum,
+            cell,
+            cells,
+            grid,
+            target,
+            q: shape_precision(gain),
+            dof: w_sum * (n - P) as f64 / n as f64,
+            grouped,
+        }
+    }
+}
+
 impl Problem<'_> {
     fn pass(&self, p: &SVector<f64, P>, noise: Option<&Vector3<f64>>) -> Pass {
         if self.grouped {
@@ -977,8 +1008,22 @@ fn weakest(cov: &SMatrix<f64, P, P>) -> ([f64; 3], f64) {
     )
 }
 
-/// Fits a symmetric `A` and `b` to raw readings (µT) so that the calibrated magnitude is constant.
-pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, FitError> {
+/// The readings a fit can use (finite, with a positive weight) and their weights: the caller's own when every
+/// reading is usable, copies otherwise.
+struct Usable<'a> {
+    /// The usable readings, µT.
+    raw: Cow<'a, [[f64; 3]]>,
+    /// Their weights (ones without the caller's).
+    base: Cow<'a, [f64]>,
+    /// How many there are.
+    n: usize,
+}
+
+/// The readings of `raw_ut` usable with the weights of `opts`; fewer than [`MIN_SAMPLES`] is an error.
+fn usable_readings<'a>(
+    raw_ut: &'a [[f64; 3]],
+    opts: &ScalarOptions<'a>,
+) -> Result<Usable<'a>, FitError> {
     if let Some(w) = opts.weights {
         assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
     }
@@ -997,7 +1042,6 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
             got: n,
         });
     }
-    // The usable readings and their weights: the caller's own when all are usable, copies otherwise.
     let (raw, base): (Cow<'_, [[f64; 3]]>, Cow<'_, [f64]>) = if n == raw_ut.len() {
         (
             Cow::Borrowed(raw_ut),
@@ -1011,34 +1055,19 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
             rows.map(|i| opts.weights.map_or(1.0, |w| w[i])).collect(),
         )
     };
-    let coverage = Coverage::of(&raw);
-    if !opts.skip_coverage_check {
-        coverage.check()?;
-    }
-    let (c0, r0) = sphere(&raw, &base).ok_or(FitError::NotAnEllipsoid(
-        "the readings fit no sphere: they may lie on a plane",
-    ))?;
-    let grid = SphereGrid::new(DIRECTION_CELLS);
-    let (w, cell, cells) = direction_weights(&raw, &base, &c0, &grid);
-    let w_sum =
-        chunks::fold(w.len(), |r| w[r].iter().sum::<f64>(), |x, y| x + y).unwrap_or_default();
-    // The fit aims at the given magnitude, or at the sphere's radius (rescaled to the ellipsoid's volume after).
-    let target = opts.field_ut.unwrap_or(r0);
-    let gain = target / r0;
-    let problem = Problem {
-        raw,
-        w,
-        w_sum,
-        cell,
-        cells,
-        grid,
-        target,
-        q: shape_precision(gain),
-        dof: w_sum * (n - P) as f64 / n as f64,
-        grouped: !opts.quick,
-    };
+    Ok(Usable { raw, base, n })
+}
+
+/// The solver's start: the centre and matrix of `start`, the matrix scaled from its magnitude to `target` (µT),
+/// or else the sphere's centre `c0_ut` and the mean gain `gain` on the diagonal.
+fn start_parameters(
+    start: Option<&ScalarFit>,
+    c0_ut: &Vector3<f64>,
+    gain: f64,
+    target: f64,
+) -> SVector<f64, P> {
     let mut p0 = SVector::<f64, P>::zeros();
-    match opts.start {
+    match start {
         // The start's matrix maps its centre's readings onto its own magnitude: scaled to this one's.
         Some(s) => {
             p0.fixed_rows_mut::<3>(0)
@@ -1048,12 +1077,137 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
             }
         }
         None => {
-            p0.fixed_rows_mut::<3>(0).copy_from(&c0);
+            p0.fixed_rows_mut::<3>(0).copy_from(c0_ut);
             for k in 0..3 {
                 p0[3 + k] = gain;
             }
         }
     }
+    p0
+}
+
+/// The direction in which the centre is least certain under the covariance `cov`, and its standard error there;
+/// an error when the solution's matrix `a` is not positive definite or, unless `quick`, the centre is undetermined
+/// for the magnitude `target` (µT).
+fn checked_weakest(
+    a: &Matrix3<f64>,
+    cov: &SMatrix<f64, P, P>,
+    target: f64,
+    quick: bool,
+) -> Result<([f64; 3], f64), FitError> {
+    let positive = a.determinant() > 0.0;
+    if !positive {
+        return Err(FitError::NotAnEllipsoid(
+            "the best fit has a matrix that is not positive definite",
+        ));
+    }
+    let weakest = weakest(cov);
+    if !quick {
+        check_determined(weakest, a.trace() / 3.0, target)?;
+    }
+    Ok(weakest)
+}
+
+/// The calibration at the solution, divided by `κ` so that the raw ellipsoid keeps its volume when no magnitude
+/// was given (`κ = 1` when one was).
+struct Scaled {
+    /// `A / κ`.
+    a: Matrix3<f64>,
+    /// `b = −(A / κ)·c`, µT.
+    b_ut: Vector3<f64>,
+    /// `κ`: `det(A)^⅓`, or 1 with a given magnitude.
+    kappa: f64,
+    /// The magnitude aimed at over `κ`, µT.
+    field_ut: f64,
+    /// Weighted RMS of the magnitude residual over `κ`, µT.
+    residual_rms_ut: f64,
+}
+
+impl Scaled {
+    /// The solution `sol` of `problem` (its matrix `a` and centre `c_ut`) scaled by `κ`; an error when the
+    /// magnitude still varies by more than [`NOT_AN_ELLIPSOID`] of the field.
+    fn new(
+        problem: &Problem<'_>,
+        sol: &Solution,
+        a: Matrix3<f64>,
+        c_ut: &Vector3<f64>,
+        field_given: bool,
+    ) -> Result<Scaled, FitError> {
+        // Without a given magnitude, keep the raw ellipsoid's volume: det(A) = 1.
+        let kappa = if field_given {
+            1.0
+        } else {
+            a.determinant().cbrt()
+        };
+        let a = a / kappa;
+        let field_ut = problem.target / kappa;
+        let residual_rms_ut = (sol.at.rss / problem.w_sum).sqrt() / kappa;
+        if residual_rms_ut > NOT_AN_ELLIPSOID * field_ut {
+            return Err(FitError::NotAnEllipsoid(
+                "the magnitude still varies by more than 20 % after the best ellipsoid",
+            ));
+        }
+        let b_ut = -(a * *c_ut);
+        Ok(Scaled {
+            a,
+            b_ut,
+            kappa,
+            field_ut,
+            residual_rms_ut,
+        })
+    }
+
+    /// The covariance of `b = −A·c` (µT²) from the parameters' covariance `cov`, through the Jacobian of `b` in
+    /// (c, A entries) with `A` scaled by `1/κ`; `c_ut` is the centre.
+    fn b_covariance(&self, c_ut: &Vector3<f64>, cov: &SMatrix<f64, P, P>) -> Matrix3<f64> {
+        let (a, c) = (&self.a, c_ut);
+        let mut jac_b = SMatrix::<f64, 3, P>::zeros();
+        for j in 0..3 {
+            for k in 0..3 {
+                jac_b[(j, k)] = -a[(j, k)];
+            }
+            for (idx, (r, s)) in SYM.iter().enumerate() {
+                let mut d = 0.0;
+                if *r == j {
+                    d += c[*s];
+                }
+                if *s == j && r != s {
+                    d += c[*r];
+                }
+                jac_b[(j, 3 + idx)] = -d / self.kappa;
+            }
+        }
+        jac_b * *cov * jac_b.transpose()
+    }
+
+    /// The standard errors of the entries of `A / κ` from the parameters' covariance `cov`.
+    fn a_se(&self, cov: &SMatrix<f64, P, P>) -> Mat3 {
+        let mut a_se = [[0.0; 3]; 3];
+        for (idx, (r, s)) in SYM.iter().enumerate() {
+            let se = cov[(3 + idx, 3 + idx)].max(0.0).sqrt() / self.kappa;
+            a_se[*r][*s] = se;
+            a_se[*s][*r] = se;
+        }
+        a_se
+    }
+}
+
+/// Fits a symmetric `A` and `b` to raw readings (µT) so that the calibrated magnitude is constant.
+pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, FitError> {
+    let readings = usable_readings(raw_ut, opts)?;
+    let n = readings.n;
+    let coverage = Coverage::of(&readings.raw);
+    if !opts.skip_coverage_check {
+        coverage.check()?;
+    }
+    let (c0, r0) = sphere(&readings.raw, &readings.base).ok_or(FitError::NotAnEllipsoid(
+        "the readings fit no sphere: they may lie on a plane",
+    ))?;
+    // The fit aims at the given magnitude, or at the sphere's radius (rescaled to the ellipsoid's volume after).
+    let target = opts.field_ut.unwrap_or(r0);
+    let gain = target / r0;
+    let problem = Problem::new(readings, &c0, target, gain, !opts.quick);
+    let p0 = start_parameters(opts.start, &c0, gain, target);
     let mut sol = problem.settle(p0, if opts.quick { 1 } else { MAX_ROUNDS });
     let (cov, shape_prior_share) = if opts.quick {
         (SMatrix::<f64, P, P>::zeros(), 0.0)
@@ -1061,67 +1215,21 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         problem.refine(&mut sol, opts, target)?
     };
     let (c, a) = unpack(&sol.p);
-    let positive = a.determinant() > 0.0;
-    if !positive {
-        return Err(FitError::NotAnEllipsoid(
-            "the best fit has a matrix that is not positive definite",
-        ));
-    }
-    let weakest = weakest(&cov);
-    if !opts.quick {
-        check_determined(weakest, a.trace() / 3.0, target)?;
-    }
-
-    // Without a given magnitude, keep the raw ellipsoid's volume: det(A) = 1.
-    let kappa = if opts.field_ut.is_some() {
-        1.0
-    } else {
-        a.determinant().cbrt()
-    };
-    let a = a / kappa;
-    let field_ut = target / kappa;
-    let residual_rms_ut = (sol.at.rss / problem.w_sum).sqrt() / kappa;
-    if residual_rms_ut > NOT_AN_ELLIPSOID * field_ut {
-        return Err(FitError::NotAnEllipsoid(
-            "the magnitude still varies by more than 20 % after the best ellipsoid",
-        ));
-    }
-    let b = -(a * c);
-    // b = −A·c: its Jacobian in (c, A entries), with A scaled by 1/κ.
-    let mut jac_b = SMatrix::<f64, 3, P>::zeros();
-    for j in 0..3 {
-        for k in 0..3 {
-            jac_b[(j, k)] = -a[(j, k)];
-        }
-        for (idx, (r, s)) in SYM.iter().enumerate() {
-            let mut d = 0.0;
-            if *r == j {
-                d += c[*s];
-            }
-            if *s == j && r != s {
-                d += c[*r];
-            }
-            jac_b[(j, 3 + idx)] = -d / kappa;
-        }
-    }
-    let cov_b = jac_b * cov * jac_b.transpose();
+    let weakest = checked_weakest(&a, &cov, target, opts.quick)?;
+    let scaled = Scaled::new(&problem, &sol, a, &c, opts.field_ut.is_some())?;
+    let cov_b = scaled.b_covariance(&c, &cov);
     let cov_c: Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
-    let mut a_se = [[0.0; 3]; 3];
-    for (idx, (r, s)) in SYM.iter().enumerate() {
-        let se = cov[(3 + idx, 3 + idx)].max(0.0).sqrt() / kappa;
-        a_se[*r][*s] = se;
-        a_se[*s][*r] = se;
-    }
+    let b = scaled.b_ut;
     Ok(ScalarFit {
-        a: std::array::from_fn(|j| std::array::from_fn(|k| a[(j, k)])),
+        a: std::array::from_fn(|j| std::array::from_fn(|k| scaled.a[(j, k)])),
         b_ut: [b[0], b[1], b[2]],
-        a_se,
+        a_se: scaled.a_se(&cov),
         b_se_ut: std::array::from_fn(|j| cov_b[(j, j)].max(0.0).sqrt()),
         centre_ut: [c[0], c[1], c[2]],
         centre_cov_ut2: std::array::from_fn(|j| std::array::from_fn(|k| cov_c[(j, k)])),
-        field_ut,
+        field_ut: scaled.field_ut,
         field_given: opts.field_ut.is_some(),
-        residual_rms_ut,
+        residual_rms_ut: scaled.residual_rms_ut,
         iterations: sol.iterations,
         n,
         coverage,

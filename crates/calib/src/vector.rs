@@ -214,56 +214,137 @@ pub(crate) const TIME_BLOCKS: usize = 32;
 /// Fewest samples the fit takes (four unknowns per axis, and a few degrees of freedom for the residual).
 pub const MIN_SAMPLES: usize = 8;
 
-/// Fits `A` and `b` to raw readings and the expected field in sensor axes (both µT). Samples whose expected field
-/// or reading has a NaN are skipped and counted.
-pub fn fit(
-    raw_ut: &[[f64; 3]],
-    expected_ut: &[[f64; 3]],
-    opts: &VectorOptions<'_>,
-) -> Result<VectorFit, FitError> {
-    assert_eq!(
-        raw_ut.len(),
-        expected_ut.len(),
-        "one expected field per reading"
-    );
-    if let Some(w) = opts.weights {
-        assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
-    }
-    if let Some(k) = opts.kept {
-        assert_eq!(k.len(), raw_ut.len(), "one kept flag per reading");
-    }
-    let weight = |i: usize| {
-        let usable = opts.kept.is_none_or(|k| k[i])
-            && expected_ut[i]
-                .iter()
-                .chain(&raw_ut[i])
-                .all(|v| v.is_finite());
-        let w = opts.weights.map_or(1.0, |w| w[i]);
-        if usable && w > 0.0 { w } else { 0.0 }
-    };
+/// The samples of a fit and the weight each gets in it.
+struct Samples<'a> {
+    /// Raw readings in sensor axes, µT.
+    raw_ut: &'a [[f64; 3]],
+    /// The expected field in sensor axes, µT (NaN = missing).
+    expected_ut: &'a [[f64; 3]],
+    /// The caller's weight per sample, if any.
+    weights: Option<&'a [f64]>,
+    /// The caller's kept flag per sample, if any.
+    kept: Option<&'a [bool]>,
+}
 
-    // One pass: weighted sums of the readings and references, shifted by the first usable sample for precision.
-    let Some(first) = (0..raw_ut.len()).find(|&i| weight(i) > 0.0) else {
+impl<'a> Samples<'a> {
+    /// The readings and expected fields with the weights and kept flags of `opts` (one of each per reading).
+    fn new(
+        raw_ut: &'a [[f64; 3]],
+        expected_ut: &'a [[f64; 3]],
+        opts: &VectorOptions<'a>,
+    ) -> Samples<'a> {
+        assert_eq!(
+            raw_ut.len(),
+            expected_ut.len(),
+            "one expected field per reading"
+        );
+        if let Some(w) = opts.weights {
+            assert_eq!(w.len(), raw_ut.len(), "one weight per reading");
+        }
+        if let Some(k) = opts.kept {
+            assert_eq!(k.len(), raw_ut.len(), "one kept flag per reading");
+        }
+        Samples {
+            raw_ut,
+            expected_ut,
+            weights: opts.weights,
+            kept: opts.kept,
+        }
+    }
+
+    /// Samples, used or not.
+    fn len(&self) -> usize {
+        self.raw_ut.len()
+    }
+
+    /// The weight of sample `i`: zero when it is not kept, its reading or expected field has a NaN, or its weight
+    /// is not positive.
+    #[inline]
+    fn weight(&self, i: usize) -> f64 {
+        let usable = self.kept.is_none_or(|k| k[i])
+            && self.expected_ut[i]
+                .iter()
+                .chain(&self.raw_ut[i])
+                .all(|v| v.is_finite());
+        let w = self.weights.map_or(1.0, |w| w[i]);
+        if usable && w > 0.0 { w } else { 0.0 }
+    }
+}
+
+/// The weighted means of the used samples and their weighted sums of products about those means (the centred
+/// normal equations).
+#[derive(Clone, Copy, Debug)]
+struct Moments {
+    /// Samples used (non-zero weight).
+    n: usize,
+    /// Sum of their weights.
+    w_sum: f64,
+    /// Weighted mean reading in sensor axes, µT.
+    m_mean: Vector3<f64>,
+    /// Weighted mean expected field in sensor axes, µT.
+    r_mean: Vector3<f64>,
+    /// `Σw·d·dᵀ` of the centred readings `d`, µT².
+    s_mm: Matrix3<f64>,
+    /// `Σw·e·dᵀ` of the centred expected fields `e` and readings `d`, µT².
+    s_rm: Matrix3<f64>,
+    /// `Σw·e·eᵀ` of the centred expected fields `e`, µT².
+    s_rr: Matrix3<f64>,
+}
+
+/// The centred moments of the used samples, from one pass of sums shifted by the first usable sample for
+/// precision; fewer than [`MIN_SAMPLES`] used is an error.
+fn moments(samples: &Samples<'_>) -> Result<Moments, FitError> {
+    let Some(first) = (0..samples.len()).find(|&i| samples.weight(i) > 0.0) else {
         return Err(FitError::TooFewSamples {
             needed: MIN_SAMPLES,
             got: 0,
         });
     };
     let (m0, r0) = (
-        Vector3::from(raw_ut[first]),
-        Vector3::from(expected_ut[first]),
+        Vector3::from(samples.raw_ut[first]),
+        Vector3::from(samples.expected_ut[first]),
     );
-    let sums = chunks::fold(
-        raw_ut.len(),
+    let Sums {
+        n,
+        w_sum,
+        sm,
+        sr,
+        smm,
+        srm,
+        srr,
+    } = shifted_sums(samples, m0, r0);
+    if n < MIN_SAMPLES {
+        return Err(FitError::TooFewSamples {
+            needed: MIN_SAMPLES,
+            got: n,
+        });
+    }
+    let (dm, dr) = (sm / w_sum, sr / w_sum);
+    Ok(Moments {
+        n,
+        w_sum,
+        m_mean: m0 + dm,
+        r_mean: r0 + dr,
+        s_mm: smm - dm * dm.transpose() * w_sum,
+        s_rm: srm - dr * dm.transpose() * w_sum,
+        s_rr: srr - dr * dr.transpose() * w_sum,
+    })
+}
+
+/// The weighted sums of the used samples' readings less `m0_ut` and expected fields less `r0_ut`, and of their
+/// products, in one pass on all threads.
+fn shifted_sums(samples: &Samples<'_>, m0_ut: Vector3<f64>, r0_ut: Vector3<f64>) -> Sums {
+    chunks::fold(
+        samples.len(),
         |range| {
             let mut s = Sums::default();
             for i in range {
-                let w = weight(i);
+                let w = samples.weight(i);
                 if w == 0.0 {
                     continue;
                 }
-                let d = Vector3::from(raw_ut[i]) - m0;
-                let e = Vector3::from(expected_ut[i]) - r0;
+                let d = Vector3::from(samples.raw_ut[i]) - m0_ut;
+                let e = Vector3::from(samples.expected_ut[i]) - r0_ut;
                 s.n += 1;
                 s.w_sum += w;
                 s.sm += d * w;
@@ -276,33 +357,16 @@ pub fn fit(
         },
         Sums::merge,
     )
-    .unwrap_or_default();
-    let Sums {
-        n,
-        w_sum,
-        sm,
-        sr,
-        smm,
-        srm,
-        srr,
-    } = sums;
-    if n < MIN_SAMPLES {
-        return Err(FitError::TooFewSamples {
-            needed: MIN_SAMPLES,
-            got: n,
-        });
-    }
-    let (dm, dr) = (sm / w_sum, sr / w_sum);
-    let m_mean = m0 + dm;
-    let r_mean = r0 + dr;
-    let s_mm = smm - dm * dm.transpose() * w_sum;
-    let s_rm = srm - dr * dm.transpose() * w_sum;
-    let s_rr = srr - dr * dr.transpose() * w_sum;
+    .unwrap_or_default()
+}
 
-    let coverage = Coverage::from_covariance(&(s_mm / w_sum));
+/// The spread of the readings; unless `opts` skips the check, an error when they do not cover the directions or
+/// the expected field stays still while they turn.
+fn checked_coverage(moments: &Moments, opts: &VectorOptions<'_>) -> Result<Coverage, FitError> {
+    let coverage = Coverage::from_covariance(&(moments.s_mm / moments.w_sum));
     if !opts.skip_coverage_check {
         coverage.check()?;
-        let reference_ut = Coverage::from_covariance(&(s_rr / w_sum)).spread_ut[0];
+        let reference_ut = Coverage::from_covariance(&(moments.s_rr / moments.w_sum)).spread_ut[0];
         if reference_ut < crate::coverage::STILL_SPREAD_UT {
             return Err(FitError::ReferenceStill {
                 reference_ut,
@@ -310,6 +374,38 @@ pub fn fit(
             });
         }
     }
+    Ok(coverage)
+}
+
+/// `A` and `b` by least squares corrected for the raw noise, and what their standard errors are made of.
+#[derive(Clone, Copy, Debug)]
+struct Estimates {
+    /// `A`.
+    a: Matrix3<f64>,
+    /// `b`, µT.
+    b_ut: Vector3<f64>,
+    /// The inverse of the corrected normal matrix `S_mm − N·σ²` (centred).
+    s_inv: Matrix3<f64>,
+    /// The correction `N·σ²` taken off the normal matrix (diagonal, per sensor axis), µT².
+    correction: Matrix3<f64>,
+    /// The factor (at most 1) the raw noise variance was scaled by ([`VectorFit::noise_bound`]).
+    noise_bound: f64,
+    /// The residual's degrees of freedom (in units of weight).
+    dof: f64,
+}
+
+/// Solves the centred normal equations: plain least squares first, whose residual bounds the raw noise the
+/// correction may assume ([`noise_bound`]), then least squares corrected for that noise (see the module docs).
+fn estimates(moments: &Moments, raw_noise_var_ut2: [f64; 3]) -> Result<Estimates, FitError> {
+    let Moments {
+        n,
+        w_sum,
+        m_mean,
+        r_mean,
+        s_mm,
+        s_rm,
+        s_rr,
+    } = *moments;
     let s_mm_inv = s_mm.try_inverse().ok_or(FitError::Singular(
         "the readings' covariance has no inverse",
     ))?;
@@ -317,17 +413,8 @@ pub fn fit(
     let dof = w_sum * (n - 4) as f64 / n as f64;
     let a_plain = s_rm * s_mm_inv;
     let rss_plain = s_rr - a_plain * s_rm.transpose();
-    let noise = Vector3::from(opts.raw_noise_var_ut2);
-    let noise_bound = (0..3)
-        .map(|j| {
-            let through_a: f64 = (0..3).map(|k| a_plain[(j, k)].powi(2) * noise[k]).sum();
-            if through_a > 0.0 {
-                (rss_plain[(j, j)].max(0.0) / dof / through_a).min(1.0)
-            } else {
-                1.0
-            }
-        })
-        .fold(1.0, f64::min);
+    let noise = Vector3::from(raw_noise_var_ut2);
+    let noise_bound = noise_bound(&a_plain, &rss_plain, dof, &noise);
     let correction = Matrix3::from_diagonal(&(noise * (noise_bound * w_sum)));
     let s_corr = s_mm - correction;
     let s_inv = s_corr
@@ -337,136 +424,281 @@ pub fn fit(
             "the readings' covariance less their noise is not positive: the noise is as large as the rotation",
         ))?;
     let a = s_rm * s_inv;
-    let b = r_mean - a * m_mean;
+    let b_ut = r_mean - a * m_mean;
+    Ok(Estimates {
+        a,
+        b_ut,
+        s_inv,
+        correction,
+        noise_bound,
+        dof,
+    })
+}
 
-    let a_arr: Mat3 = std::array::from_fn(|j| std::array::from_fn(|k| a[(j, k)]));
-    if opts.estimates_only {
-        // The residual from the sums: Σw·e·eᵀ = S_rr − A·S_rmᵀ − S_rm·Aᵀ + A·S_mm·Aᵀ (centred; the intercept fits the
-        // means exactly).
-        let rss_matrix =
-            s_rr - a * s_rm.transpose() - s_rm * a.transpose() + a * s_mm * a.transpose();
-        return Ok(VectorFit {
-            a: a_arr,
-            b_ut: [b[0], b[1], b[2]],
-            a_se: [[0.0; 3]; 3],
-            b_se_ut: [0.0; 3],
-            covariance: [[[0.0; 4]; 4]; 3],
-            residual_rms_ut: std::array::from_fn(|j| (rss_matrix[(j, j)].max(0.0) / w_sum).sqrt()),
-            condition_number: coverage.spread_ut[0] / coverage.spread_ut[2],
-            n,
-            skipped: raw_ut.len() - n,
-            coverage,
-            noise_bound,
-            direction_cells: 0,
-        });
+/// The factor (at most 1) that scales the raw noise variance `noise_ut2` down until, on every axis, what it makes
+/// through the plain fit's `a_plain` fits in that fit's residual (`rss_plain` over `dof` degrees of freedom).
+fn noise_bound(
+    a_plain: &Matrix3<f64>,
+    rss_plain: &Matrix3<f64>,
+    dof: f64,
+    noise_ut2: &Vector3<f64>,
+) -> f64 {
+    (0..3)
+        .map(|j| {
+            let through_a: f64 = (0..3).map(|k| a_plain[(j, k)].powi(2) * noise_ut2[k]).sum();
+            if through_a > 0.0 {
+                (rss_plain[(j, j)].max(0.0) / dof / through_a).min(1.0)
+            } else {
+                1.0
+            }
+        })
+        .fold(1.0, f64::min)
+}
+
+/// A matrix as rows.
+fn rows(a: &Matrix3<f64>) -> Mat3 {
+    std::array::from_fn(|j| std::array::from_fn(|k| a[(j, k)]))
+}
+
+/// The fit of a reweighting pass ([`VectorOptions::estimates_only`]): the residual from the sums, no standard errors
+/// (zero), no cells of direction; `total` samples, used or not.
+fn estimates_only_fit(
+    moments: &Moments,
+    est: &Estimates,
+    coverage: Coverage,
+    total: usize,
+) -> VectorFit {
+    let Moments {
+        n,
+        w_sum,
+        s_mm,
+        s_rm,
+        s_rr,
+        ..
+    } = *moments;
+    let (a, b) = (est.a, est.b_ut);
+    // The residual from the sums: Σw·e·eᵀ = S_rr − A·S_rmᵀ − S_rm·Aᵀ + A·S_mm·Aᵀ (centred; the intercept fits the
+    // means exactly).
+    let rss_matrix = s_rr - a * s_rm.transpose() - s_rm * a.transpose() + a * s_mm * a.transpose();
+    VectorFit {
+        a: rows(&a),
+        b_ut: [b[0], b[1], b[2]],
+        a_se: [[0.0; 3]; 3],
+        b_se_ut: [0.0; 3],
+        covariance: [[[0.0; 4]; 4]; 3],
+        residual_rms_ut: std::array::from_fn(|j| (rss_matrix[(j, j)].max(0.0) / w_sum).sqrt()),
+        condition_number: coverage.spread_ut[0] / coverage.spread_ut[2],
+        n,
+        skipped: total - n,
+        coverage,
+        noise_bound: est.noise_bound,
+        direction_cells: 0,
+    }
+}
+
+/// The second pass's sums per group — the cells of field direction, then the blocks of time — and over all samples.
+#[derive(Clone, Debug)]
+struct Scores {
+    /// Per group and calibrated axis `j`, the score `−Σw·e_j·(d, 1)` (`e` the residual, `d` the centred reading).
+    scores: Vec<[Vector4<f64>; 3]>,
+    /// Per group, the sum of its samples' weights.
+    group_weight: Vec<f64>,
+    /// `Σw·e²` per calibrated axis, µT².
+    rss_ut2: Vector3<f64>,
+    /// Groups that are cells of direction (the first ones).
+    cells: usize,
+}
+
+impl Scores {
+    /// Empty sums over `cells` cells of direction and `blocks` blocks of time.
+    fn zeros(cells: usize, blocks: usize) -> Scores {
+        Scores {
+            scores: vec![[Vector4::zeros(); 3]; cells + blocks],
+            group_weight: vec![0.0; cells + blocks],
+            rss_ut2: Vector3::zeros(),
+            cells,
+        }
     }
 
-    // Second pass: residuals, and their scores per cell of field direction and per block of time.
-    let grid = SphereGrid::new(DIRECTION_CELLS);
-    let total = raw_ut.len();
-    let blocks = TIME_BLOCKS.min(total);
-    let groups = grid.len() + blocks;
-    let scores_of = |range: std::ops::Range<usize>| {
-        let mut scores: Vec<[Vector4<f64>; 3]> = vec![[Vector4::zeros(); 3]; groups];
-        let mut group_weight = vec![0.0; groups];
-        let mut rss = Vector3::zeros();
-        for i in range {
-            let w = weight(i);
-            if w == 0.0 {
-                continue;
-            }
-            let m = Vector3::from(raw_ut[i]);
-            let e = a * m + b - Vector3::from(expected_ut[i]);
-            rss += e.component_mul(&e) * w;
-            let x = m - m_mean;
-            let xt = Vector4::new(x[0], x[1], x[2], 1.0);
-            let cell = grid.cell(expected_ut[i]).unwrap_or(0);
-            for group in [cell, grid.len() + i * blocks / total] {
-                for j in 0..3 {
-                    scores[group][j] -= xt * (w * e[j]);
-                }
-                group_weight[group] += w;
-            }
-        }
-        (scores, group_weight, rss)
-    };
-    let (scores, group_weight, rss) = chunks::fold(total, scores_of, |mut x, y| {
-        for (c, d) in x.0.iter_mut().zip(&y.0) {
+    /// The sums of two runs of samples, `self`'s first.
+    fn merge(mut self, o: Scores) -> Scores {
+        for (c, d) in self.scores.iter_mut().zip(&o.scores) {
             for j in 0..3 {
                 c[j] += d[j];
             }
         }
-        for (c, d) in x.1.iter_mut().zip(&y.1) {
+        for (c, d) in self.group_weight.iter_mut().zip(&o.group_weight) {
             *c += d;
         }
-        (x.0, x.1, x.2 + y.2)
-    })
-    .unwrap_or_else(|| scores_of(0..0));
-    let used = |range: std::ops::Range<usize>| -> Vec<usize> {
-        range.filter(|&k| group_weight[k] > 0.0).collect()
-    };
-    let (clusters, time_blocks) = (used(0..grid.len()), used(grid.len()..groups));
+        self.rss_ut2 += o.rss_ut2;
+        self
+    }
 
+    /// The groups in `range` that hold samples.
+    fn used(&self, range: std::ops::Range<usize>) -> Vec<usize> {
+        range.filter(|&k| self.group_weight[k] > 0.0).collect()
+    }
+
+    /// The cells of direction that hold samples (the clusters of the robust standard errors).
+    fn used_cells(&self) -> Vec<usize> {
+        self.used(0..self.cells)
+    }
+
+    /// The blocks of time that hold samples.
+    fn used_blocks(&self) -> Vec<usize> {
+        self.used(self.cells..self.group_weight.len())
+    }
+}
+
+/// The second pass, on all threads: the residuals under `est`, and their scores per cell of field direction and per
+/// block of time ([`TIME_BLOCKS`]); `m_mean_ut` is the mean reading the scores are centred on.
+fn residual_scores(samples: &Samples<'_>, est: &Estimates, m_mean_ut: Vector3<f64>) -> Scores {
+    let (a, b) = (est.a, est.b_ut);
+    let grid = SphereGrid::new(DIRECTION_CELLS);
+    let total = samples.len();
+    let blocks = TIME_BLOCKS.min(total);
+    let scores_of = |range: std::ops::Range<usize>| {
+        let mut s = Scores::zeros(grid.len(), blocks);
+        for i in range {
+            let w = samples.weight(i);
+            if w == 0.0 {
+                continue;
+            }
+            let m = Vector3::from(samples.raw_ut[i]);
+            let e = a * m + b - Vector3::from(samples.expected_ut[i]);
+            s.rss_ut2 += e.component_mul(&e) * w;
+            let x = m - m_mean_ut;
+            let xt = Vector4::new(x[0], x[1], x[2], 1.0);
+            let cell = grid.cell(samples.expected_ut[i]).unwrap_or(0);
+            for group in [cell, grid.len() + i * blocks / total] {
+                for j in 0..3 {
+                    s.scores[group][j] -= xt * (w * e[j]);
+                }
+                s.group_weight[group] += w;
+            }
+        }
+        s
+    };
+    chunks::fold(total, scores_of, Scores::merge).unwrap_or_else(|| scores_of(0..0))
+}
+
+/// Per calibrated axis `j`, the covariance of `(a_j1, a_j2, a_j3, b_j)`: the largest, in every direction, of the
+/// model-based one and the cluster-robust ones over the cells of direction `clusters` and the blocks of time
+/// `time_blocks` (see the module docs).
+fn covariances(
+    moments: &Moments,
+    est: &Estimates,
+    scores: &Scores,
+    clusters: &[usize],
+    time_blocks: &[usize],
+) -> [[[f64; 4]; 4]; 3] {
     // Bread: the corrected normal matrix in centred coordinates (the intercept decoupled).
     let mut bread_inv = Matrix4::zeros();
-    bread_inv.fixed_view_mut::<3, 3>(0, 0).copy_from(&s_inv);
-    bread_inv[(3, 3)] = 1.0 / w_sum;
+    bread_inv.fixed_view_mut::<3, 3>(0, 0).copy_from(&est.s_inv);
+    bread_inv[(3, 3)] = 1.0 / moments.w_sum;
     // From centred (a_j, b'_j) to (a_j, b_j): b_j = b'_j − a_j·mean.
     let mut to_b = Matrix4::identity();
     for k in 0..3 {
-        to_b[(3, k)] = -m_mean[k];
+        to_b[(3, k)] = -moments.m_mean[k];
     }
     let mut covariance = [[[0.0; 4]; 4]; 3];
     for j in 0..3 {
-        let sigma2 = rss[j] / dof;
-        let model_based = bread_inv * sigma2;
-        let theta = Vector4::new(a[(j, 0)], a[(j, 1)], a[(j, 2)], 0.0);
-        let eiv = Vector4::new(
-            correction[(0, 0)],
-            correction[(1, 1)],
-            correction[(2, 2)],
-            0.0,
-        )
-        .component_mul(&theta)
-            / w_sum;
-        // The cluster-robust sandwich over `groups` (cells of direction, or blocks of time), when it has more than one.
-        let sandwich = |groups: &[usize]| {
-            let g = groups.len() as f64;
-            let meat: Matrix4<f64> = groups
-                .iter()
-                .map(|&k| {
-                    let score = scores[k][j] + eiv * group_weight[k];
-                    score * score.transpose()
-                })
-                .sum();
-            let small_sample = g / (g - 1.0) * (n as f64 - 1.0) / (n as f64 - 4.0);
-            (groups.len() > 1).then(|| bread_inv * meat * bread_inv * small_sample)
-        };
-        let mut larger = DMatrix::from_column_slice(4, 4, model_based.as_slice());
-        for robust in [sandwich(&clusters), sandwich(&time_blocks)]
-            .into_iter()
-            .flatten()
-        {
-            larger = loewner_max(
-                &larger,
-                &DMatrix::from_column_slice(4, 4, robust.as_slice()),
-            );
-        }
-        let c = to_b * Matrix4::from_column_slice(larger.as_slice()) * to_b.transpose();
+        let centred = axis_covariance(j, moments, est, scores, bread_inv, [clusters, time_blocks]);
+        let c = to_b * centred * to_b.transpose();
         covariance[j] = std::array::from_fn(|r| std::array::from_fn(|s| c[(r, s)]));
     }
+    covariance
+}
+
+/// Axis `j`'s covariance in centred coordinates: the model-based one from `bread_inv` (the inverse of the corrected
+/// normal matrix), enlarged to each cluster-robust sandwich over `groups` that can be made.
+fn axis_covariance(
+    j: usize,
+    moments: &Moments,
+    est: &Estimates,
+    scores: &Scores,
+    bread_inv: Matrix4<f64>,
+    groups: [&[usize]; 2],
+) -> Matrix4<f64> {
+    let sigma2 = scores.rss_ut2[j] / est.dof;
+    let model_based = bread_inv * sigma2;
+    let theta = Vector4::new(est.a[(j, 0)], est.a[(j, 1)], est.a[(j, 2)], 0.0);
+    let correction = &est.correction;
+    let eiv = Vector4::new(
+        correction[(0, 0)],
+        correction[(1, 1)],
+        correction[(2, 2)],
+        0.0,
+    )
+    .component_mul(&theta)
+        / moments.w_sum;
+    let mut larger = DMatrix::from_column_slice(4, 4, model_based.as_slice());
+    for robust in groups
+        .map(|g| sandwich(j, scores, eiv, g, bread_inv, moments.n))
+        .into_iter()
+        .flatten()
+    {
+        larger = loewner_max(
+            &larger,
+            &DMatrix::from_column_slice(4, 4, robust.as_slice()),
+        );
+    }
+    Matrix4::from_column_slice(larger.as_slice())
+}
+
+/// The cluster-robust sandwich covariance of axis `j` over `groups` (cells of direction, or blocks of time), each
+/// group's score with the noise correction's share `eiv` per unit weight, when there is more than one group; `n`
+/// samples used.
+fn sandwich(
+    j: usize,
+    scores: &Scores,
+    eiv: Vector4<f64>,
+    groups: &[usize],
+    bread_inv: Matrix4<f64>,
+    n: usize,
+) -> Option<Matrix4<f64>> {
+    let g = groups.len() as f64;
+    let meat: Matrix4<f64> = groups
+        .iter()
+        .map(|&k| {
+            let score = scores.scores[k][j] + eiv * scores.group_weight[k];
+            score * score.transpose()
+        })
+        .sum();
+    let small_sample = g / (g - 1.0) * (n as f64 - 1.0) / (n as f64 - 4.0);
+    (groups.len() > 1).then(|| bread_inv * meat * bread_inv * small_sample)
+}
+
+/// Fits `A` and `b` to raw readings and the expected field in sensor axes (both µT). Samples whose expected field
+/// or reading has a NaN are skipped and counted.
+pub fn fit(
+    raw_ut: &[[f64; 3]],
+    expected_ut: &[[f64; 3]],
+    opts: &VectorOptions<'_>,
+) -> Result<VectorFit, FitError> {
+    let samples = Samples::new(raw_ut, expected_ut, opts);
+    let moments = moments(&samples)?;
+    let coverage = checked_coverage(&moments, opts)?;
+    let est = estimates(&moments, opts.raw_noise_var_ut2)?;
+    if opts.estimates_only {
+        return Ok(estimates_only_fit(&moments, &est, coverage, raw_ut.len()));
+    }
+    let scores = residual_scores(&samples, &est, moments.m_mean);
+    let (clusters, time_blocks) = (scores.used_cells(), scores.used_blocks());
+    let covariance = covariances(&moments, &est, &scores, &clusters, &time_blocks);
+    let (n, b) = (moments.n, est.b_ut);
     Ok(VectorFit {
-        a: a_arr,
+        a: rows(&est.a),
         b_ut: [b[0], b[1], b[2]],
         a_se: std::array::from_fn(|j| std::array::from_fn(|k| covariance[j][k][k].sqrt())),
         b_se_ut: std::array::from_fn(|j| covariance[j][3][3].sqrt()),
         covariance,
-        residual_rms_ut: std::array::from_fn(|j| (rss[j] / w_sum).sqrt()),
+        residual_rms_ut: std::array::from_fn(|j| (scores.rss_ut2[j] / moments.w_sum).sqrt()),
         condition_number: coverage.spread_ut[0] / coverage.spread_ut[2],
         n,
         skipped: raw_ut.len() - n,
         coverage,
-        noise_bound,
+        noise_bound: est.noise_bound,
         direction_cells: clusters.len(),
     })
 }
