@@ -10,14 +10,14 @@
 
 use magcal_calib::coverage::Coverage;
 use magcal_calib::diagnosis::{self, DiagnosisInput, Disturbed, GrossSpan, Reference};
-use magcal_calib::effects::EffectId;
+use magcal_calib::effects::Need;
 use magcal_calib::noise::{self, NoiseFloor};
 use magcal_calib::{Model, frames};
 use magcal_recording::Recording;
 
 use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
-use crate::params::{Correction, ParamsFile};
+use crate::params::ParamsFile;
 use crate::readings::{calibrate_rows, expected_field, noise_measurable};
 use crate::verdict::{Grade, Hints, Verdict, judge, judge_without_direction};
 
@@ -89,12 +89,9 @@ pub fn model_for(params: &ParamsFile, rec: &Recording) -> Result<Model, ApplyErr
     let model = params
         .model(&channels)
         .map_err(ApplyError::MissingChannel)?;
-    let needs_temp = model.corrections().any(|e| {
-        matches!(
-            e.id(),
-            EffectId::TemperatureBias | EffectId::TemperatureScale
-        )
-    });
+    let needs_temp = model
+        .corrections()
+        .any(|e| e.id().descriptor().needs.contains(&Need::Temperature));
     if needs_temp && rec.temp_c.is_none() {
         return Err(ApplyError::MissingChannel(
             "a temperature column (temp) for their temperature correction".to_owned(),
@@ -476,11 +473,8 @@ fn apply_warnings(params: &ParamsFile, against: &Against, fitted_on_it: bool) ->
     let timed: Vec<&str> = params
         .corrections
         .iter()
-        .filter_map(|c| match c {
-            Correction::BiasStep { .. } => Some("bias_step"),
-            Correction::BiasDrift { .. } => Some("bias_drift"),
-            _ => None,
-        })
+        .filter(|c| c.id.descriptor().needs.contains(&Need::Time))
+        .map(|c| c.id.as_str())
         .collect();
     if !timed.is_empty() && !fitted_on_it {
         warnings.push(format!(

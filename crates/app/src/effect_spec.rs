@@ -2,7 +2,7 @@
 //! `id:name=value[,value,value][;name=value…]`, e.g. `temperature_bias:coef_ut_per_c=0.05,0,0;t_ref_c=25` or
 //! `current_bias:channel=i_motor;coef_ut_per_a=0.3,0,0`.
 
-use magcal_calib::effects::{Effect, EffectId};
+use magcal_calib::effects::{Effect, EffectId, ParamSpec, Shape, Value, WhenOmitted};
 
 /// An effect spec that cannot be used.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -22,7 +22,7 @@ pub struct Defaults<'a> {
     pub currents: &'a [String],
 }
 
-/// Parses one effect spec.
+/// Parses one effect spec: every parameter its descriptor lists, in order, from the spec or its default.
 pub fn parse(spec: &str, defaults: &Defaults<'_>) -> Result<Effect, EffectSpecError> {
     let err = |why: String| EffectSpecError {
         spec: spec.to_owned(),
@@ -43,180 +43,94 @@ pub fn parse(spec: &str, defaults: &Defaults<'_>) -> Result<Effect, EffectSpecEr
             .ok_or_else(|| err(format!("{part:?} is not name=value")))?;
         values.push((name.trim(), value.trim()));
     }
-    let get = |name: &str| values.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
-    let num = |name: &str, default: Option<f64>| -> Result<f64, EffectSpecError> {
-        match get(name) {
-            Some(v) => v
-                .parse()
-                .map_err(|_| err(format!("{name}: {v:?} is not a number"))),
-            None => default.ok_or_else(|| err(format!("{name} is required"))),
-        }
-    };
-    let vec3 = |name: &str| -> Result<[f64; 3], EffectSpecError> {
-        let v = get(name).ok_or_else(|| err(format!("{name} is required (three numbers)")))?;
-        let parts: Vec<f64> = v
-            .split(',')
-            .map(|x| x.trim().parse::<f64>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| err(format!("{name}: {v:?} is not three numbers")))?;
-        parts
-            .try_into()
-            .map_err(|_| err(format!("{name}: {v:?} is not three numbers")))
-    };
-    let allowed: &[&str] = match id {
-        EffectId::TemperatureBias => &["coef_ut_per_c", "t_ref_c"],
-        EffectId::TemperatureScale => &["coef_per_c", "t_ref_c"],
-        EffectId::CurrentBias => &["channel", "coef_ut_per_a"],
-        EffectId::TimeLag => &["lag_s"],
-        EffectId::RateCoupling => &["lag_axis_s"],
-        EffectId::FieldDrift => &["rate_ut_per_s", "t_ref_s"],
-        EffectId::FieldDirectionError => &["declination_error_deg", "inclination_error_deg"],
-        EffectId::Nonlinearity => &["cubic_per_ut2"],
-        EffectId::BiasStep => &["t_s", "step_ut"],
-        EffectId::BiasDrift => &["rate_ut_per_s", "t_ref_s"],
-        EffectId::Disturbance => &["t0_s", "t1_s", "field_ned_ut"],
-        EffectId::BiasWindow => &["t0_s", "t1_s", "offset_ut"],
-        EffectId::MagnetNearby => &["position_m", "moment_am2"],
-    };
-    if let Some((name, _)) = values.iter().find(|(n, _)| !allowed.contains(n)) {
+    let params = id.descriptor().params;
+    if let Some((name, _)) = values
+        .iter()
+        .find(|(n, _)| !params.iter().any(|p| p.name == *n))
+    {
+        let allowed: Vec<&str> = params.iter().map(|p| p.name).collect();
         return Err(err(format!(
             "{id} has no parameter {name:?}; it takes {}",
             allowed.join(", ")
         )));
     }
-    Ok(match id {
-        EffectId::TemperatureBias => Effect::TemperatureBias {
-            coef_ut_per_c: vec3("coef_ut_per_c")?,
-            t_ref_c: num("t_ref_c", Some(defaults.t_ref_c))?,
-        },
-        EffectId::TemperatureScale => Effect::TemperatureScale {
-            coef_per_c: vec3("coef_per_c")?,
-            t_ref_c: num("t_ref_c", Some(defaults.t_ref_c))?,
-        },
-        EffectId::CurrentBias => {
-            let name = get("channel")
+    let get = |name: &str| values.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
+    let parsed = params
+        .iter()
+        .map(|p| value(p, get(p.name), defaults).map_err(err))
+        .collect::<Result<Vec<Value>, _>>()?;
+    Ok(Effect::from_values(id, &parsed).expect("the values follow the descriptor"))
+}
+
+/// A parameter's value from its text in a spec (`None`: left out, then its default).
+fn value(p: &ParamSpec, text: Option<&str>, defaults: &Defaults<'_>) -> Result<Value, String> {
+    let name = p.name;
+    match p.shape {
+        Shape::Channel => {
+            let channel = text
                 .or(defaults.currents.first().map(String::as_str))
-                .ok_or_else(|| {
-                    err(
-                        "needs a current channel: add --current NAME:ON_A,MEAN_ON_S,MEAN_OFF_S"
-                            .to_owned(),
-                    )
-                })?;
-            let channel = defaults
+                .ok_or(
+                    "needs a current channel: add --current NAME:ON_A,MEAN_ON_S,MEAN_OFF_S"
+                        .to_owned(),
+                )?;
+            defaults
                 .currents
                 .iter()
-                .position(|c| c == name)
+                .position(|c| c == channel)
+                .map(Value::Channel)
                 .ok_or_else(|| {
-                    err(format!(
-                        "no current channel {name:?} (have {:?})",
+                    format!(
+                        "no current channel {channel:?} (have {:?})",
                         defaults.currents
-                    ))
-                })?;
-            Effect::CurrentBias {
-                channel,
-                coef_ut_per_a: vec3("coef_ut_per_a")?,
+                    )
+                })
+        }
+        Shape::Vector => {
+            let v = text.ok_or_else(|| format!("{name} is required (three numbers)"))?;
+            let parts: Vec<f64> = v
+                .split(',')
+                .map(|x| x.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| format!("{name}: {v:?} is not three numbers"))?;
+            let parts: [f64; 3] = parts
+                .try_into()
+                .map_err(|_| format!("{name}: {v:?} is not three numbers"))?;
+            Ok(Value::Vector(parts))
+        }
+        Shape::Number => {
+            let default = match p.default {
+                WhenOmitted::Required | WhenOmitted::FirstChannel => None,
+                WhenOmitted::Zero => Some(0.0),
+                WhenOmitted::ReferenceTemperature => Some(defaults.t_ref_c),
+                WhenOmitted::FieldDriftTime => Some(defaults.field_drift_t_ref_s),
+            };
+            match text {
+                Some(v) => v
+                    .parse()
+                    .map(Value::Number)
+                    .map_err(|_| format!("{name}: {v:?} is not a number")),
+                None => default
+                    .map(Value::Number)
+                    .ok_or_else(|| format!("{name} is required")),
             }
         }
-        EffectId::TimeLag => Effect::TimeLag {
-            lag_s: num("lag_s", None)?,
-        },
-        EffectId::RateCoupling => Effect::RateCoupling {
-            lag_axis_s: vec3("lag_axis_s")?,
-        },
-        EffectId::FieldDrift => Effect::FieldDrift {
-            rate_ut_per_s: vec3("rate_ut_per_s")?,
-            t_ref_s: num("t_ref_s", Some(defaults.field_drift_t_ref_s))?,
-        },
-        EffectId::FieldDirectionError => Effect::FieldDirectionError {
-            declination_error_deg: num("declination_error_deg", Some(0.0))?,
-            inclination_error_deg: num("inclination_error_deg", Some(0.0))?,
-        },
-        EffectId::Nonlinearity => Effect::Nonlinearity {
-            cubic_per_ut2: vec3("cubic_per_ut2")?,
-        },
-        EffectId::BiasStep => Effect::BiasStep {
-            t_s: num("t_s", None)?,
-            step_ut: vec3("step_ut")?,
-        },
-        EffectId::BiasDrift => Effect::BiasDrift {
-            rate_ut_per_s: vec3("rate_ut_per_s")?,
-            t_ref_s: num("t_ref_s", Some(0.0))?,
-        },
-        EffectId::Disturbance => Effect::Disturbance {
-            t0_s: num("t0_s", None)?,
-            t1_s: num("t1_s", None)?,
-            field_ned_ut: vec3("field_ned_ut")?,
-        },
-        EffectId::BiasWindow => Effect::BiasWindow {
-            t0_s: num("t0_s", None)?,
-            t1_s: num("t1_s", None)?,
-            offset_ut: vec3("offset_ut")?,
-        },
-        EffectId::MagnetNearby => Effect::MagnetNearby {
-            position_m: vec3("position_m")?,
-            moment_am2: vec3("moment_am2")?,
-        },
-    })
+    }
 }
 
 /// Writes an effect as a spec that [`parse`] reads back (`currents` names the channels).
 pub fn format(e: &Effect, currents: &[String]) -> String {
-    let v = |x: [f64; 3]| format!("{},{},{}", x[0], x[1], x[2]);
-    let params = match *e {
-        Effect::TemperatureBias {
-            coef_ut_per_c,
-            t_ref_c,
-        } => {
-            format!("coef_ut_per_c={};t_ref_c={t_ref_c}", v(coef_ut_per_c))
-        }
-        Effect::TemperatureScale {
-            coef_per_c,
-            t_ref_c,
-        } => format!("coef_per_c={};t_ref_c={t_ref_c}", v(coef_per_c)),
-        Effect::CurrentBias {
-            channel,
-            coef_ut_per_a,
-        } => format!(
-            "channel={};coef_ut_per_a={}",
-            currents.get(channel).map_or("?", String::as_str),
-            v(coef_ut_per_a)
-        ),
-        Effect::TimeLag { lag_s } => format!("lag_s={lag_s}"),
-        Effect::RateCoupling { lag_axis_s } => format!("lag_axis_s={}", v(lag_axis_s)),
-        Effect::FieldDrift {
-            rate_ut_per_s,
-            t_ref_s,
-        } => format!("rate_ut_per_s={};t_ref_s={t_ref_s}", v(rate_ut_per_s)),
-        Effect::FieldDirectionError {
-            declination_error_deg,
-            inclination_error_deg,
-        } => format!(
-            "declination_error_deg={declination_error_deg};inclination_error_deg={inclination_error_deg}"
-        ),
-        Effect::Nonlinearity { cubic_per_ut2 } => format!("cubic_per_ut2={}", v(cubic_per_ut2)),
-        Effect::BiasStep { t_s, step_ut } => format!("t_s={t_s};step_ut={}", v(step_ut)),
-        Effect::BiasDrift {
-            rate_ut_per_s,
-            t_ref_s,
-        } => format!("rate_ut_per_s={};t_ref_s={t_ref_s}", v(rate_ut_per_s)),
-        Effect::Disturbance {
-            t0_s,
-            t1_s,
-            field_ned_ut,
-        } => {
-            format!("t0_s={t0_s};t1_s={t1_s};field_ned_ut={}", v(field_ned_ut))
-        }
-        Effect::BiasWindow {
-            t0_s,
-            t1_s,
-            offset_ut,
-        } => format!("t0_s={t0_s};t1_s={t1_s};offset_ut={}", v(offset_ut)),
-        Effect::MagnetNearby {
-            position_m,
-            moment_am2,
-        } => format!("position_m={};moment_am2={}", v(position_m), v(moment_am2)),
-    };
-    format!("{}:{params}", e.id())
+    let params: Vec<String> = e
+        .values()
+        .map(|(spec, value)| {
+            let value = match value {
+                Value::Number(x) => format!("{x}"),
+                Value::Vector(x) => format!("{},{},{}", x[0], x[1], x[2]),
+                Value::Channel(c) => currents.get(c).map_or("?", String::as_str).to_owned(),
+            };
+            format!("{}={value}", spec.name)
+        })
+        .collect();
+    format!("{}:{}", e.id(), params.join(";"))
 }
 
 #[cfg(test)]

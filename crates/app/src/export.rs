@@ -64,12 +64,6 @@ impl Holder {
     }
 }
 
-/// Whether a found effect is a correction of the sensor, which the final model and the parameters file hold (the
-/// others are the bench's, the world's or one recording's events).
-pub fn is_correction(id: EffectId) -> bool {
-    id.frame() == Frame::Body && !id.is_transient()
-}
-
 /// Why `holder` does not carry the found effect `e`.
 fn why_not(e: &FoundEffect, holder: Holder) -> String {
     let id = e.effect.id();
@@ -113,7 +107,7 @@ pub fn left_out_lines(found: &[FoundEffect], holder: Holder) -> Vec<String> {
     for e in found {
         lines.push(format!(
             "{} {}, {:.3} µT RMS per axis on this recording: {}; {}",
-            if is_correction(e.effect.id()) {
+            if e.effect.id().is_correction() {
                 "left out:"
             } else {
                 "not a correction:"
@@ -235,7 +229,7 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
     } else {
         found
             .iter()
-            .filter(|e| is_correction(e.effect.id()))
+            .filter(|e| e.effect.id().is_correction())
             .count()
     };
     let named = left_out_lines(found, Holder::Format(format));
@@ -338,7 +332,7 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
                 "target_holds": Holder::Format(format).holds(),
                 "left_out": found.iter().map(|e| serde_json::json!({
                     "id": e.effect.id().as_str(),
-                    "correction": is_correction(e.effect.id()),
+                    "correction": e.effect.id().is_correction(),
                     "size_ut": e.size_ut,
                     "params": crate::report::params_json(e),
                     "what": e.what,

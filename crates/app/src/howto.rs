@@ -7,7 +7,7 @@ use std::path::Path;
 use magcal_calib::diagnosis::FoundEffect;
 
 use crate::device::DeviceSpec;
-use crate::export::{ExportFormat, Holder, is_correction, left_out_lines};
+use crate::export::{ExportFormat, Holder, left_out_lines};
 
 /// Where the calibration goes.
 #[derive(Clone, Copy, Debug)]
@@ -119,7 +119,7 @@ pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, found: &[FoundEff
     };
     let corrections = found
         .iter()
-        .filter(|e| is_correction(e.effect.id()))
+        .filter(|e| e.effect.id().is_correction())
         .count();
     if let Some(holder) = holder {
         if corrections > 0 {

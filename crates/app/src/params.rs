@@ -2,7 +2,8 @@
 
 use std::path::Path;
 
-use magcal_calib::{Effect, Model};
+use magcal_calib::effects::{Shape, Value};
+use magcal_calib::{Effect, EffectId, Model};
 use serde::{Deserialize, Serialize};
 
 use crate::files::write_atomic;
@@ -40,50 +41,27 @@ pub struct LinearParams {
     pub b_ut: [f64; 3],
 }
 
-/// A body-fixed correction as written in the file (current channels by name, not index).
+/// A body-fixed correction as written in the file: the effect's id and its parameters in its descriptor's order
+/// ([`EffectId::descriptor`]), current channels by name, not index. In TOML and JSON it is a table: `id`, then each
+/// parameter by its report name.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Correction {
+    /// The effect: body-fixed, and a property of the sensor (not an event of one recording).
+    pub id: EffectId,
+    /// Its parameters, each with its descriptor's name.
+    pub params: Vec<(&'static str, CorrectionValue)>,
+}
+
+/// A correction's parameter as written in the file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "id", rename_all = "snake_case", deny_unknown_fields)]
-pub enum Correction {
-    /// See [`Effect::TemperatureBias`].
-    TemperatureBias {
-        /// µT/°C.
-        coef_ut_per_c: [f64; 3],
-        /// °C.
-        t_ref_c: f64,
-    },
-    /// See [`Effect::TemperatureScale`].
-    TemperatureScale {
-        /// 1/°C.
-        coef_per_c: [f64; 3],
-        /// °C.
-        t_ref_c: f64,
-    },
-    /// See [`Effect::CurrentBias`].
-    CurrentBias {
-        /// The `i_<name>` column.
-        channel: String,
-        /// µT/A.
-        coef_ut_per_a: [f64; 3],
-    },
-    /// See [`Effect::Nonlinearity`].
-    Nonlinearity {
-        /// 1/µT².
-        cubic_per_ut2: [f64; 3],
-    },
-    /// See [`Effect::BiasStep`].
-    BiasStep {
-        /// s.
-        t_s: f64,
-        /// µT.
-        step_ut: [f64; 3],
-    },
-    /// See [`Effect::BiasDrift`].
-    BiasDrift {
-        /// µT/s.
-        rate_ut_per_s: [f64; 3],
-        /// s.
-        t_ref_s: f64,
-    },
+#[serde(untagged)]
+pub enum CorrectionValue {
+    /// One number.
+    Number(f64),
+    /// Three numbers.
+    Vector([f64; 3]),
+    /// A current channel, by its column name.
+    Channel(String),
 }
 
 /// The key of the first number in `v` that is not finite (`calibration.A[0][1]`), if any.
@@ -136,82 +114,118 @@ pub enum ParamsError {
 impl Correction {
     /// The file form of a body-fixed effect; `channels` names the recording's current columns.
     pub fn from_effect(e: &Effect, channels: &[String]) -> Option<Correction> {
-        Some(match *e {
-            Effect::TemperatureBias {
-                coef_ut_per_c,
-                t_ref_c,
-            } => Correction::TemperatureBias {
-                coef_ut_per_c,
-                t_ref_c,
-            },
-            Effect::TemperatureScale {
-                coef_per_c,
-                t_ref_c,
-            } => Correction::TemperatureScale {
-                coef_per_c,
-                t_ref_c,
-            },
-            Effect::CurrentBias {
-                channel,
-                coef_ut_per_a,
-            } => Correction::CurrentBias {
-                channel: channels.get(channel)?.clone(),
-                coef_ut_per_a,
-            },
-            Effect::Nonlinearity { cubic_per_ut2 } => Correction::Nonlinearity { cubic_per_ut2 },
-            Effect::BiasStep { t_s, step_ut } => Correction::BiasStep { t_s, step_ut },
-            Effect::BiasDrift {
-                rate_ut_per_s,
-                t_ref_s,
-            } => Correction::BiasDrift {
-                rate_ut_per_s,
-                t_ref_s,
-            },
-            _ => return None,
-        })
+        if !e.id().is_correction() {
+            return None;
+        }
+        let params = e
+            .values()
+            .map(|(spec, v)| {
+                let v = match v {
+                    Value::Number(x) => CorrectionValue::Number(x),
+                    Value::Vector(x) => CorrectionValue::Vector(x),
+                    Value::Channel(c) => CorrectionValue::Channel(channels.get(c)?.clone()),
+                };
+                Some((spec.name, v))
+            })
+            .collect::<Option<Vec<_>>>()?;
+        Some(Correction { id: e.id(), params })
     }
 
     /// The effect, with current channels indexed into `channels`.
     fn to_effect(&self, channels: &[String]) -> Result<Effect, String> {
-        Ok(match self {
-            Correction::TemperatureBias {
-                coef_ut_per_c,
-                t_ref_c,
-            } => Effect::TemperatureBias {
-                coef_ut_per_c: *coef_ut_per_c,
-                t_ref_c: *t_ref_c,
-            },
-            Correction::TemperatureScale {
-                coef_per_c,
-                t_ref_c,
-            } => Effect::TemperatureScale {
-                coef_per_c: *coef_per_c,
-                t_ref_c: *t_ref_c,
-            },
-            Correction::CurrentBias {
-                channel,
-                coef_ut_per_a,
-            } => Effect::CurrentBias {
-                channel: channels.iter().position(|c| c == channel).ok_or_else(|| {
-                    format!("current channel {channel} is not among {channels:?}")
-                })?,
-                coef_ut_per_a: *coef_ut_per_a,
-            },
-            Correction::Nonlinearity { cubic_per_ut2 } => Effect::Nonlinearity {
-                cubic_per_ut2: *cubic_per_ut2,
-            },
-            Correction::BiasStep { t_s, step_ut } => Effect::BiasStep {
-                t_s: *t_s,
-                step_ut: *step_ut,
-            },
-            Correction::BiasDrift {
-                rate_ut_per_s,
-                t_ref_s,
-            } => Effect::BiasDrift {
-                rate_ut_per_s: *rate_ut_per_s,
-                t_ref_s: *t_ref_s,
-            },
-        })
+        let values = self
+            .params
+            .iter()
+            .map(|(_, v)| match v {
+                CorrectionValue::Number(x) => Ok(Value::Number(*x)),
+                CorrectionValue::Vector(x) => Ok(Value::Vector(*x)),
+                CorrectionValue::Channel(channel) => channels
+                    .iter()
+                    .position(|c| c == channel)
+                    .map(Value::Channel)
+                    .ok_or_else(|| format!("current channel {channel} is not among {channels:?}")),
+            })
+            .collect::<Result<Vec<Value>, String>>()?;
+        Effect::from_values(self.id, &values)
+            .ok_or_else(|| format!("the parameters of {} are not its own", self.id))
+    }
+}
+
+impl Serialize for Correction {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(Some(1 + self.params.len()))?;
+        map.serialize_entry("id", self.id.as_str())?;
+        for (name, value) in &self.params {
+            map.serialize_entry(name, value)?;
+        }
+        map.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for Correction {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Correction, D::Error> {
+        use serde::de::Error;
+        let mut table =
+            std::collections::BTreeMap::<String, CorrectionValue>::deserialize(deserializer)?;
+        let id = match table.remove("id") {
+            Some(CorrectionValue::Channel(id)) => id,
+            _ => return Err(D::Error::custom("a correction needs its `id` (a text)")),
+        };
+        let corrections = || {
+            EffectId::ALL
+                .into_iter()
+                .filter(|id| id.is_correction())
+                .map(EffectId::as_str)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let id = EffectId::parse(&id)
+            .filter(|id| id.is_correction())
+            .ok_or_else(|| {
+                D::Error::custom(format!(
+                    "`{id}` is no correction a parameters file holds; they are {}",
+                    corrections()
+                ))
+            })?;
+        let specs = id.descriptor().params;
+        let names = || specs.iter().map(|p| p.name).collect::<Vec<_>>().join(", ");
+        if let Some(unknown) = table
+            .keys()
+            .find(|k| !specs.iter().any(|p| p.name == k.as_str()))
+        {
+            return Err(D::Error::custom(format!(
+                "{id} has no parameter `{unknown}`; it takes {}",
+                names()
+            )));
+        }
+        let params = specs
+            .iter()
+            .map(|spec| {
+                let value = table.remove(spec.name).ok_or_else(|| {
+                    D::Error::custom(format!("{id} needs `{}` ({})", spec.name, names()))
+                })?;
+                let fits = matches!(
+                    (spec.shape, &value),
+                    (Shape::Number, CorrectionValue::Number(_))
+                        | (Shape::Vector, CorrectionValue::Vector(_))
+                        | (Shape::Channel, CorrectionValue::Channel(_))
+                );
+                if !fits {
+                    return Err(D::Error::custom(format!(
+                        "{id}'s `{}` must be {}",
+                        spec.name,
+                        match spec.shape {
+                            Shape::Number => "a number",
+                            Shape::Vector => "three numbers",
+                            Shape::Channel => "a current column's name",
+                        }
+                    )));
+                }
+                Ok((spec.name, value))
+            })
+            .collect::<Result<Vec<_>, D::Error>>()?;
+        Ok(Correction { id, params })
     }
 }
 
@@ -432,5 +446,47 @@ mod tests {
             .unwrap();
         let file = ParamsFile::new("vector", &model, &["i_a".to_owned()]);
         assert!(file.model(&["i_b".to_owned()]).unwrap_err().contains("i_a"));
+    }
+
+    #[test]
+    fn a_correction_is_read_by_its_descriptor_and_what_is_wrong_is_said() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.toml");
+        let head = "format = \"magcal-params v1\"\nmethod = \"vector\"\n[calibration]\n\
+                    A = [[1,0,0],[0,1,0],[0,0,1]]\nb_ut = [0,0,0]\n[[corrections]]\n";
+        let read = |body: &str| {
+            std::fs::write(&path, format!("{head}{body}")).unwrap();
+            ParamsFile::read(&path)
+        };
+        let file = read("id = \"bias_drift\"\nrate_ut_per_s = [0.1, 0, 0]\nt_ref_s = 3\n").unwrap();
+        assert_eq!(
+            file.model(&[]).unwrap().corrections().next(),
+            Some(&Effect::BiasDrift {
+                rate_ut_per_s: [0.1, 0.0, 0.0],
+                t_ref_s: 3.0
+            })
+        );
+        for (body, said) in [
+            (
+                "id = \"time_lag\"\nlag_s = 0.01\n",
+                "is no correction a parameters file holds",
+            ),
+            (
+                "id = \"bias_drift\"\nrate = [0.1, 0, 0]\nt_ref_s = 3\n",
+                "has no parameter `rate`",
+            ),
+            (
+                "id = \"bias_drift\"\nrate_ut_per_s = [0.1, 0, 0]\n",
+                "needs `t_ref_s`",
+            ),
+            (
+                "id = \"bias_drift\"\nrate_ut_per_s = 1\nt_ref_s = 3\n",
+                "must be three numbers",
+            ),
+            ("rate_ut_per_s = [0.1, 0, 0]\n", "needs its `id`"),
+        ] {
+            let err = read(body).unwrap_err().to_string();
+            assert!(err.contains(said), "{body}: {err}");
+        }
     }
 }

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use magcal_calib::diagnosis::{Components, Diagnosis, Verdict as Finding};
-use magcal_calib::effects::{Effect, EffectId};
+use magcal_calib::effects::{Effect, Frame, Need};
 use magcal_calib::frames;
 use magcal_recording::Recording;
 use nalgebra::{Matrix2, Matrix3};
@@ -878,11 +878,16 @@ fn blamed_channel(d: &Diagnosis) -> Option<(&str, &[f64])> {
         return Some(found);
     }
     let e = d.effects.first()?;
-    match e.effect.id() {
-        EffectId::TemperatureBias | EffectId::TemperatureScale => by_name("temp"),
-        EffectId::CurrentBias => e.channel.as_deref().and_then(by_name),
-        EffectId::TimeLag | EffectId::RateCoupling => by_name("rotation_rate"),
-        _ => by_name("t"),
+    let id = e.effect.id();
+    let needs = id.descriptor().needs;
+    if needs.contains(&Need::Temperature) {
+        by_name("temp")
+    } else if needs.contains(&Need::Current) {
+        e.channel.as_deref().and_then(by_name)
+    } else if id.frame() == Frame::Timing {
+        by_name("rotation_rate")
+    } else {
+        by_name("t")
     }
 }
 

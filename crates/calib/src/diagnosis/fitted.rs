@@ -1,7 +1,7 @@
 //! What a solution of the diagnosis' problem says: the linear part `A`, `b` (back from centred readings, and for
 //! the scalar method from the linearisation), their standard errors, and each effect's parameters in report form.
 
-use crate::effects::{Effect, EffectId};
+use crate::effects::{Effect, Role, Value};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 
@@ -128,147 +128,71 @@ pub(crate) fn linear_se(
 /// Index pairs of the scalar method's symmetric `A` parameters (as in [`crate::scalar`]).
 pub(crate) const SYM: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
 
-pub(crate) fn not_excited(id: EffectId) -> &'static str {
-    match id {
-        EffectId::TemperatureBias | EffectId::TemperatureScale => {
-            "the temperature did not change during the recording"
-        }
-        EffectId::CurrentBias => "the current did not change during the recording",
-        EffectId::TimeLag | EffectId::RateCoupling => {
-            "the attitude did not change while samples were taken (static poses only)"
-        }
-        _ => "its signature is zero throughout this recording",
-    }
-}
-
-/// The report parameters of a fitted effect, with standard errors (`se` per fitted parameter; `sigma2` the residual
-/// variance per row, µT²).
+/// The report parameters of a fitted effect, in its descriptor's order, with standard errors (`se` per fitted
+/// parameter; `sigma2` the residual variance per row, µT²): a fitted vector's three, a fitted number's own; a scanned
+/// time's from its scan ([`scanned_se`]); none for a fixed one.
 pub(crate) fn params_of(e: &Effect, se: [f64; 3], cand: &Candidate, sigma2: f64) -> Vec<Param> {
-    let num = |name, v: f64, s: f64| Param {
-        name,
-        value: ParamValue::Number(v),
-        se: Some(ParamValue::Number(s)),
-    };
-    let vec3 = |name, v: [f64; 3]| Param {
-        name,
-        value: ParamValue::Vector(v),
-        se: Some(ParamValue::Vector(se)),
-    };
-    let fixed = |name, v: f64| Param {
-        name,
-        value: ParamValue::Number(v),
-        se: None,
-    };
-    // A scanned time's uncertainty. A change point is not a regular parameter and its profile interval under-covers;
-    // the location error of a jump Δ in white noise σ spreads like the argmax of a two-sided random walk with drift,
-    // whose standard deviation is √26·σ²/|Δ|² samples (Yao, Ann. Statist. 15, 1987). The larger of the two, and at
-    // least half a sample interval.
-    let jump2 = match *e {
-        Effect::BiasStep { step_ut, .. } => frames::dot(step_ut, step_ut),
-        Effect::Disturbance { field_ned_ut, .. } => frames::dot(field_ned_ut, field_ned_ut),
-        Effect::BiasWindow { offset_ut, .. } => frames::dot(offset_ut, offset_ut),
+    // The size of the jump a scanned time is the time of: the effect's fitted vector.
+    let jump2 = match e
+        .values()
+        .find(|(s, _)| s.role == Role::Fitted)
+        .map(|(_, v)| v)
+    {
+        Some(Value::Vector(v)) if e.values().any(|(s, _)| s.role == Role::Scanned) => {
+            frames::dot(v, v)
+        }
         _ => f64::INFINITY,
     };
-    let half = |(lo, hi): (f64, f64)| {
-        let dt = cand.scan.map_or(0.0, |s| s.sample_interval_s);
-        ((hi - lo) / 2.0)
-            .max(26f64.sqrt() * sigma2 / jump2 * dt)
-            .max(dt / 2.0)
-    };
-    match *e {
-        Effect::TemperatureBias {
-            coef_ut_per_c,
-            t_ref_c,
-        } => {
-            vec![
-                vec3("coef_ut_per_c", coef_ut_per_c),
-                fixed("t_ref_c", t_ref_c),
-            ]
-        }
-        Effect::TemperatureScale {
-            coef_per_c,
-            t_ref_c,
-        } => vec![vec3("coef_per_c", coef_per_c), fixed("t_ref_c", t_ref_c)],
-        Effect::CurrentBias { coef_ut_per_a, .. } => vec![
+    let (mut fitted_numbers, mut scanned) = (0, 0);
+    e.values()
+        .map(|(spec, value)| {
+            let (value, se) = match (spec.role, value) {
+                (Role::Fitted, Value::Vector(v)) => {
+                    (ParamValue::Vector(v), Some(ParamValue::Vector(se)))
+                }
+                (Role::Fitted, Value::Number(x)) => {
+                    fitted_numbers += 1;
+                    (
+                        ParamValue::Number(x),
+                        Some(ParamValue::Number(se[fitted_numbers - 1])),
+                    )
+                }
+                (Role::Scanned, Value::Number(t)) => {
+                    scanned += 1;
+                    let interval = cand.scan.and_then(|s| {
+                        if scanned == 1 {
+                            Some(s.start_s)
+                        } else {
+                            s.end_s
+                        }
+                    });
+                    let se = interval.map_or(f64::NAN, |i| scanned_se(i, cand, sigma2, jump2));
+                    (ParamValue::Number(t), Some(ParamValue::Number(se)))
+                }
+                (Role::Channel, _) => (
+                    ParamValue::Text(cand.channel.clone().unwrap_or_default()),
+                    None,
+                ),
+                (_, Value::Vector(v)) => (ParamValue::Vector(v), None),
+                (_, Value::Number(x)) => (ParamValue::Number(x), None),
+                (_, Value::Channel(_)) => unreachable!("only a channel parameter holds a channel"),
+            };
             Param {
-                name: "channel",
-                value: ParamValue::Text(cand.channel.clone().unwrap_or_default()),
-                se: None,
-            },
-            vec3("coef_ut_per_a", coef_ut_per_a),
-        ],
-        Effect::TimeLag { lag_s } => vec![num("lag_s", lag_s, se[0])],
-        Effect::RateCoupling { lag_axis_s } => vec![vec3("lag_axis_s", lag_axis_s)],
-        Effect::FieldDrift {
-            rate_ut_per_s,
-            t_ref_s,
-        } => vec![
-            vec3("rate_ut_per_s", rate_ut_per_s),
-            fixed("t_ref_s", t_ref_s),
-        ],
-        Effect::FieldDirectionError {
-            declination_error_deg,
-            inclination_error_deg,
-        } => vec![
-            num("declination_error_deg", declination_error_deg, se[0]),
-            num("inclination_error_deg", inclination_error_deg, se[1]),
-        ],
-        Effect::Nonlinearity { cubic_per_ut2 } => vec![vec3("cubic_per_ut2", cubic_per_ut2)],
-        Effect::BiasStep { t_s, step_ut } => vec![
-            num("t_s", t_s, cand.scan.map_or(f64::NAN, |s| half(s.start_s))),
-            vec3("step_ut", step_ut),
-        ],
-        Effect::BiasDrift {
-            rate_ut_per_s,
-            t_ref_s,
-        } => vec![
-            vec3("rate_ut_per_s", rate_ut_per_s),
-            fixed("t_ref_s", t_ref_s),
-        ],
-        Effect::Disturbance {
-            t0_s,
-            t1_s,
-            field_ned_ut,
-        } => vec![
-            num(
-                "t0_s",
-                t0_s,
-                cand.scan.map_or(f64::NAN, |s| half(s.start_s)),
-            ),
-            num(
-                "t1_s",
-                t1_s,
-                cand.scan.and_then(|s| s.end_s).map_or(f64::NAN, half),
-            ),
-            vec3("field_ned_ut", field_ned_ut),
-        ],
-        Effect::BiasWindow {
-            t0_s,
-            t1_s,
-            offset_ut,
-        } => vec![
-            num(
-                "t0_s",
-                t0_s,
-                cand.scan.map_or(f64::NAN, |s| half(s.start_s)),
-            ),
-            num(
-                "t1_s",
-                t1_s,
-                cand.scan.and_then(|s| s.end_s).map_or(f64::NAN, half),
-            ),
-            vec3("offset_ut", offset_ut),
-        ],
-        Effect::MagnetNearby {
-            position_m,
-            moment_am2,
-        } => vec![
-            Param {
-                name: "position_m",
-                value: ParamValue::Vector(position_m),
-                se: None,
-            },
-            vec3("moment_am2", moment_am2),
-        ],
-    }
+                name: spec.name,
+                value,
+                se,
+            }
+        })
+        .collect()
+}
+
+/// A scanned time's uncertainty from its profile interval `(lo, hi)`, s. A change point is not a regular parameter
+/// and its profile interval under-covers; the location error of a jump Δ (`jump2` = |Δ|²) in white noise σ
+/// (`sigma2` = σ²) spreads like the argmax of a two-sided random walk with drift, whose standard deviation is
+/// √26·σ²/|Δ|² samples (Yao, Ann. Statist. 15, 1987). The larger of the two, and at least half a sample interval.
+fn scanned_se((lo, hi): (f64, f64), cand: &Candidate, sigma2: f64, jump2: f64) -> f64 {
+    let dt = cand.scan.map_or(0.0, |s| s.sample_interval_s);
+    ((hi - lo) / 2.0)
+        .max(26f64.sqrt() * sigma2 / jump2 * dt)
+        .max(dt / 2.0)
 }

@@ -4,7 +4,7 @@
 
 use std::borrow::Cow;
 
-use crate::effects::{Effect, Frame};
+use crate::effects::Effect;
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 use crate::scan;
@@ -14,7 +14,7 @@ use super::explain::{self, Fate};
 use super::findings::{
     Ambiguity, Diagnosis, FitSummary, FoundEffect, GrossSpan, Rejected, Residuals, Verdict,
 };
-use super::fitted::{coefficient, linear_of, linear_se, not_excited, params_of};
+use super::fitted::{coefficient, linear_of, linear_se, params_of};
 use super::gross::Span;
 use super::locate::{self, Components, Located, Segment};
 use super::rounds::Round;
@@ -278,7 +278,7 @@ fn found_effects(
     let mut effects = Vec::new();
     for (k, (c, effect, se)) in chosen.iter().enumerate() {
         let cand = &round.cands[*c];
-        if effect.id().frame() == Frame::Body && !effect.id().is_transient() {
+        if effect.id().is_correction() {
             model
                 .add_correction(*effect)
                 .expect("candidates are limited so that every body-fixed effect fits in a model");
@@ -366,7 +366,7 @@ fn untestable(round: &mut Round) -> Vec<Untestable> {
             id: cand.id(),
             why: match why {
                 SetAside::NotExcited => {
-                    format!("not excited{name}: {}", not_excited(cand.id()))
+                    format!("not excited{name}: {}", cand.id().descriptor().not_excited)
                 }
                 SetAside::Absorbed {
                     unabsorbed,

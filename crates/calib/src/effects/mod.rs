@@ -13,6 +13,10 @@
 
 use crate::frames::{self, Mat3};
 
+mod catalogue;
+
+pub use catalogue::{CATALOGUE, Descriptor, Need, ParamSpec, Role, Shape, Value, WhenOmitted};
+
 /// The stable identifier of an effect, as it appears in reports and parameter files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum EffectId {
@@ -64,21 +68,7 @@ impl EffectId {
 
     /// The id used in reports, e.g. `"temperature_bias"`.
     pub fn as_str(self) -> &'static str {
-        match self {
-            EffectId::TemperatureBias => "temperature_bias",
-            EffectId::TemperatureScale => "temperature_scale",
-            EffectId::CurrentBias => "current_bias",
-            EffectId::TimeLag => "time_lag",
-            EffectId::RateCoupling => "rate_coupling",
-            EffectId::FieldDrift => "field_drift",
-            EffectId::FieldDirectionError => "field_direction_error",
-            EffectId::Nonlinearity => "nonlinearity",
-            EffectId::BiasStep => "bias_step",
-            EffectId::BiasDrift => "bias_drift",
-            EffectId::Disturbance => "disturbance",
-            EffectId::BiasWindow => "bias_window",
-            EffectId::MagnetNearby => "magnet_nearby",
-        }
+        self.descriptor().name
     }
 
     /// Parses a report id.
@@ -88,25 +78,19 @@ impl EffectId {
 
     /// Where the effect lives.
     pub fn frame(self) -> Frame {
-        match self {
-            EffectId::TimeLag | EffectId::RateCoupling => Frame::Timing,
-            EffectId::FieldDrift
-            | EffectId::FieldDirectionError
-            | EffectId::Disturbance
-            | EffectId::MagnetNearby => Frame::World,
-            _ => Frame::Body,
-        }
+        self.descriptor().frame
     }
-}
 
-impl EffectId {
     /// Whether the effect is an event of one recording (a disturbance that came and went) rather than a property
     /// of the sensor or the bench: never a correction for other recordings.
     pub fn is_transient(self) -> bool {
-        matches!(
-            self,
-            EffectId::Disturbance | EffectId::BiasWindow | EffectId::MagnetNearby
-        )
+        self.descriptor().transient
+    }
+
+    /// Whether the effect is a correction `apply` removes: fixed to the sensor, and a property of it (not an event
+    /// of one recording).
+    pub fn is_correction(self) -> bool {
+        self.frame() == Frame::Body && !self.is_transient()
     }
 }
 
@@ -445,73 +429,38 @@ impl Effect {
     }
 
     /// The fitted parameters (the rest — reference temperature or time, channel, step time, window — are fixed while
-    /// fitting) and how many of the array's entries are used.
+    /// fitting) and how many of the array's entries are used: a vector's three, or the numbers in order.
     pub fn params(&self) -> ([f64; 3], usize) {
-        match *self {
-            Effect::TemperatureBias {
-                coef_ut_per_c: p, ..
+        let (mut p, mut n) = ([0.0; 3], 0);
+        for (spec, v) in self.values() {
+            match (spec.role, v) {
+                (Role::Fitted, Value::Vector(x)) => (p, n) = (x, 3),
+                (Role::Fitted, Value::Number(x)) => {
+                    p[n] = x;
+                    n += 1;
+                }
+                _ => {}
             }
-            | Effect::TemperatureScale { coef_per_c: p, .. }
-            | Effect::CurrentBias {
-                coef_ut_per_a: p, ..
-            }
-            | Effect::RateCoupling { lag_axis_s: p }
-            | Effect::FieldDrift {
-                rate_ut_per_s: p, ..
-            }
-            | Effect::Nonlinearity { cubic_per_ut2: p }
-            | Effect::BiasStep { step_ut: p, .. }
-            | Effect::BiasDrift {
-                rate_ut_per_s: p, ..
-            }
-            | Effect::Disturbance {
-                field_ned_ut: p, ..
-            }
-            | Effect::BiasWindow { offset_ut: p, .. }
-            | Effect::MagnetNearby { moment_am2: p, .. } => (p, 3),
-            Effect::TimeLag { lag_s } => ([lag_s, 0.0, 0.0], 1),
-            Effect::FieldDirectionError {
-                declination_error_deg,
-                inclination_error_deg,
-            } => ([declination_error_deg, inclination_error_deg, 0.0], 2),
         }
+        (p, n)
     }
 
     /// The same effect with other fitted parameters (the first `params().1` entries of `p` are used).
     pub fn with_params(&self, p: [f64; 3]) -> Effect {
-        let mut e = *self;
-        match &mut e {
-            Effect::TemperatureBias {
-                coef_ut_per_c: q, ..
-            }
-            | Effect::TemperatureScale { coef_per_c: q, .. }
-            | Effect::CurrentBias {
-                coef_ut_per_a: q, ..
-            }
-            | Effect::RateCoupling { lag_axis_s: q }
-            | Effect::FieldDrift {
-                rate_ut_per_s: q, ..
-            }
-            | Effect::Nonlinearity { cubic_per_ut2: q }
-            | Effect::BiasStep { step_ut: q, .. }
-            | Effect::BiasDrift {
-                rate_ut_per_s: q, ..
-            }
-            | Effect::Disturbance {
-                field_ned_ut: q, ..
-            }
-            | Effect::BiasWindow { offset_ut: q, .. }
-            | Effect::MagnetNearby { moment_am2: q, .. } => *q = p,
-            Effect::TimeLag { lag_s } => *lag_s = p[0],
-            Effect::FieldDirectionError {
-                declination_error_deg,
-                inclination_error_deg,
-            } => {
-                *declination_error_deg = p[0];
-                *inclination_error_deg = p[1];
-            }
+        let mut values = [Value::Number(0.0); 3];
+        let mut used = 0;
+        for (k, (spec, v)) in self.values().enumerate() {
+            values[k] = match (spec.role, v) {
+                (Role::Fitted, Value::Vector(_)) => Value::Vector(p),
+                (Role::Fitted, Value::Number(_)) => {
+                    used += 1;
+                    Value::Number(p[used - 1])
+                }
+                (_, v) => v,
+            };
         }
-        e
+        let count = self.id().descriptor().params.len();
+        Effect::from_values(self.id(), &values[..count]).expect("an effect's own values fit it")
     }
 }
 
