@@ -122,9 +122,6 @@ const fn with_default(spec: ParamSpec, default: WhenOmitted) -> ParamSpec {
     ParamSpec { default, ..spec }
 }
 
-use Role::{Channel as ByChannel, Fitted, Fixed, Scanned};
-use Shape::{Number, Vector};
-
 /// The signature of an effect is zero throughout the recording.
 const ZERO_SIGNATURE: &str = "its signature is zero throughout this recording";
 /// The temperature did not change.
@@ -141,9 +138,9 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::Body,
         transient: false,
         params: &[
-            p("coef_ut_per_c", "µT/°C", Fitted, Vector),
+            p("coef_ut_per_c", "µT/°C", Role::Fitted, Shape::Vector),
             with_default(
-                p("t_ref_c", "°C", Fixed, Number),
+                p("t_ref_c", "°C", Role::Fixed, Shape::Number),
                 WhenOmitted::ReferenceTemperature,
             ),
         ],
@@ -157,9 +154,9 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::Body,
         transient: false,
         params: &[
-            p("coef_per_c", "1/°C", Fitted, Vector),
+            p("coef_per_c", "1/°C", Role::Fitted, Shape::Vector),
             with_default(
-                p("t_ref_c", "°C", Fixed, Number),
+                p("t_ref_c", "°C", Role::Fixed, Shape::Number),
                 WhenOmitted::ReferenceTemperature,
             ),
         ],
@@ -174,10 +171,10 @@ pub const CATALOGUE: [Descriptor; 13] = [
         transient: false,
         params: &[
             with_default(
-                p("channel", "", ByChannel, Shape::Channel),
+                p("channel", "", Role::Channel, Shape::Channel),
                 WhenOmitted::FirstChannel,
             ),
-            p("coef_ut_per_a", "µT/A", Fitted, Vector),
+            p("coef_ut_per_a", "µT/A", Role::Fitted, Shape::Vector),
         ],
         needs: &[Need::Current],
         summary: "the field of a current recorded in an i_<name> channel",
@@ -188,7 +185,7 @@ pub const CATALOGUE: [Descriptor; 13] = [
         name: "time_lag",
         frame: Frame::Timing,
         transient: false,
-        params: &[p("lag_s", "s", Fitted, Number)],
+        params: &[p("lag_s", "s", Role::Fitted, Shape::Number)],
         needs: &[Need::Reference, Need::Time],
         summary: "the magnetometer sample late relative to the attitude reference (one delay for all axes)",
         not_excited: STATIC_POSES,
@@ -198,7 +195,7 @@ pub const CATALOGUE: [Descriptor; 13] = [
         name: "rate_coupling",
         frame: Frame::Timing,
         transient: false,
-        params: &[p("lag_axis_s", "s", Fitted, Vector)],
+        params: &[p("lag_axis_s", "s", Role::Fitted, Shape::Vector)],
         needs: &[Need::Reference, Need::Time],
         summary: "each axis following the field's rate of change with its own delay (filters, eddy currents)",
         not_excited: STATIC_POSES,
@@ -209,9 +206,9 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::World,
         transient: false,
         params: &[
-            p("rate_ut_per_s", "µT/s (NED)", Fitted, Vector),
+            p("rate_ut_per_s", "µT/s (NED)", Role::Fitted, Shape::Vector),
             with_default(
-                p("t_ref_s", "s", Fixed, Number),
+                p("t_ref_s", "s", Role::Fixed, Shape::Number),
                 WhenOmitted::FieldDriftTime,
             ),
         ],
@@ -226,11 +223,11 @@ pub const CATALOGUE: [Descriptor; 13] = [
         transient: false,
         params: &[
             with_default(
-                p("declination_error_deg", "°", Fitted, Number),
+                p("declination_error_deg", "°", Role::Fitted, Shape::Number),
                 WhenOmitted::Zero,
             ),
             with_default(
-                p("inclination_error_deg", "°", Fitted, Number),
+                p("inclination_error_deg", "°", Role::Fitted, Shape::Number),
                 WhenOmitted::Zero,
             ),
         ],
@@ -243,7 +240,7 @@ pub const CATALOGUE: [Descriptor; 13] = [
         name: "nonlinearity",
         frame: Frame::Body,
         transient: false,
-        params: &[p("cubic_per_ut2", "1/µT²", Fitted, Vector)],
+        params: &[p("cubic_per_ut2", "1/µT²", Role::Fitted, Shape::Vector)],
         needs: &[],
         summary: "a response not linear in the field (a cubic per axis)",
         not_excited: ZERO_SIGNATURE,
@@ -254,8 +251,8 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::Body,
         transient: false,
         params: &[
-            p("t_s", "s", Scanned, Number),
-            p("step_ut", "µT", Fitted, Vector),
+            p("t_s", "s", Role::Scanned, Shape::Number),
+            p("step_ut", "µT", Role::Fitted, Shape::Vector),
         ],
         needs: &[Need::Time],
         summary: "a sudden change of the offset",
@@ -267,8 +264,11 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::Body,
         transient: false,
         params: &[
-            p("rate_ut_per_s", "µT/s", Fitted, Vector),
-            with_default(p("t_ref_s", "s", Fixed, Number), WhenOmitted::Zero),
+            p("rate_ut_per_s", "µT/s", Role::Fitted, Shape::Vector),
+            with_default(
+                p("t_ref_s", "s", Role::Fixed, Shape::Number),
+                WhenOmitted::Zero,
+            ),
         ],
         needs: &[Need::Time],
         summary: "the offset drifting with time",
@@ -280,9 +280,9 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::World,
         transient: true,
         params: &[
-            p("t0_s", "s", Scanned, Number),
-            p("t1_s", "s", Scanned, Number),
-            p("field_ned_ut", "µT (NED)", Fitted, Vector),
+            p("t0_s", "s", Role::Scanned, Shape::Number),
+            p("t1_s", "s", Role::Scanned, Shape::Number),
+            p("field_ned_ut", "µT (NED)", Role::Fitted, Shape::Vector),
         ],
         needs: &[Need::Attitude, Need::Time],
         summary: "a transient external field fixed in the world",
@@ -294,9 +294,9 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::Body,
         transient: true,
         params: &[
-            p("t0_s", "s", Scanned, Number),
-            p("t1_s", "s", Scanned, Number),
-            p("offset_ut", "µT", Fitted, Vector),
+            p("t0_s", "s", Role::Scanned, Shape::Number),
+            p("t1_s", "s", Role::Scanned, Shape::Number),
+            p("offset_ut", "µT", Role::Fitted, Shape::Vector),
         ],
         needs: &[Need::Time],
         summary: "a transient offset fixed to the sensor (something magnetic attached to the board for a while)",
@@ -308,8 +308,8 @@ pub const CATALOGUE: [Descriptor; 13] = [
         frame: Frame::World,
         transient: true,
         params: &[
-            p("position_m", "m (NED)", Fixed, Vector),
-            p("moment_am2", "A·m² (NED)", Fitted, Vector),
+            p("position_m", "m (NED)", Role::Fixed, Shape::Vector),
+            p("moment_am2", "A·m² (NED)", Role::Fitted, Shape::Vector),
         ],
         needs: &[Need::Attitude],
         summary: "a magnet fixed in the room: its field depends on where the sensor is",
