@@ -296,21 +296,67 @@ pub(crate) const STEP_SCAN_PENALTY: f64 = 14.0;
 /// Evidence demanded for the disturbance window scanned over pairs of boundaries.
 pub(crate) const WINDOW_SCAN_PENALTY: f64 = 24.0;
 
-/// The candidates and the untestable effects, with columns numbered from `first_column`.
+/// The candidates and the untestable effects, with columns numbered from `first_column`: the modelled spans'
+/// effects (forced into the model), then the catalogue's in a fixed order — temperature, currents, timing, the
+/// world's, the response's, time's — each offered where the recording can observe it, or said untestable with why.
 pub(crate) fn candidates(
     offer: &Offer<'_>,
     first_column: usize,
 ) -> (Vec<Candidate>, Vec<Untestable>) {
-    let s = offer.samples;
-    let mut out: Vec<Candidate> = Vec::new();
-    let mut untestable = Vec::new();
-    let mut column = first_column;
-    let mut add = |template: Effect, channel, supersedes, scan_penalty, scan, forced| {
+    let mut list = List {
+        out: Vec::new(),
+        untestable: Vec::new(),
+        column: first_column,
+    };
+    for (effect, times) in &offer.spans {
+        list.add(*effect, None, None, 0.0, Some(*times), true);
+    }
+    list.temperature(offer);
+    list.currents(offer);
+    list.timing(offer);
+    list.world(offer);
+    list.push(
+        Effect::Nonlinearity {
+            cubic_per_ut2: [0.0; 3],
+        },
+        None,
+        None,
+        0.0,
+        None,
+    );
+    list.time(offer);
+    (list.out, list.untestable)
+}
+
+/// The candidates as they are offered, and the effects said untestable.
+struct List {
+    out: Vec<Candidate>,
+    untestable: Vec<Untestable>,
+    /// The next candidate's first design column.
+    column: usize,
+}
+
+/// Why temperature effects are untestable without a temperature.
+const NO_TEMP: &str = "the recording has no temp column";
+/// Why time effects are untestable without time.
+const NO_TIME: &str = "the recording has no t column";
+
+impl List {
+    /// A candidate with its columns next.
+    fn add(
+        &mut self,
+        template: Effect,
+        channel: Option<String>,
+        supersedes: Option<EffectId>,
+        scan_penalty: f64,
+        scan: Option<ScanTimes>,
+        forced: bool,
+    ) {
         let n = template.params().1;
-        out.push(Candidate {
+        self.out.push(Candidate {
             template,
             n,
-            first: column,
+            first: self.column,
             channel,
             supersedes,
             scan_penalty,
@@ -318,30 +364,39 @@ pub(crate) fn candidates(
             forced,
             active_rows: 0,
         });
-        column += n;
-    };
-    for (effect, times) in &offer.spans {
-        add(*effect, None, None, 0.0, Some(*times), true);
+        self.column += n;
     }
-    let mut push = |template: Effect, channel: Option<String>, supersedes, scan_penalty, scan| {
-        add(template, channel, supersedes, scan_penalty, scan, false)
-    };
-    let mut refuse = |id: EffectId, why: &str| {
-        untestable.push(Untestable {
+
+    /// A catalogue candidate (selected, not forced).
+    fn push(
+        &mut self,
+        template: Effect,
+        channel: Option<String>,
+        supersedes: Option<EffectId>,
+        scan_penalty: f64,
+        scan: Option<ScanTimes>,
+    ) {
+        self.add(template, channel, supersedes, scan_penalty, scan, false)
+    }
+
+    /// An effect this recording cannot test, and why.
+    fn refuse(&mut self, id: EffectId, why: &str) {
+        self.untestable.push(Untestable {
             id,
             why: why.to_owned(),
         })
-    };
-    // Every body-fixed effect must fit in one model: five besides the currents.
-    let max_currents = crate::model::MAX_CORRECTIONS - 5;
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let t_ref_s = mean(&s.t);
-    let between = |k: usize| between(s, k);
+    }
 
-    const NO_TEMP: &str = "the recording has no temp column";
-    if s.has_temp {
+    /// The temperature's effects, about the mean temperature.
+    fn temperature(&mut self, offer: &Offer<'_>) {
+        let s = offer.samples;
+        if !s.has_temp {
+            self.refuse(EffectId::TemperatureBias, NO_TEMP);
+            self.refuse(EffectId::TemperatureScale, NO_TEMP);
+            return;
+        }
         let t_ref_c = mean(&s.temp);
-        push(
+        self.push(
             Effect::TemperatureBias {
                 coef_ut_per_c: [0.0; 3],
                 t_ref_c,
@@ -351,7 +406,7 @@ pub(crate) fn candidates(
             0.0,
             None,
         );
-        push(
+        self.push(
             Effect::TemperatureScale {
                 coef_per_c: [0.0; 3],
                 t_ref_c,
@@ -361,173 +416,170 @@ pub(crate) fn candidates(
             0.0,
             None,
         );
-    } else {
-        refuse(EffectId::TemperatureBias, NO_TEMP);
-        refuse(EffectId::TemperatureScale, NO_TEMP);
-    }
-    if offer.current_names.is_empty() {
-        refuse(
-            EffectId::CurrentBias,
-            "the recording has no current channel (i_<name> column)",
-        );
-    }
-    for name in offer.current_names.iter().skip(max_currents) {
-        refuse(
-            EffectId::CurrentBias,
-            &format!("{name}: only the first {max_currents} current channels are tested"),
-        );
-    }
-    for (channel, name) in offer.current_names.iter().enumerate().take(max_currents) {
-        push(
-            Effect::CurrentBias {
-                channel,
-                coef_ut_per_a: [0.0; 3],
-            },
-            Some((*name).to_owned()),
-            None,
-            0.0,
-            None,
-        );
     }
 
-    let attitude = s.quat.is_some();
-    const NO_REFERENCE: &str = "the scalar method has no attitude reference: a timing error between sensor and reference needs one";
-    const NO_TIME: &str = "the recording has no t column";
-    match (offer.vector, s.has_time) {
-        (true, true) => {
-            push(Effect::TimeLag { lag_s: 0.0 }, None, None, 0.0, None);
-            push(
-                Effect::RateCoupling {
-                    lag_axis_s: [0.0; 3],
+    /// A current bias per current channel, as many as fit in one model with every other body-fixed effect.
+    fn currents(&mut self, offer: &Offer<'_>) {
+        // Every body-fixed effect must fit in one model: five besides the currents.
+        let max_currents = crate::model::MAX_CORRECTIONS - 5;
+        if offer.current_names.is_empty() {
+            self.refuse(
+                EffectId::CurrentBias,
+                "the recording has no current channel (i_<name> column)",
+            );
+        }
+        for name in offer.current_names.iter().skip(max_currents) {
+            self.refuse(
+                EffectId::CurrentBias,
+                &format!("{name}: only the first {max_currents} current channels are tested"),
+            );
+        }
+        for (channel, name) in offer.current_names.iter().enumerate().take(max_currents) {
+            self.push(
+                Effect::CurrentBias {
+                    channel,
+                    coef_ut_per_a: [0.0; 3],
                 },
+                Some((*name).to_owned()),
                 None,
-                Some(EffectId::TimeLag),
                 0.0,
                 None,
             );
         }
-        (false, _) => {
-            refuse(EffectId::TimeLag, NO_REFERENCE);
-            refuse(EffectId::RateCoupling, NO_REFERENCE);
-        }
-        (true, false) => {
-            refuse(EffectId::TimeLag, NO_TIME);
-            refuse(EffectId::RateCoupling, NO_TIME);
-        }
     }
 
-    let world_why = if !offer.vector {
-        Some(
-            "a world-frame effect: the scalar method sees |B| only, with no attitude to tell world from sensor axes",
-        )
-    } else if !attitude {
-        Some(
-            "a world-frame effect: the recording gives the expected field in sensor axes (rx,ry,rz) but not the attitude",
-        )
-    } else {
-        None
-    };
-    match (world_why, s.has_time) {
-        (Some(why), _) => {
-            refuse(EffectId::FieldDrift, why);
-            refuse(EffectId::FieldDirectionError, why);
-            refuse(EffectId::Disturbance, why);
-            refuse(EffectId::MagnetNearby, why);
-        }
-        (None, has_time) => {
-            refuse(
-                EffectId::MagnetNearby,
-                "needs where the sensor was, which no recording holds: such a magnet's spans are located and left out \
-                 instead",
-            );
-            if has_time {
-                push(
-                    Effect::FieldDrift {
-                        rate_ut_per_s: [0.0; 3],
-                        t_ref_s,
+    /// A timing lag, and per-axis delays that generalise it: with a reference and time.
+    fn timing(&mut self, offer: &Offer<'_>) {
+        const NO_REFERENCE: &str = "the scalar method has no attitude reference: a timing error between sensor and reference needs one";
+        match (offer.vector, offer.samples.has_time) {
+            (true, true) => {
+                self.push(Effect::TimeLag { lag_s: 0.0 }, None, None, 0.0, None);
+                self.push(
+                    Effect::RateCoupling {
+                        lag_axis_s: [0.0; 3],
                     },
                     None,
-                    None,
+                    Some(EffectId::TimeLag),
                     0.0,
                     None,
                 );
-            } else {
-                refuse(EffectId::FieldDrift, NO_TIME);
             }
-            push(
-                Effect::FieldDirectionError {
-                    declination_error_deg: 0.0,
-                    inclination_error_deg: 0.0,
+            (false, _) => {
+                self.refuse(EffectId::TimeLag, NO_REFERENCE);
+                self.refuse(EffectId::RateCoupling, NO_REFERENCE);
+            }
+            (true, false) => {
+                self.refuse(EffectId::TimeLag, NO_TIME);
+                self.refuse(EffectId::RateCoupling, NO_TIME);
+            }
+        }
+    }
+
+    /// The world's effects: with the attitude only (to tell the world's frame from the sensor's).
+    fn world(&mut self, offer: &Offer<'_>) {
+        let s = offer.samples;
+        let world_why = if !offer.vector {
+            Some(
+                "a world-frame effect: the scalar method sees |B| only, with no attitude to tell world from sensor axes",
+            )
+        } else if s.quat.is_none() {
+            Some(
+                "a world-frame effect: the recording gives the expected field in sensor axes (rx,ry,rz) but not the attitude",
+            )
+        } else {
+            None
+        };
+        if let Some(why) = world_why {
+            self.refuse(EffectId::FieldDrift, why);
+            self.refuse(EffectId::FieldDirectionError, why);
+            self.refuse(EffectId::Disturbance, why);
+            self.refuse(EffectId::MagnetNearby, why);
+            return;
+        }
+        self.refuse(
+            EffectId::MagnetNearby,
+            "needs where the sensor was, which no recording holds: such a magnet's spans are located and left out \
+             instead",
+        );
+        if s.has_time {
+            self.push(
+                Effect::FieldDrift {
+                    rate_ut_per_s: [0.0; 3],
+                    t_ref_s: mean(&s.t),
                 },
                 None,
                 None,
                 0.0,
                 None,
             );
-            match (has_time, offer.window) {
-                (true, Some(w)) => {
-                    let t0_s = between(w.start);
-                    let t1_s = between(w.end);
-                    push(
-                        Effect::Disturbance {
-                            t0_s,
-                            t1_s,
-                            field_ned_ut: [0.0; 3],
-                        },
-                        None,
-                        None,
-                        WINDOW_SCAN_PENALTY,
-                        Some(scan_times(s, &w, true)),
-                    );
-                }
-                (true, None) => refuse(
-                    EffectId::Disturbance,
-                    "the recording is too short to look for a transient",
-                ),
-                (false, _) => refuse(EffectId::Disturbance, NO_TIME),
-            }
+        } else {
+            self.refuse(EffectId::FieldDrift, NO_TIME);
         }
-    }
-
-    push(
-        Effect::Nonlinearity {
-            cubic_per_ut2: [0.0; 3],
-        },
-        None,
-        None,
-        0.0,
-        None,
-    );
-
-    if s.has_time {
-        match offer.step {
-            Ok(step) => {
-                push(
-                    Effect::BiasStep {
-                        t_s: between(step.start),
-                        step_ut: [0.0; 3],
-                    },
-                    None,
-                    None,
-                    STEP_SCAN_PENALTY,
-                    Some(scan_times(s, &step, false)),
-                );
-            }
-            Err(why) => refuse(EffectId::BiasStep, why),
-        }
-        push(
-            Effect::BiasDrift {
-                rate_ut_per_s: [0.0; 3],
-                t_ref_s,
+        self.push(
+            Effect::FieldDirectionError {
+                declination_error_deg: 0.0,
+                inclination_error_deg: 0.0,
             },
             None,
             None,
             0.0,
             None,
         );
-    } else {
-        refuse(EffectId::BiasStep, NO_TIME);
-        refuse(EffectId::BiasDrift, NO_TIME);
+        match (s.has_time, offer.window) {
+            (true, Some(w)) => self.push(
+                Effect::Disturbance {
+                    t0_s: between(s, w.start),
+                    t1_s: between(s, w.end),
+                    field_ned_ut: [0.0; 3],
+                },
+                None,
+                None,
+                WINDOW_SCAN_PENALTY,
+                Some(scan_times(s, &w, true)),
+            ),
+            (true, None) => self.refuse(
+                EffectId::Disturbance,
+                "the recording is too short to look for a transient",
+            ),
+            (false, _) => self.refuse(EffectId::Disturbance, NO_TIME),
+        }
     }
-    (out, untestable)
+
+    /// Time's effects on the offset: the likeliest step, and a drift about the mean time.
+    fn time(&mut self, offer: &Offer<'_>) {
+        let s = offer.samples;
+        if !s.has_time {
+            self.refuse(EffectId::BiasStep, NO_TIME);
+            self.refuse(EffectId::BiasDrift, NO_TIME);
+            return;
+        }
+        match offer.step {
+            Ok(step) => self.push(
+                Effect::BiasStep {
+                    t_s: between(s, step.start),
+                    step_ut: [0.0; 3],
+                },
+                None,
+                None,
+                STEP_SCAN_PENALTY,
+                Some(scan_times(s, &step, false)),
+            ),
+            Err(why) => self.refuse(EffectId::BiasStep, why),
+        }
+        self.push(
+            Effect::BiasDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s: mean(&s.t),
+            },
+            None,
+            None,
+            0.0,
+            None,
+        );
+    }
+}
+
+/// The mean of a column.
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
 }
