@@ -583,3 +583,89 @@ impl List {
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::Reference;
+    use super::super::testbench::{Bench, true_model};
+    use super::*;
+
+    fn ids(cands: &[Candidate]) -> Vec<EffectId> {
+        cands.iter().map(Candidate::id).collect()
+    }
+
+    #[test]
+    fn every_effect_the_recording_can_observe_is_offered_with_its_columns() {
+        let bench = Bench::new(1500, &[], 6);
+        let input = bench.input(None, f64::NAN);
+        let model = true_model();
+        let samples = Samples::gather(&input, &model, false);
+        let setup = Setup::new(&input, &samples, &model);
+        let residual = setup.residual(&model.a, model.b_ut, &[]);
+        let offer = offer(&setup, &residual, &vec![true; samples.len()], Vec::new());
+        let (cands, untestable) = candidates(&offer, 12);
+        use EffectId::*;
+        let mut want = vec![
+            TemperatureBias,
+            TemperatureScale,
+            CurrentBias,
+            TimeLag,
+            RateCoupling,
+            FieldDrift,
+            FieldDirectionError,
+        ];
+        if offer.window.is_some() {
+            want.push(Disturbance);
+        }
+        want.push(Nonlinearity);
+        if offer.step.is_ok() {
+            want.push(BiasStep);
+        }
+        want.push(BiasDrift);
+        assert_eq!(ids(&cands), want);
+        // Columns follow one another from the first given.
+        let mut column = 12;
+        for c in &cands {
+            assert_eq!(c.first, column, "{:?}", c.id());
+            column += c.n;
+        }
+        assert_eq!(cands[2].channel.as_deref(), Some("i_motor"));
+        // A magnet fixed in the room needs where the sensor was.
+        assert!(untestable.iter().any(|u| u.id == MagnetNearby));
+        // The reference temperature is the recording's mean.
+        let Effect::TemperatureBias { t_ref_c, .. } = cands[0].template else {
+            panic!()
+        };
+        let mean_c = bench.temp_c.iter().sum::<f64>() / 1500.0;
+        assert!((t_ref_c - mean_c).abs() < 1e-9);
+    }
+
+    #[test]
+    fn without_a_reference_or_a_temperature_the_effects_that_need_them_are_untestable() {
+        let bench = Bench::new(600, &[], 7);
+        let mut input = bench.input(None, f64::NAN);
+        input.reference = Reference::Magnitude { field_ut: 50.0 };
+        input.temp_c = None;
+        let model = true_model();
+        let samples = Samples::gather(&input, &model, false);
+        let setup = Setup::new(&input, &samples, &model);
+        let residual = setup.residual(&model.a, model.b_ut, &[]);
+        let offer = offer(&setup, &residual, &vec![true; samples.len()], Vec::new());
+        let (cands, untestable) = candidates(&offer, 9);
+        let why = |id: EffectId| {
+            untestable
+                .iter()
+                .find(|u| u.id == id)
+                .map(|u| u.why.clone())
+                .unwrap_or_default()
+        };
+        assert_eq!(why(EffectId::TemperatureBias), NO_TEMP);
+        assert!(why(EffectId::TimeLag).contains("no attitude reference"));
+        assert!(why(EffectId::FieldDrift).contains("scalar method sees |B| only"));
+        assert!(
+            ids(&cands)
+                .iter()
+                .all(|id| id.frame() != crate::effects::Frame::World)
+        );
+    }
+}

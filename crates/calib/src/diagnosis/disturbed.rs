@@ -73,3 +73,36 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
         left_out,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::testbench::{Bench, on_board, true_model};
+    use super::*;
+
+    #[test]
+    fn a_field_on_the_board_is_located_and_left_out_of_a_check_of_the_true_model() {
+        let bench = Bench::new(1500, &[on_board(10.0, 20.0, [15.0, 0.0, -5.0])], 21);
+        let d = disturbed(&bench.input(None, f64::NAN), &true_model()).unwrap();
+        assert_eq!(d.spans.len(), 1, "{:?}", d.spans);
+        let span = &d.spans[0];
+        assert!(
+            span.explanation
+                .ends_with("fixed to the sensor — left out of the check")
+                && !span.modelled,
+            "{}",
+            span.explanation
+        );
+        assert!((span.t0_s - 10.0).abs() < 0.1 && (span.t1_s - 20.0).abs() < 0.1);
+        let left: Vec<usize> = (0..1500).filter(|&i| d.left_out[i]).collect();
+        assert!(
+            left.len() >= 495 && left.len() < 520,
+            "{} left out",
+            left.len()
+        );
+        assert!(left.iter().all(|&i| (9.9..20.1).contains(&bench.t_s[i])));
+        // A recording the model fits has nothing to leave out.
+        let clean = Bench::new(1500, &[], 22);
+        let d = disturbed(&clean.input(None, f64::NAN), &true_model()).unwrap();
+        assert!(d.spans.is_empty() && d.rows_left_out() == 0);
+    }
+}

@@ -196,3 +196,104 @@ fn scanned_se((lo, hi): (f64, f64), cand: &Candidate, sigma2: f64, jump2: f64) -
         .max(26f64.sqrt() * sigma2 / jump2 * dt)
         .max(dt / 2.0)
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, DVector};
+
+    use super::super::candidates::ScanTimes;
+    use super::*;
+
+    fn solution(beta: Vec<f64>) -> Solution {
+        let n = beta.len();
+        Solution {
+            columns: (0..n).collect(),
+            beta: DVector::from_vec(beta),
+            inverse: DMatrix::identity(n, n) * 0.01,
+            rss: 1.0,
+        }
+    }
+
+    #[test]
+    fn the_linear_part_is_taken_back_from_centred_readings() {
+        // Rows of A then b' per axis: b = b' − A·mean.
+        let mut beta = Vec::new();
+        for j in 0..3 {
+            beta.extend((0..3).map(|k| if j == k { 2.0 } else { 0.0 }));
+            beta.push(10.0 * (j + 1) as f64);
+        }
+        let mean = [1.0, 2.0, 3.0];
+        let base = Model::linear(frames::IDENTITY, [0.0; 3]);
+        let (a, b) = linear_of(&solution(beta), true, &base, mean);
+        assert_eq!(a, [[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 2.0]]);
+        assert_eq!(b, [8.0, 16.0, 24.0]);
+        // The scalar method's columns move the base fit's symmetric A and its offset.
+        let (a, _) = linear_of(
+            &solution(vec![0.1, 0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            false,
+            &base,
+            mean,
+        );
+        assert_eq!((a[0][0], a[0][1], a[1][0]), (1.1, 0.05, 0.05));
+        assert_eq!(coefficient(&solution(vec![3.0]), 0, 4.0), Some((3.0, 0.2)));
+    }
+
+    fn candidate(template: Effect, scan: Option<ScanTimes>) -> Candidate {
+        Candidate {
+            n: template.params().1,
+            template,
+            first: 12,
+            channel: Some("i_motor".to_owned()),
+            supersedes: None,
+            scan_penalty: 0.0,
+            scan,
+            forced: false,
+            active_rows: 0,
+        }
+    }
+
+    #[test]
+    fn each_parameter_is_reported_in_the_descriptors_order_with_its_own_uncertainty() {
+        let current = Effect::CurrentBias {
+            channel: 0,
+            coef_ut_per_a: [0.3, 0.0, -0.2],
+        };
+        let p = params_of(&current, [0.01, 0.02, 0.03], &candidate(current, None), 0.1);
+        assert_eq!(p[0].value, ParamValue::Text("i_motor".to_owned()));
+        assert_eq!((p[0].name, p[0].se.clone()), ("channel", None));
+        assert_eq!(p[1].se, Some(ParamValue::Vector([0.01, 0.02, 0.03])));
+        let direction = Effect::FieldDirectionError {
+            declination_error_deg: 2.0,
+            inclination_error_deg: -1.0,
+        };
+        let p = params_of(
+            &direction,
+            [0.1, 0.2, 0.0],
+            &candidate(direction, None),
+            0.1,
+        );
+        assert_eq!(p[1].se, Some(ParamValue::Number(0.2)));
+        // A window's times: their profile intervals, at least half a sample apart, and no less than a jump of its
+        // size in this noise allows.
+        let window = Effect::Disturbance {
+            t0_s: 10.0,
+            t1_s: 20.0,
+            field_ned_ut: [3.0, 0.0, 4.0],
+        };
+        let scan = ScanTimes {
+            start_s: (9.9, 10.3),
+            end_s: Some((19.99, 20.01)),
+            sample_interval_s: 0.02,
+        };
+        let p = params_of(&window, [0.1; 3], &candidate(window, Some(scan)), 0.25);
+        let names: Vec<&str> = p.iter().map(|x| x.name).collect();
+        assert_eq!(names, ["t0_s", "t1_s", "field_ned_ut"]);
+        let se = |k: usize| match p[k].se {
+            Some(ParamValue::Number(x)) => x,
+            _ => panic!(),
+        };
+        assert!((se(0) - 0.2).abs() < 1e-12);
+        let yao = 26f64.sqrt() * 0.25 / 25.0 * 0.02;
+        assert!((se(1) - yao.max(0.01)).abs() < 1e-12, "{}", se(1));
+    }
+}

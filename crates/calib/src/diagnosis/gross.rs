@@ -952,4 +952,44 @@ mod tests {
             "{found:?}"
         );
     }
+
+    #[test]
+    fn the_stage_models_a_field_on_the_board_and_keeps_the_samples_it_explains() {
+        use super::super::testbench::{Bench, on_board, with_setup};
+        let bench = Bench::new(1500, &[on_board(10.0, 20.0, [15.0, 0.0, -5.0])], 23);
+        with_setup(&bench, |setup, residual| {
+            let (_, kept, scale) = bench.base();
+            let stage = stage(setup, residual, &kept, scale, &[]);
+            assert_eq!(stage.spans.len(), 1, "{:?}", stage.spans);
+            assert!(stage.spans[0].modelled());
+            let [(effect, times)] = stage.span_effects[..] else {
+                panic!("{:?}", stage.span_effects)
+            };
+            let Effect::BiasWindow { t0_s, t1_s, .. } = effect else {
+                panic!("{effect:?}")
+            };
+            assert!(
+                (t0_s - 10.0).abs() < 0.05 && (t1_s - 20.0).abs() < 0.05,
+                "{t0_s}–{t1_s}"
+            );
+            assert_eq!(times.start_s, (t0_s, t0_s));
+            let t = &setup.samples.t;
+            let inside: Vec<usize> = (0..t.len())
+                .filter(|&i| (10.05..19.95).contains(&t[i]))
+                .collect();
+            assert!(inside.iter().all(|&i| !stage.clean[i]));
+            let back = inside.iter().filter(|&&i| stage.included[i]).count();
+            assert!(back > 450, "{back} of {} back in the fit", inside.len());
+            // Declined, it is left out whole.
+            let declined = super::stage(
+                setup,
+                residual,
+                &kept,
+                scale,
+                &[(0, t.len(), Declined::NoGain)],
+            );
+            assert!(!declined.spans[0].modelled() && declined.span_effects.is_empty());
+            assert!(inside.iter().all(|&i| !declined.included[i]));
+        });
+    }
 }

@@ -258,3 +258,67 @@ pub(crate) fn harm_why(id: EffectId, with: f64, without: f64) -> String {
          against {without:.3} µT): left out, so the calibration is no worse for the diagnosis"
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::rounds::settle;
+    use super::super::testbench::{Bench, with_setup};
+    use super::*;
+    use crate::frames::IDENTITY;
+
+    #[test]
+    fn a_cubic_worth_more_than_a_few_percent_of_the_field_is_implausible() {
+        let bench = Bench::new(300, &[], 13);
+        with_setup(&bench, |setup, _| {
+            let cubic = |k: f64| Effect::Nonlinearity {
+                cubic_per_ut2: [k, 0.0, 0.0],
+            };
+            // 1e-5/µT² at 50 µT: 1.25 µT, 2.5 % of the field; ten times that is not a sensor's.
+            assert_eq!(implausible(&cubic(1e-5), setup.samples, 50.0), None);
+            let why = implausible(&cubic(1e-4), setup.samples, 50.0).unwrap();
+            assert!(why.contains("more than a sensor's non-linearity"), "{why}");
+            // A correction whose derivative approaches one cannot be inverted by apply.
+            let scale = Effect::TemperatureScale {
+                coef_per_c: [0.05, 0.0, 0.0],
+                t_ref_c: 0.0,
+            };
+            let why = implausible(&scale, setup.samples, 50.0);
+            assert!(why.is_some_and(|w| w.contains("could not be inverted")));
+            // Effects of the world or of one recording are not the sensor's: not judged so.
+            let window = Effect::BiasWindow {
+                t0_s: 0.0,
+                t1_s: 1.0,
+                offset_ut: [1e3; 3],
+            };
+            assert_eq!(implausible(&window, setup.samples, 50.0), None);
+        });
+    }
+
+    #[test]
+    fn the_gain_change_is_the_largest_relative_change_of_a_singular_value() {
+        let mut a = IDENTITY;
+        a[1][1] = 1.1;
+        a[2][2] = 0.97;
+        assert!((gain_change(&a, &IDENTITY) - 0.1).abs() < 1e-12);
+        assert_eq!(gain_change(&IDENTITY, &IDENTITY), 0.0);
+    }
+
+    #[test]
+    fn an_effect_that_helps_stays_and_the_spans_of_a_null_recording_need_no_judging() {
+        let effect = Effect::CurrentBias {
+            channel: 0,
+            coef_ut_per_a: [0.3, 0.0, -0.2],
+        };
+        let bench = Bench::new(3000, &[effect], 14);
+        with_setup(&bench, |setup, residual| {
+            let mut settled = settle(setup, residual).unwrap();
+            let before = settled.round.chosen_steps();
+            assert_eq!(before.len(), 1);
+            let mut rejected = Vec::new();
+            assert!(!guard(setup, &mut settled.round, &mut rejected));
+            assert!(rejected.is_empty(), "{rejected:?}");
+            assert_eq!(settled.round.chosen_steps(), before);
+            assert!(spans_worth_their_rows(&settled.round));
+        });
+    }
+}

@@ -173,3 +173,74 @@ fn diagnose_at(
     diagnosis.residuals.t_s = samples.t.into_owned();
     Ok((diagnosis, lag0_s))
 }
+
+#[cfg(test)]
+mod testbench;
+
+#[cfg(test)]
+mod tests {
+    use super::testbench::{Bench, FIELD_NED_UT};
+    use super::*;
+    use crate::effects::{Effect, EffectId};
+
+    #[test]
+    fn a_null_recording_is_consistent_and_keeps_the_base_fit() {
+        let bench = Bench::new(1500, &[], 1);
+        let (base, kept, scale) = bench.base();
+        let d = diagnose(&bench.input(Some(&kept), scale), &base).unwrap();
+        assert_eq!(d.verdict, Verdict::Consistent, "{:?}", d.effects);
+        assert!(d.effects.is_empty() && d.spans.is_empty());
+        // Without effects the final model is the base fit itself.
+        for j in 0..3 {
+            for k in 0..3 {
+                assert!((d.model.a[j][k] - base.a[j][k]).abs() < 1e-9);
+            }
+        }
+        assert_eq!(d.samples_used, 1500);
+        // Every effect is offered or said untestable, with a reason.
+        assert!(d.untestable.iter().all(|u| !u.why.is_empty()));
+    }
+
+    #[test]
+    fn a_current_bias_is_found_with_its_coefficient() {
+        let coef_ut_per_a = [0.3, 0.0, -0.2];
+        let effect = Effect::CurrentBias {
+            channel: 0,
+            coef_ut_per_a,
+        };
+        let bench = Bench::new(3000, &[effect], 2);
+        let (base, kept, scale) = bench.base();
+        let d = diagnose(&bench.input(Some(&kept), scale), &base).unwrap();
+        assert_eq!(d.verdict, Verdict::Mismatch);
+        let found = &d.effects[0];
+        assert_eq!(found.effect.id(), EffectId::CurrentBias, "{:?}", d.effects);
+        assert_eq!(found.channel.as_deref(), Some("i_motor"));
+        let (
+            Effect::CurrentBias {
+                coef_ut_per_a: got, ..
+            },
+            Some(ParamValue::Vector(se)),
+        ) = (found.effect, &found.params[1].se)
+        else {
+            panic!("{found:?}")
+        };
+        for k in 0..3 {
+            assert!(
+                (got[k] - coef_ut_per_a[k]).abs() < 4.0 * se[k],
+                "{got:?} ± {se:?}"
+            );
+        }
+        assert!(found.holdout_rms_after_ut < found.holdout_rms_before_ut);
+        // It is a correction of the sensor: the model holds it.
+        assert_eq!(d.model.corrections().count(), 1);
+    }
+
+    #[test]
+    fn too_few_samples_are_refused() {
+        let bench = Bench::new(MIN_SAMPLES - 1, &[], 3);
+        let model = testbench::true_model();
+        let err = diagnose(&bench.input(None, f64::NAN), &model).unwrap_err();
+        assert!(matches!(err, FitError::TooFewSamples { .. }), "{err}");
+        let _ = FIELD_NED_UT;
+    }
+}

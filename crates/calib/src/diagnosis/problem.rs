@@ -231,3 +231,39 @@ fn push_candidates(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::candidates::{self, candidates};
+    use super::super::testbench::{Bench, with_setup};
+    use super::*;
+    use crate::effects::EffectId;
+
+    #[test]
+    fn the_normal_equations_count_the_included_and_clean_rows_and_where_each_candidate_acts() {
+        let bench = Bench::new(1500, &[], 8);
+        with_setup(&bench, |setup, residual| {
+            let n = setup.samples.len();
+            let clean: Vec<bool> = (0..n).map(|i| !(100..300).contains(&i)).collect();
+            let included: Vec<bool> = (0..n).map(|i| !(100..200).contains(&i)).collect();
+            let offer = candidates::offer(setup, residual, &clean, Vec::new());
+            let (mut cands, _) = candidates(&offer, setup.n_base);
+            let problem = accumulate(setup, &mut cands, &included, &clean);
+            // Three rows a sample in the vector method.
+            assert_eq!(problem.total.rows, 3 * (n - 100));
+            assert_eq!(problem.clean_total.rows, 3 * (n - 200));
+            assert_eq!(problem.blocks.len(), CV_BLOCKS);
+            // The current bias acts where the current is on.
+            let on = (0..n)
+                .filter(|&i| included[i] && bench.current_a[setup.samples.rows[i]] != 0.0)
+                .count();
+            let current = cands
+                .iter()
+                .find(|c| c.id() == EffectId::CurrentBias)
+                .unwrap();
+            assert_eq!(current.active_rows, 3 * on);
+            // The temperature's effects act everywhere (it never sits at its mean exactly).
+            assert_eq!(cands[0].active_rows, 3 * (n - 100));
+        });
+    }
+}

@@ -131,3 +131,57 @@ fn noisy_stretches_only<P: RobustProblem>(
     }
     kept
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::testbench::{Bench, on_board};
+    use super::*;
+    use crate::robust::{self, RobustProblem};
+    use crate::vector::VectorProblem;
+
+    #[test]
+    fn a_stretch_left_out_that_fits_like_the_rest_is_put_back_and_one_that_does_not_stays_out() {
+        let bench = Bench::new(1500, &[on_board(10.0, 14.0, [6.0, 0.0, 0.0])], 19);
+        let problem = bench.problem();
+        let all = vec![true; 1500];
+        let fit = problem.final_fit(&all, None).unwrap();
+        let mut kept = all.clone();
+        // Samples 100–200 (2–4 s) are clean; 500–700 (10–14 s) carry the field on the board.
+        kept[100..200].fill(false);
+        kept[500..700].fill(false);
+        let back = noisy_stretches_only(&problem, &all, &kept, &fit);
+        assert!(back[100..200].iter().all(|k| *k));
+        assert!(back[500..700].iter().all(|k| !*k));
+        // Leaving the board's stretch out predicts the rest better: the refit is made without it.
+        let (model, rows) = refit_if_better(&problem, &all, &kept, &fit).unwrap();
+        assert_eq!(rows, back);
+        assert!((model.b_ut[0] - VectorProblem::model(&fit).b_ut[0]).abs() > 0.1);
+        // Nothing new left out: nothing to refit.
+        assert!(refit_if_better(&problem, &all, &all, &fit).is_none());
+    }
+
+    #[test]
+    fn around_spans_on_a_null_recording_is_the_diagnosis_itself() {
+        let bench = Bench::new(1500, &[], 20);
+        let problem = bench.problem();
+        let r = robust::fit(&problem, Some(&bench.t_s)).unwrap();
+        let input = bench.input(Some(&r.kept), r.sigma_ut);
+        let base = VectorProblem::model(&r.fit);
+        let mut made = false;
+        let d = diagnose_around_spans(
+            &input,
+            &base,
+            || {
+                made = true;
+                Some(bench.problem())
+            },
+            &r.fit,
+        )
+        .unwrap();
+        assert_eq!(d, diagnose(&input, &base).unwrap());
+        assert!(
+            !made,
+            "the refit's problem was made though nothing was left out"
+        );
+    }
+}

@@ -588,3 +588,59 @@ fn effect_t1(e: &Effect) -> f64 {
         _ => f64::NEG_INFINITY,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::rounds::settle;
+    use super::super::testbench::{Bench, on_board, with_setup};
+    use super::*;
+    #[test]
+    fn the_report_of_a_field_on_the_board_left_out_says_what_it_was_and_why() {
+        let bench = Bench::new(1500, &[on_board(10.0, 20.0, [15.0, 0.0, -5.0])], 17);
+        with_setup(&bench, |setup, residual| {
+            let settled = settle(setup, residual).unwrap();
+            let d = report(setup, settled.round, residual.to_vec(), settled.rejected);
+            assert_eq!(d.verdict, Verdict::Mismatch);
+            assert_eq!(d.spans.len(), 1);
+            let span = &d.spans[0];
+            assert!(!span.modelled);
+            assert!(
+                span.explanation.starts_with("10.")
+                    && span.explanation.contains("fixed to the sensor — left out of the calibration: with its \
+                                                  samples kept and modelled, the clean part fitted no better"),
+                "{}",
+                span.explanation
+            );
+            // Where the mismatch is: its segment (the samples used fit to the noise, on every axis).
+            assert_eq!(d.located.segments.len(), 1);
+            assert!(d.located.axes.is_empty(), "{:?}", d.located.axes);
+            // The residuals for the plots: one component per axis, per sample, the span's flagged.
+            assert_eq!(d.residuals.extended.len(), setup.samples.len());
+            let out = d.residuals.excluded.iter().filter(|x| **x).count();
+            assert!((495..530).contains(&out), "{out}");
+            assert_eq!(d.samples_used + d.samples_excluded, setup.samples.len());
+            // The final model is the clean part's, with standard errors.
+            assert!(d.effects.is_empty() && d.model.corrections().count() == 0);
+            let se = d.extended.se.unwrap();
+            assert!(se.a[0][0] > 0.0 && se.offset_ut[0] > 0.0);
+        });
+    }
+
+    #[test]
+    fn without_effects_the_final_model_is_the_base_fit() {
+        let bench = Bench::new(1500, &[], 18);
+        with_setup(&bench, |setup, residual| {
+            let settled = settle(setup, residual).unwrap();
+            let d = report(setup, settled.round, residual.to_vec(), settled.rejected);
+            assert_eq!(d.verdict, Verdict::Consistent);
+            for j in 0..3 {
+                for k in 0..3 {
+                    assert!((d.extended.a[j][k] - setup.base.a[j][k]).abs() < 1e-12);
+                }
+                assert!((d.extended.b_ut[j] - setup.base.b_ut[j]).abs() < 1e-9);
+            }
+            // The reference's own error is what the residual holds beyond the noise: none here.
+            assert!(d.reference_floor_ut < 0.1, "{}", d.reference_floor_ut);
+        });
+    }
+}

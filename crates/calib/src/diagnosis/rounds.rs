@@ -242,3 +242,54 @@ impl Round {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::gross::SpanKind;
+    use super::super::testbench::{Bench, on_board, with_setup};
+    use super::*;
+    #[test]
+    fn a_null_recording_settles_on_nothing() {
+        let bench = Bench::new(1500, &[], 15);
+        with_setup(&bench, |setup, residual| {
+            let settled = settle(setup, residual).unwrap();
+            assert!(settled.round.spans.is_empty());
+            assert!(settled.round.chosen_steps().is_empty());
+            assert!(settled.rejected.is_empty());
+            assert!(settled.round.included.iter().all(|i| *i));
+        });
+    }
+
+    #[test]
+    fn a_field_on_the_board_the_rest_does_not_need_is_left_out_not_modelled() {
+        // The sensor tumbles throughout: the clean part determines the calibration on its own, so the window's
+        // constant is not worth its rows (the guard finds no noticeable gain) and the round is made again with the
+        // span left out.
+        let bench = Bench::new(1500, &[on_board(10.0, 20.0, [15.0, 0.0, -5.0])], 16);
+        with_setup(&bench, |setup, residual| {
+            let settled = settle(setup, residual).unwrap();
+            let round = &settled.round;
+            assert_eq!(round.spans.len(), 1, "{:?}", round.spans);
+            let span = round.spans[0];
+            assert!(matches!(
+                span.kind,
+                SpanKind::SensorFixed {
+                    told_apart: true,
+                    ..
+                }
+            ));
+            assert_eq!(span.declined, Some(Declined::NoGain));
+            assert!(!span.modelled());
+            assert!(round.cands.iter().all(|c| !c.forced));
+            // Its samples are out of the fit and of the clean ones.
+            let inside = |i: usize| (10.05..19.95).contains(&setup.samples.t[i]);
+            let n = setup.samples.len();
+            assert!(
+                (0..n)
+                    .filter(|&i| inside(i))
+                    .all(|i| !round.clean[i] && !round.included[i])
+            );
+            assert!(round.chosen_steps().is_empty());
+        });
+    }
+}

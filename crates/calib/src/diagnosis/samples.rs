@@ -216,3 +216,26 @@ fn field_rate(field: &[[f64; 3]], t: &[f64], links: &timing::Links) -> Vec<[f64;
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::testbench::{Bench, true_model};
+
+    use super::*;
+
+    #[test]
+    fn rows_missing_a_channel_are_left_out_and_counted() {
+        let mut bench = Bench::new(300, &[], 4);
+        bench.temp_c[10] = f64::NAN;
+        bench.quat[20] = [f64::NAN; 4];
+        let input = bench.input(None, f64::NAN);
+        let s = Samples::gather(&input, &true_model(), false);
+        assert_eq!((s.len(), s.left_out), (298, 2));
+        assert!(!s.rows.contains(&10) && !s.rows.contains(&20));
+        // Every sample carries its world context and the field's rate (the sensor turns).
+        let ctx = s.context(50);
+        assert!(ctx.world.is_some());
+        assert!(frames::norm(ctx.field_rate_ut_per_s) > 1.0);
+        assert!(s.has_time && s.has_temp && s.kept.iter().all(|k| *k));
+    }
+}

@@ -431,3 +431,86 @@ fn takes_up(
         "the matrix A (scale, soft iron, misalignment)"
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::candidates::{self, candidates};
+    use super::super::problem::accumulate;
+    use super::super::testbench::{Bench, with_setup};
+    use super::*;
+    use crate::effects::{Effect, EffectId};
+
+    /// The selection on a bench with `effects`, and the candidates' ids.
+    fn selection(effects: &[Effect], seed: u64) -> (Selection, Vec<EffectId>) {
+        let bench = Bench::new(3000, effects, seed);
+        with_setup(&bench, |setup, residual| {
+            let all = vec![true; setup.samples.len()];
+            let offer = candidates::offer(setup, residual, &all, Vec::new());
+            let (mut cands, _) = candidates(&offer, setup.n_base);
+            let problem = accumulate(setup, &mut cands, &all, &all);
+            let sel = stage(setup, &problem, &cands).unwrap();
+            (sel, cands.iter().map(Candidate::id).collect())
+        })
+    }
+
+    #[test]
+    fn the_effect_in_the_recording_is_chosen_and_nothing_in_a_null_one() {
+        let (sel, ids) = selection(
+            &[Effect::CurrentBias {
+                channel: 0,
+                coef_ut_per_a: [0.3, 0.0, -0.2],
+            }],
+            9,
+        );
+        assert_eq!(sel.steps.len(), 1, "{:?}", sel.steps);
+        let step = &sel.steps[0];
+        assert_eq!(ids[step.cand], EffectId::CurrentBias);
+        assert!(step.evidence > 0.0 && step.cv.1 < step.cv.0 && step.rss.1 < step.rss.0);
+        assert!(sel.last_cv < sel.base_cv);
+        let (sel, _) = selection(&[], 10);
+        assert!(sel.steps.is_empty(), "{:?}", sel.steps);
+        assert_eq!(sel.last_cv, sel.base_cv);
+    }
+
+    #[test]
+    fn the_wald_statistic_is_the_squared_coefficients_over_their_variance() {
+        // Fifteen columns, the candidate's the last three, with unit inverse and a residual variance of 0.25.
+        let rows = 1015.0;
+        let sol = Solution {
+            columns: (0..15).collect(),
+            beta: DVector::from_fn(15, |k, _| {
+                if k >= 12 {
+                    [1.0, -2.0, 2.0][k - 12]
+                } else {
+                    0.5
+                }
+            }),
+            inverse: DMatrix::identity(15, 15),
+            rss: 0.25 * (rows - 15.0),
+        };
+        let cand = Candidate {
+            template: Effect::BiasDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s: 0.0,
+            },
+            n: 3,
+            first: 12,
+            channel: None,
+            supersedes: None,
+            scan_penalty: 0.0,
+            scan: None,
+            forced: false,
+            active_rows: 0,
+        };
+        assert!((wald(&sol, &cand, false, rows) - 9.0 / 0.25).abs() < 1e-9);
+        // As a generalisation, only the differences count: (1 − (−2))² + (−2 − 2)² under their covariance.
+        let diffs = wald(&sol, &cand, true, rows);
+        let want = (DMatrix::from_row_slice(1, 2, &[3.0, -4.0])
+            * DMatrix::from_row_slice(2, 2, &[2.0, -1.0, -1.0, 2.0])
+                .try_inverse()
+                .unwrap()
+            * DMatrix::from_row_slice(2, 1, &[3.0, -4.0]))[(0, 0)]
+            / 0.25;
+        assert!((diffs - want).abs() < 1e-9, "{diffs} against {want}");
+    }
+}

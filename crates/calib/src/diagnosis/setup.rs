@@ -166,3 +166,42 @@ impl<'a> Setup<'a> {
         channels
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::testbench::{Bench, NOISE_UT, true_model};
+    use super::*;
+
+    #[test]
+    fn the_true_models_residual_is_the_noise() {
+        let bench = Bench::new(2000, &[], 5);
+        let input = bench.input(None, f64::NAN);
+        let model = true_model();
+        let samples = Samples::gather(&input, &model, false);
+        let setup = Setup::new(&input, &samples, &model);
+        assert!(setup.vector && setup.n_base == 12);
+        let residual = setup.residual(&model.a, model.b_ut, &[]);
+        let rms =
+            (residual.iter().map(|e| frames::dot(*e, *e)).sum::<f64>() / (3.0 * 2000.0)).sqrt();
+        // The readings' noise through A (gains near one).
+        assert!((rms / NOISE_UT - 1.0).abs() < 0.1, "{rms}");
+        assert!((setup.scale(&residual) / NOISE_UT - 1.0).abs() < 0.15);
+        assert!(
+            (setup.noise_floor_ut / NOISE_UT - 1.0).abs() < 0.15,
+            "{}",
+            setup.noise_floor_ut
+        );
+        // An effect's perturbation comes out of the residual: with a made-up offset added, it is there again.
+        let shifted = Model::linear(model.a, frames::add(model.b_ut, [1.0, 0.0, 0.0]));
+        let e = setup.residual(
+            &shifted.a,
+            shifted.b_ut,
+            &[Effect::BiasDrift {
+                rate_ut_per_s: [0.0; 3],
+                t_ref_s: 0.0,
+            }],
+        );
+        let mean_x = e.iter().map(|v| v[0]).sum::<f64>() / 2000.0;
+        assert!((mean_x - 1.0).abs() < 0.05, "{mean_x}");
+    }
+}
