@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use magcal_app::cli::{exit, parse_floats};
 use magcal_app::effect_spec::{self, Defaults};
-use magcal_app::files::{check_file_output, check_recording_output};
+use magcal_app::outputs::{Guard, Replace};
 use magcal_app::tellln;
 use magcal_app::truth::TruthFile;
 use magcal_calib::effects::EffectId;
@@ -124,10 +124,10 @@ fn main() -> ExitCode {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    check_recording_output("--out", &args.out, "simulated")?;
-    if let Some(truth) = &args.truth {
-        check_file_output("--truth", truth)?;
-    }
+    Guard::new("magcal-sim")
+        .file("--out", Some(&args.out), Replace::Remakes("simulated"))
+        .file("--truth", args.truth.as_deref(), Replace::Products)
+        .check()?;
     if !(args.duration > 0.0 && args.duration.is_finite()) {
         bail!(
             "--duration must be a positive number of seconds, got {}",

@@ -15,9 +15,33 @@ pub fn parse_floats<const N: usize>(s: &str) -> Result<[f64; N], String> {
         .split(',')
         .map(|x| x.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+        .map_err(|e| format!("{}: {e}", excerpt(s)))?;
     v.try_into()
-        .map_err(|_| format!("expected {N} comma-separated numbers, got {s:?}"))
+        .map_err(|_| format!("expected {N} comma-separated numbers, got {}", excerpt(s)))
+}
+
+/// A number as an error quotes it: as Rust writes it when that is short (`0.25`, `1e-7` as `0.0000001`), in
+/// scientific notation otherwise (`1e30`, `1e-300`), never hundreds of digits.
+pub fn number(value: f64) -> String {
+    let plain = value.to_string();
+    if plain.len() <= 16 {
+        plain
+    } else {
+        format!("{value:e}")
+    }
+}
+
+/// At most this many characters of a user's argument are quoted in an error.
+pub const EXCERPT_CHARS: usize = 40;
+
+/// A short, escaped excerpt of a user's argument for an error: its first [`EXCERPT_CHARS`] characters (`…` when it
+/// had more), quoted with control characters escaped, so that a long or hostile argument never floods the terminal
+/// or writes escape sequences to it.
+pub fn excerpt(text: &str) -> String {
+    match text.char_indices().nth(EXCERPT_CHARS) {
+        Some((end, _)) => format!("{:?}", format!("{}…", &text[..end])),
+        None => format!("{text:?}"),
+    }
 }
 
 /// The local world field, given directly or by place and date for the World Magnetic Model.

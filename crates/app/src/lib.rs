@@ -15,6 +15,7 @@ pub mod field;
 pub mod files;
 pub mod heading;
 pub mod howto;
+pub mod outputs;
 pub mod params;
 pub mod plots;
 pub mod record;
