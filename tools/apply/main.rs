@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::Parser;
 use magcal_app::apply::check;
-use magcal_app::cli::{WorldFieldOpts, exit};
+use magcal_app::cli::{WorldFieldOpts, exit, parse};
 use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::{ParamsError, ParamsFile};
@@ -45,7 +45,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    exit("magcal-apply", run(Args::parse()))
+    exit("magcal-apply", run(parse()))
 }
 
 /// A recording given where the parameters go, with the order of the arguments; other errors as they are.

@@ -9,7 +9,7 @@ use clap::Parser;
 use magcal_app::calibrate::{
     Method, attitude_worth_checking, calibrate, drop_faulty, read_to_calibrate,
 };
-use magcal_app::cli::{WorldFieldOpts, exit};
+use magcal_app::cli::{WorldFieldOpts, exit, parse};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
 use magcal_app::field::resolve;
@@ -88,7 +88,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    exit("magcal-fit", run(Args::parse()))
+    exit("magcal-fit", run(parse()))
 }
 
 /// Refuses outputs that would overwrite the recording, each other or another recording, files that cannot be made

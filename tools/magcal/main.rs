@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::Parser;
 use magcal_app::calibrate::{Calibration, Fit, Method, calibrate, drop_faulty};
-use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
@@ -64,7 +64,7 @@ const PARAMS: &str = "params.toml";
 const REPORT: &str = "report.json";
 
 fn main() -> ExitCode {
-    exit("magcal", run(Args::parse()))
+    exit("magcal", run(parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {

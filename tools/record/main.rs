@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
@@ -162,7 +162,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    exit("magcal-record", run(Args::parse()))
+    exit("magcal-record", run(parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {

@@ -239,9 +239,16 @@ pub fn within(option: &str, value: f64, min: f64, max: f64, unit: &str) -> Resul
     if (min..=max).contains(&value) {
         return Ok(());
     }
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
     Err(BadOption(format!(
-        "{option} {} {unit}: must be a number from {min} to {max} {unit}",
-        number(value)
+        "{option} {}{unit}: must be a number from {} to {}{unit}",
+        number(value),
+        number(min),
+        number(max)
     )))
 }
 

@@ -21,6 +21,7 @@ pub mod plots;
 pub mod record;
 pub mod report;
 pub mod seed;
+pub mod sim_options;
 pub mod summary;
 pub mod truth;
 pub mod uncertainty;

@@ -159,12 +159,11 @@ impl Refused {
                  ({nothing})"
             ),
             Why::Exists(recording) => format!(
-                "{p} exists: {} never replaced unasked; choose another {o}, or add --force to replace it \
-                 ({nothing})",
+                "{p} exists: {}; choose another {o}, or add --force to replace it ({nothing})",
                 if *recording {
-                    "a recording is"
+                    "a recording is never replaced"
                 } else {
-                    "a file is"
+                    "a file is never replaced unasked"
                 }
             ),
         }
