@@ -66,7 +66,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         .file(
             "--out",
             args.out.as_deref(),
-            Replace::Remakes("calibrated_with"),
+            Replace::Remakes("calibrated_with", ""),
         )
         .check()?;
     let params = ParamsFile::read(&args.params).map_err(swapped_hint)?;

@@ -123,7 +123,11 @@ fn main() -> ExitCode {
 
 fn run(args: Args) -> anyhow::Result<()> {
     Guard::new("magcal-sim")
-        .file("--out", Some(&args.out), Replace::Remakes("simulated"))
+        .file(
+            "--out",
+            Some(&args.out),
+            Replace::Remakes("simulated", "magcal-sim"),
+        )
         .file("--truth", args.truth.as_deref(), Replace::Products)
         .check()?;
     let Some(chip) = ChipModel::by_name(&args.chip) else {

@@ -185,6 +185,21 @@ pub fn parse<T: clap::Parser>() -> T {
     })
 }
 
+/// `text` without terminal escape sequences (`ESC [ … letter`) and other control characters.
+fn without_escapes(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' && chars.peek() == Some(&'[') {
+            chars.next();
+            while chars.next().is_some_and(|c| !('@'..='~').contains(&c)) {}
+        } else if !c.is_control() {
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// The longest line of an error message shown whole: a message longer than this quotes something it should not.
 const MAX_ERROR_LINE_CHARS: usize = 2000;
 
@@ -201,6 +216,9 @@ pub fn shortened(message: &str) -> String {
         }
         pieces.push(arg);
     }
+    // clap drops escape sequences from what it quotes.
+    let plain: Vec<String> = pieces.iter().map(|p| without_escapes(p)).collect();
+    pieces.extend(plain);
     pieces.retain(|p| p.chars().count() > EXCERPT_CHARS);
     // The longest first, so that a piece is not cut out of an argument before the argument itself.
     pieces.sort_by_key(|p| std::cmp::Reverse(p.len()));
@@ -239,6 +257,7 @@ mod tests {
         assert_eq!(excerpt("ab\u{1b}[2J"), "\"ab\\u{1b}[2J\"");
         let long = "x".repeat(100_000);
         assert_eq!(excerpt(&long), format!("\"{}…\"", "x".repeat(40)));
+        assert_eq!(without_escapes("a\u{1b}[2Jb\u{7}c"), "abc");
     }
 
     #[test]

@@ -30,9 +30,10 @@ use crate::files::same_file;
 pub enum Replace {
     /// Any file that holds no recording: parameters, reports, exports, plots, truths (each run makes them again).
     Products,
-    /// Any file that holds no recording, and a recording whose metadata has this key: one the tool made and can
-    /// make again (`simulated` for magcal-sim, `calibrated_with` for magcal-apply's calibrated copies).
-    Remakes(&'static str),
+    /// Any file that holds no recording, and a recording whose metadata has this key with a value that starts so:
+    /// one the tool made and can make again (`simulated: magcal-sim…` for magcal-sim, `calibrated_with` for
+    /// magcal-apply's calibrated copies).
+    Remakes(&'static str, &'static str),
     /// Nothing that exists, unless `--force`; with it, any file that holds no recording.
     New,
     /// The recording being recorded: nothing that exists, unless `--force`; with it, whatever the path names (the
@@ -320,8 +321,12 @@ impl Guard {
         let forced = self.force && out.replace == Replace::Recording;
         let how = match probe(path) {
             Holds::Other => None,
-            Holds::Recording { keys, encoding } => match out.replace {
-                Replace::Remakes(key) if keys.iter().any(|k| k == key) => None,
+            Holds::Recording { pairs, encoding } => match out.replace {
+                Replace::Remakes(key, value)
+                    if pairs.iter().any(|(k, v)| k == key && v.starts_with(value)) =>
+                {
+                    None
+                }
                 _ => Some(encoding.map(|e| format!("encoded as {e}"))),
             },
             Holds::Compressed(format) => {

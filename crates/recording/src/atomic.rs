@@ -171,20 +171,27 @@ pub fn replace(target: &Path, write: impl FnOnce(&mut File) -> io::Result<()>) -
     Ok(())
 }
 
+/// What a failed write's error means when it is a full disk or a reached file size limit (`ulimit -f`).
+pub fn storage_reason(e: &io::Error) -> Option<&'static str> {
+    match e.kind() {
+        io::ErrorKind::StorageFull | io::ErrorKind::QuotaExceeded => Some("the disk is full"),
+        io::ErrorKind::FileTooLarge => Some("the file size limit (ulimit -f) was reached"),
+        _ => None,
+    }
+}
+
 /// `e` with what a full disk or a reached file size limit means for `target`, if it is one of those.
-pub fn explained(e: io::Error, target: &Path) -> io::Error {
-    let why = match e.kind() {
-        io::ErrorKind::StorageFull | io::ErrorKind::QuotaExceeded => "the disk is full",
-        io::ErrorKind::FileTooLarge => "the file size limit (ulimit -f) was reached",
-        _ => return e,
-    };
-    io::Error::new(
-        e.kind(),
-        format!(
-            "{e}: {why}; {} was left as it was (free space or raise the limit, and run again)",
-            target.display()
+fn explained(e: io::Error, target: &Path) -> io::Error {
+    match storage_reason(&e) {
+        Some(why) => io::Error::new(
+            e.kind(),
+            format!(
+                "{e}: {why}; {} was left as it was (free space or raise the limit, and run again)",
+                target.display()
+            ),
         ),
-    )
+        None => e,
+    }
 }
 
 /// A temporary file a process that ended left behind, removed by [`clean_stale`].

@@ -19,10 +19,10 @@ use crate::read::{BOM, COMPRESSED};
 pub enum Holds {
     /// No recording (or nothing: a missing or empty file).
     Other,
-    /// A recording: the keys of its metadata, and `Some("UTF-16")` when it is so encoded.
+    /// A recording: its metadata pairs, and `Some("UTF-16")` when it is so encoded.
     Recording {
-        /// The metadata keys, in order.
-        keys: Vec<String>,
+        /// The metadata `key: value` pairs, in order.
+        pairs: Vec<(String, String)>,
         /// The text encoding, when not UTF-8.
         encoding: Option<&'static str>,
     },
@@ -63,8 +63,8 @@ pub fn probe_reader(reader: impl Read) -> io::Result<Holds> {
                 pending: Vec::new(),
             };
             Ok(match probe_text(text)? {
-                Holds::Recording { keys, .. } => Holds::Recording {
-                    keys,
+                Holds::Recording { pairs, .. } => Holds::Recording {
+                    pairs,
                     encoding: Some("UTF-16"),
                 },
                 other => other,
@@ -77,7 +77,7 @@ pub fn probe_reader(reader: impl Read) -> io::Result<Holds> {
 /// What text holds: the metadata block's keys, then the header row.
 fn probe_text(reader: impl Read) -> io::Result<Holds> {
     let mut input = BufReader::new(LineEnds::new(reader));
-    let mut keys = Vec::new();
+    let mut pairs = Vec::new();
     let mut magic = false;
     let mut line = Vec::new();
     let mut first = true;
@@ -89,7 +89,7 @@ fn probe_text(reader: impl Read) -> io::Result<Holds> {
         if n == 0 {
             return Ok(if magic {
                 Holds::Recording {
-                    keys,
+                    pairs,
                     encoding: None,
                 }
             } else {
@@ -111,7 +111,7 @@ fn probe_text(reader: impl Read) -> io::Result<Holds> {
             let recording = magic || header_reads(text);
             return Ok(if recording {
                 Holds::Recording {
-                    keys,
+                    pairs,
                     encoding: None,
                 }
             } else {
@@ -120,7 +120,7 @@ fn probe_text(reader: impl Read) -> io::Result<Holds> {
         }
         match classify_line(&String::from_utf8_lossy(text)) {
             MetaLine::Magic(_) => magic = true,
-            MetaLine::Pair(key, _) => keys.push(key.to_owned()),
+            MetaLine::Pair(key, value) => pairs.push((key.to_owned(), value.to_owned())),
             MetaLine::Comment => {}
         }
         // A line cut at the cap: skip the rest of it.
@@ -215,7 +215,7 @@ mod tests {
         assert_eq!(
             holds(plain.as_bytes()),
             Holds::Recording {
-                keys: vec!["simulated".into()],
+                pairs: vec![("simulated".into(), "yes".into())],
                 encoding: None
             }
         );
@@ -236,7 +236,7 @@ mod tests {
             assert_eq!(
                 holds(&utf16(plain, big)),
                 Holds::Recording {
-                    keys: vec!["simulated".into()],
+                    pairs: vec![("simulated".into(), "yes".into())],
                     encoding: Some("UTF-16")
                 }
             );

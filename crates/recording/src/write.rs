@@ -249,6 +249,14 @@ pub struct RecordingWriter {
     replacing: Option<(Staged, Option<File>)>,
 }
 
+/// `e` with what it means, when it is a full disk or a reached file size limit.
+fn with_reason(e: io::Error) -> io::Error {
+    match atomic::storage_reason(&e) {
+        Some(why) => io::Error::new(e.kind(), format!("{e} ({why})")),
+        None => e,
+    }
+}
+
 /// Opens `path` for a writer, new, and locks it.
 fn open_locked(path: &Path) -> io::Result<File> {
     let file = OpenOptions::new().write(true).create_new(true).open(path)?;
@@ -352,7 +360,7 @@ impl RecordingWriter {
                 drop(file);
                 let _ = fs::remove_file(path);
             }
-            return Err(atomic::explained(e, path));
+            return Err(with_reason(e));
         }
         Ok(RecordingWriter {
             file,
@@ -505,7 +513,7 @@ impl RecordingWriter {
             self.file_len += whole_bytes as u64;
             self.rows_in_file += whole_rows as u64;
             let _ = self.file.set_len(self.file_len);
-            return Err(atomic::explained(error, &self.path));
+            return Err(with_reason(error));
         }
         self.file_len += bytes.len() as u64;
         self.rows_in_file = self.rows;
