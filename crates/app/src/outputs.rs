@@ -374,3 +374,141 @@ fn block_file_size_signal() {
     // Failure leaves the default action, as before.
     let _ = set.thread_block();
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_refusal_names_its_option_and_why() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = |name: &str| dir.path().join(name);
+        std::fs::write(at("afile"), "x").unwrap();
+        std::fs::write(at("rec.csv"), "t,mx,my,mz\n0,1,2,3\n").unwrap();
+        std::fs::write(
+            at("sim.csv"),
+            "# simulated: magcal-sim, seed 1\nt,mx,my,mz\n0,1,2,3\n",
+        )
+        .unwrap();
+        std::fs::write(
+            at("recorded.csv"),
+            "# simulated: magcal-record sim:lis3mdl, seed 1\nt,mx,my,mz\n0,1,2,3\n",
+        )
+        .unwrap();
+        std::fs::write(at("params.toml"), "format = 1\n").unwrap();
+        let file = |tool, option, path: &Path, replace| {
+            Guard::new(tool)
+                .file(option, Some(path), replace)
+                .check()
+                .map_err(|e| e.why)
+        };
+        let products = Replace::Products;
+        let sim = Replace::Remakes("simulated", "magcal-sim");
+        assert_eq!(
+            file("magcal-fit", "--out", &at("afile/p.toml"), products),
+            Err(Why::NoFolder(at("afile"), true))
+        );
+        assert_eq!(
+            file("magcal-fit", "--out", &at("no/p.toml"), products),
+            Err(Why::NoFolder(at("no"), false))
+        );
+        assert_eq!(
+            file("magcal-fit", "--out", dir.path(), products),
+            Err(Why::IsFolder)
+        );
+        assert_eq!(
+            file("magcal-fit", "--report", Path::new("/dev/null"), products),
+            Err(Why::NotAFile)
+        );
+        assert_eq!(
+            file("magcal-fit", "--out", &at("rec.csv"), products),
+            Err(Why::HoldsRecording(None, false))
+        );
+        assert_eq!(
+            file("magcal-fit", "--out", &at("params.toml"), products),
+            Ok(())
+        );
+        assert_eq!(file("magcal-sim", "--out", &at("sim.csv"), sim), Ok(()));
+        assert_eq!(
+            file("magcal-sim", "--out", &at("recorded.csv"), sim),
+            Err(Why::HoldsRecording(None, false))
+        );
+        assert_eq!(
+            file("magcal-record", "--truth", &at("params.toml"), Replace::New),
+            Err(Why::Exists(false))
+        );
+        assert_eq!(
+            file("magcal-record", "--out", &at("rec.csv"), Replace::Recording),
+            Err(Why::HoldsRecording(None, true))
+        );
+        let forced = |option, path: &Path, replace| {
+            Guard::new("magcal-record")
+                .force(true)
+                .file(option, Some(path), replace)
+                .check()
+                .map_err(|e| e.why)
+        };
+        assert_eq!(forced("--out", &at("rec.csv"), Replace::Recording), Ok(()));
+        assert_eq!(forced("--truth", &at("params.toml"), Replace::New), Ok(()));
+        assert_eq!(
+            forced("--truth", &at("rec.csv"), Replace::New),
+            Err(Why::HoldsRecording(None, false))
+        );
+        let holder = std::fs::File::open(at("params.toml")).unwrap();
+        holder.lock().unwrap();
+        assert_eq!(
+            forced("--truth", &at("params.toml"), Replace::New),
+            Err(Why::Busy)
+        );
+    }
+
+    #[test]
+    fn inputs_other_outputs_and_folders_are_checked_together() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("rec.csv");
+        std::fs::write(&input, "t,mx,my,mz\n0,1,2,3\n").unwrap();
+        let report = dir.path().join("report.json");
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        let e = Guard::new("magcal-fit")
+            .input("<RECORDING>", &input)
+            .file("--out", Some(&report), Replace::Products)
+            .file(
+                "--report",
+                Some(&dir.path().join("sub/../report.json")),
+                Replace::Products,
+            )
+            .check()
+            .unwrap_err();
+        assert_eq!(e.why, Why::SameAs("--out"));
+        assert!(
+            e.to_string().starts_with("--out and --report both name"),
+            "{e}"
+        );
+        let e = Guard::new("magcal-fit")
+            .input("<RECORDING>", &input)
+            .folder("--plots", Some(dir.path()), &["rec.csv"], Replace::Products)
+            .check()
+            .unwrap_err();
+        assert!(matches!(e.why, Why::IsInput(..)), "{e}");
+        assert!(e.to_string().contains("never overwrites the input"), "{e}");
+        // A folder that does not exist yet is made: nothing in it to refuse.
+        let made = dir.path().join("new/deeper");
+        assert_eq!(
+            Guard::new("magcal-fit")
+                .folder("--plots", Some(&made), &["readings.svg"], Replace::Products)
+                .check(),
+            Ok(())
+        );
+        let e = Guard::new("magcal-fit")
+            .folder(
+                "--plots",
+                Some(&input),
+                &["readings.svg"],
+                Replace::Products,
+            )
+            .check()
+            .unwrap_err();
+        assert_eq!(e.why, Why::FolderIsFile);
+        assert!(e.to_string().contains("names a directory"), "{e}");
+    }
+}

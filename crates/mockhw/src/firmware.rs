@@ -521,6 +521,24 @@ mod tests {
     }
 
     #[test]
+    fn a_corrupted_line_reads_as_a_field_out_of_range() {
+        for (output, field) in [
+            (Output::MotionCal, ",-42000000,"),
+            (Output::Csv, ",-4200000.00,"),
+        ] {
+            let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+            config.output = output;
+            config.lines_per_wall_s = 1e6;
+            config.raw_lines = Some(5);
+            config.fault = Some(BoardFault::CorruptedAt(2));
+            let (report, text) = run(Vec::new(), config);
+            assert_eq!(report.raw_lines, 5);
+            let lines: Vec<&str> = text.lines().filter(|l| l.contains(field)).collect();
+            assert_eq!(lines.len(), 1, "{output:?}: {text}");
+        }
+    }
+
+    #[test]
     fn the_crc_is_modbus() {
         // The standard check value of CRC-16/MODBUS.
         assert_eq!(crc16_modbus(b"123456789"), 0x4B37);

@@ -208,6 +208,32 @@ mod tests {
     }
 
     #[test]
+    fn samples_beyond_what_a_recording_holds_are_garbage() {
+        let mut p = StreamParser::new(Protocol::MotionCal);
+        // A line that lost bytes: 0.1 µT units, −4.2·10⁶ µT.
+        assert_eq!(
+            p.parse(b"Raw:0,0,8192,0,0,0,-42000000,10,20"),
+            Parsed::Garbage(GarbageKind::OutOfRange)
+        );
+        assert!(matches!(
+            p.parse(b"Raw:0,0,8192,0,0,0,-420000,10,20"),
+            Parsed::Sample(_)
+        ));
+        let mut p = StreamParser::new(Protocol::Csv);
+        assert_eq!(p.parse(b"t,mx,my,mz,temp"), Parsed::Header);
+        for line in [&b"0.1,1,2,3,20000"[..], b"1e12,1,2,3,20", b"0.1,1e7,2,3,20"] {
+            assert_eq!(
+                p.parse(line),
+                Parsed::Garbage(GarbageKind::OutOfRange),
+                "{}",
+                String::from_utf8_lossy(line)
+            );
+        }
+        assert!(matches!(p.parse(b"0.2,1,2,3,20"), Parsed::Sample(_)));
+        assert_eq!(p.counts().garbage.get(GarbageKind::OutOfRange), 3);
+    }
+
+    #[test]
     fn csv_stream_goes_through_the_csv_parser() {
         let mut p = StreamParser::new(Protocol::Csv);
         assert_eq!(p.parse(b"1,2,3"), Parsed::Garbage(GarbageKind::NoHeader));
