@@ -11,8 +11,7 @@ use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
-    RecordOptions, RecordSummary, Routine, Stop, device_metadata, garbage_note, record,
-    sim_field_note, ui,
+    RecordOptions, RecordSummary, Routine, Stop, device_metadata, record, sim_field_note, ui,
 };
 use magcal_app::{sayln, tellln};
 
@@ -275,7 +274,7 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
         )?;
     }
     if let Some(g) = &s.garbage {
-        sayln!("{}", garbage_note(g, &s.skipped_at))?;
+        sayln!("{g}")?;
     }
     if s.untouched {
         sayln!(

@@ -383,19 +383,19 @@ mod tests {
     fn each_refusal_names_its_option_and_why() {
         let dir = tempfile::tempdir().unwrap();
         let at = |name: &str| dir.path().join(name);
-        std::fs::write(at("afile"), "x").unwrap();
-        std::fs::write(at("rec.csv"), "t,mx,my,mz\n0,1,2,3\n").unwrap();
-        std::fs::write(
+        fs::write(at("afile"), "x").unwrap();
+        fs::write(at("rec.csv"), "t,mx,my,mz\n0,1,2,3\n").unwrap();
+        fs::write(
             at("sim.csv"),
             "# simulated: magcal-sim, seed 1\nt,mx,my,mz\n0,1,2,3\n",
         )
         .unwrap();
-        std::fs::write(
+        fs::write(
             at("recorded.csv"),
             "# simulated: magcal-record sim:lis3mdl, seed 1\nt,mx,my,mz\n0,1,2,3\n",
         )
         .unwrap();
-        std::fs::write(at("params.toml"), "format = 1\n").unwrap();
+        fs::write(at("params.toml"), "format = 1\n").unwrap();
         let file = |tool, option, path: &Path, replace| {
             Guard::new(tool)
                 .file(option, Some(path), replace)
@@ -454,7 +454,7 @@ mod tests {
             forced("--truth", &at("rec.csv"), Replace::New),
             Err(Why::HoldsRecording(None, false))
         );
-        let holder = std::fs::File::open(at("params.toml")).unwrap();
+        let holder = fs::File::open(at("params.toml")).unwrap();
         holder.lock().unwrap();
         assert_eq!(
             forced("--truth", &at("params.toml"), Replace::New),
@@ -466,9 +466,9 @@ mod tests {
     fn inputs_other_outputs_and_folders_are_checked_together() {
         let dir = tempfile::tempdir().unwrap();
         let input = dir.path().join("rec.csv");
-        std::fs::write(&input, "t,mx,my,mz\n0,1,2,3\n").unwrap();
+        fs::write(&input, "t,mx,my,mz\n0,1,2,3\n").unwrap();
         let report = dir.path().join("report.json");
-        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        fs::create_dir(dir.path().join("sub")).unwrap();
         let e = Guard::new("magcal-fit")
             .input("<RECORDING>", &input)
             .file("--out", Some(&report), Replace::Products)

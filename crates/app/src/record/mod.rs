@@ -47,7 +47,6 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use magcal_driver::serial::{GarbageCounts, GarbageKind};
 use magcal_recording::{CreateOptions, Layout, Metadata, Note, RecordingWriter, Sample};
 use magcal_sim::{CubePose, cube24_poses};
 
@@ -57,7 +56,7 @@ use crate::device::{BadOption, DeviceSpec, positive_at_most, within};
 pub use coverage::CoverageMap;
 pub use magnitude::{Disturbance, MagnitudeEvent, MagnitudeWatch};
 pub use quality::Quality;
-pub use source::{Reading, Source, SourceError, garbage_note};
+pub use source::{Reading, Skipped, Source, SourceError};
 pub use still::StillWindow;
 pub use ui::{Progress, Ui};
 
@@ -200,9 +199,7 @@ pub struct RecordSummary {
     /// Times at which the device's clock restarted and a new segment of time began, s of recording time.
     pub clock_restarts: Vec<f64>,
     /// Garbage lines skipped (line streams).
-    pub garbage: Option<GarbageCounts>,
-    /// Where the first garbage lines were skipped: samples before each, and what it was.
-    pub skipped_at: Vec<(u64, GarbageKind)>,
+    pub garbage: Option<Skipped>,
     /// No sample came, and the file `--force` was to replace was left as it was.
     pub untouched: bool,
     /// Why it stopped.
@@ -295,7 +292,7 @@ pub enum RecordError {
         } else {
             format!("{} keeps the {kept} samples recorded before", path.display())
         },
-        garbage.as_deref().map(|g| format!("; {}", garbage_note(g, skipped_at))).unwrap_or_default()
+        garbage.as_deref().map(|g| format!("; {g}")).unwrap_or_default()
     )]
     Device {
         /// What the device did.
@@ -305,9 +302,7 @@ pub enum RecordError {
         /// Rows in the file.
         kept: u64,
         /// Garbage lines skipped (line streams).
-        garbage: Option<Box<GarbageCounts>>,
-        /// Where the first garbage lines were skipped.
-        skipped_at: Vec<(u64, GarbageKind)>,
+        garbage: Option<Box<Skipped>>,
         /// No sample came, and the file `--force` was to replace was left as it was.
         untouched: bool,
     },

@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::{
     CoverageMap, Cube, MagnitudeEvent, MagnitudeWatch, Out, Reading, RecordError, RecordOptions,
-    RecordSummary, Routine, Source, SourceError, Stop, Ui, cube_step, progress, prompt_pose,
-    units_note,
+    RecordSummary, Routine, Skipped, Source, SourceError, Stop, Ui, cube_step, progress,
+    prompt_pose, units_note,
 };
 
 /// Identical consecutive readings that mean the outputs are stuck: this many, or two seconds' worth if more.
@@ -97,8 +97,7 @@ pub(super) fn run(
         saturated: source.saturated(),
         disturbed: s.disturbed,
         clock_restarts: source.clock_restarts().iter().map(|t| t - s.t0_s).collect(),
-        garbage: source.garbage(),
-        skipped_at: source.skipped_at(),
+        garbage: Skipped::of(source),
         untouched: false,
         stop,
     })
@@ -151,8 +150,7 @@ impl<'o> Session<'o> {
             error,
             path: out.path().to_owned(),
             kept: out.rows(),
-            garbage: source.garbage().map(Box::new),
-            skipped_at: source.skipped_at(),
+            garbage: Skipped::of(source).map(Box::new),
             untouched: false,
         }
     }

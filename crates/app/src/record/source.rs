@@ -340,34 +340,57 @@ where
     }
 }
 
-/// What a recorder says of the garbage lines a stream skipped: how many of each kind, where the first were (after
-/// how many samples), and that a line that lost bytes yet still reads as a sample cannot be told from one.
-pub fn garbage_note(counts: &GarbageCounts, skipped_at: &[(u64, GarbageKind)]) -> String {
-    let mut note = format!("garbage lines skipped: {} ({counts})", counts.total());
-    if skipped_at.is_empty() {
-        return note;
+/// The garbage lines a line stream skipped: how many of each kind, and where the first were.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Skipped {
+    /// How many of each kind.
+    pub counts: GarbageCounts,
+    /// The first ones: how many samples came before each, and what it was.
+    pub at: Vec<(u64, GarbageKind)>,
+}
+
+impl Skipped {
+    /// What `source` skipped, for line streams.
+    pub fn of(source: &dyn Source) -> Option<Skipped> {
+        source.garbage().map(|counts| Skipped {
+            counts,
+            at: source.skipped_at(),
+        })
     }
-    let places: Vec<String> = skipped_at
-        .iter()
-        .map(|(n, kind)| format!("{n} ({kind})"))
-        .collect();
-    let more = counts.total().saturating_sub(skipped_at.len() as u64);
-    note += &format!(
-        "; {} after sample {}{}: a line that lost bytes but still reads as a sample in range cannot be told from \
-         one, so look at the rows there",
-        if skipped_at.len() == 1 {
-            "it came"
-        } else {
-            "the first came"
-        },
-        places.join(", "),
-        if more > 0 {
-            format!(" and {more} more")
-        } else {
-            String::new()
+}
+
+impl std::fmt::Display for Skipped {
+    /// How many lines of each kind, where the first were (after how many samples), and that a line that lost bytes
+    /// yet still reads as a sample cannot be told from one.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let counts = &self.counts;
+        write!(f, "garbage lines skipped: {} ({counts})", counts.total())?;
+        if self.at.is_empty() {
+            return Ok(());
         }
-    );
-    note
+        let places: Vec<String> = self
+            .at
+            .iter()
+            .map(|(n, kind)| format!("{n} ({kind})"))
+            .collect();
+        let more = counts.total().saturating_sub(self.at.len() as u64);
+        write!(
+            f,
+            "; {} after sample {}{}: a line that lost bytes but still reads as a sample in range cannot be told \
+             from one, so look at the rows there",
+            if self.at.len() == 1 {
+                "it came"
+            } else {
+                "the first came"
+            },
+            places.join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        )
+    }
 }
 
 /// Which clock a serial sample's time came from.
