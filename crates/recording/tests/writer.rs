@@ -360,9 +360,18 @@ fn a_replaced_file_stays_until_the_first_row_and_a_link_is_replaced_itself() {
     w.finish().unwrap();
     assert_eq!(std::fs::read_to_string(&path).unwrap(), "precious");
     assert_eq!(files(dir.path()), 1);
-    // The first row replaces it.
-    let mut w = RecordingWriter::create(&path, &meta(), &layout())
-        .unwrap()
+    // The first row replaces it. (The lock the first writer held may linger for a moment in a child process another
+    // test forks, until it execs: try again briefly.)
+    let mut w = (0..100)
+        .find_map(|_| {
+            RecordingWriter::create(&path, &meta(), &layout())
+                .inspect_err(|e| {
+                    assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock, "{e}");
+                    std::thread::sleep(Duration::from_millis(10));
+                })
+                .ok()
+        })
+        .expect("the lock is released")
         .with_flush_interval(Duration::ZERO);
     assert_eq!(std::fs::read_to_string(&path).unwrap(), "precious");
     w.write_sample(&sample(0)).unwrap();
