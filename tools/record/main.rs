@@ -155,7 +155,8 @@ struct Args {
     /// sim: run at the pace of the wall clock (to watch it) instead of as fast as possible.
     #[arg(long)]
     realtime: bool,
-    /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against.
+    /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against (a new file, or
+    /// with --force any file but a recording).
     #[arg(long, value_name = "TRUTH.toml")]
     truth: Option<PathBuf>,
 }

@@ -203,9 +203,13 @@ fn without_escapes(text: &str) -> String {
 /// The longest line of an error message shown whole: a message longer than this quotes something it should not.
 const MAX_ERROR_LINE_CHARS: usize = 2000;
 
-/// `message` with every long command-line argument it quotes (longer than [`EXCERPT_CHARS`]: whole, after an `=`,
-/// or a piece between `:`, `;`, `=` and `,`), as is or escaped, replaced by a short, escaped excerpt, and any line
-/// still over [`MAX_ERROR_LINE_CHARS`] characters cut.
+/// An argument longer than this, bytes, is no path (Linux's `PATH_MAX`): an error quotes an excerpt of it.
+const MAX_PATH_BYTES: usize = 4096;
+
+/// `message` with every command-line argument it quotes that is longer than a path can be ([`MAX_PATH_BYTES`]) or
+/// holds control characters (whole, after an `=`, or a piece between `:`, `;`, `=` and `,`), as is or escaped,
+/// replaced by a short, escaped excerpt, and any line still over [`MAX_ERROR_LINE_CHARS`] characters cut. Paths, which
+/// errors name, are left whole.
 pub fn shortened(message: &str) -> String {
     let mut pieces: Vec<String> = Vec::new();
     for arg in std::env::args_os().skip(1) {
@@ -219,7 +223,7 @@ pub fn shortened(message: &str) -> String {
     // clap drops escape sequences from what it quotes.
     let plain: Vec<String> = pieces.iter().map(|p| without_escapes(p)).collect();
     pieces.extend(plain);
-    pieces.retain(|p| p.chars().count() > EXCERPT_CHARS);
+    pieces.retain(|p| p.len() > MAX_PATH_BYTES || p.chars().any(char::is_control));
     // The longest first, so that a piece is not cut out of an argument before the argument itself.
     pieces.sort_by_key(|p| std::cmp::Reverse(p.len()));
     let mut out = message.to_owned();
