@@ -126,8 +126,11 @@ fn an_unwritable_out_path_fails_before_recording_starts() {
     let (stdout, stderr) = text(&out);
     assert!(!out.status.success());
     assert!(
-        stderr.contains(&format!("cannot create the recording {}", path.display()))
-            && stderr.contains("nothing was recorded"),
+        stderr.contains(&format!(
+            "--out {}: {} is a file, not a folder",
+            path.display(),
+            file.display()
+        )) && stderr.contains("nothing was recorded"),
         "{stderr}"
     );
     assert!(

@@ -6,9 +6,9 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::Parser;
 use magcal_app::apply::check;
-use magcal_app::cli::{WorldFieldOpts, exit};
+use magcal_app::cli::{WorldFieldOpts, exit, parse};
 use magcal_app::field::resolve;
-use magcal_app::files::{check_outputs, check_recording_output};
+use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::{ParamsError, ParamsFile};
 use magcal_app::summary::check_summary;
 use magcal_app::verdict::Grade;
@@ -45,7 +45,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    exit("magcal-apply", run(Args::parse()))
+    exit("magcal-apply", run(parse()))
 }
 
 /// A recording given where the parameters go, with the order of the arguments; other errors as they are.
@@ -59,12 +59,16 @@ fn swapped_hint(e: ParamsError) -> anyhow::Error {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    // Neither input is ever overwritten, before anything is read.
-    if let Some(out) = &args.out {
-        check_outputs(&args.recording, &[("--out", out)])?;
-        check_outputs(&args.params, &[("--out", out)])?;
-        check_recording_output("--out", out, "calibrated_with")?;
-    }
+    // Neither input is ever overwritten, nor any recording but a calibrated copy, before anything is read.
+    Guard::new("magcal-apply")
+        .input("<PARAMS>", &args.params)
+        .input("<RECORDING>", &args.recording)
+        .file(
+            "--out",
+            args.out.as_deref(),
+            Replace::Remakes("calibrated_with", ""),
+        )
+        .check()?;
     let params = ParamsFile::read(&args.params).map_err(swapped_hint)?;
     let rec = Recording::read(&args.recording)?;
     let name = args.recording.display().to_string();

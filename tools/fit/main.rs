@@ -6,14 +6,15 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit};
+use magcal_app::cli::{WorldFieldOpts, exit, parse};
 use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
-use magcal_app::files::{check_file_output, check_outputs, write_atomic};
+use magcal_app::files::write_atomic;
 use magcal_app::fit::Method;
 use magcal_app::howto::{Target, how_to_apply};
+use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
-use magcal_app::plots::{write_plots, write_readings_plot};
+use magcal_app::plots::{PLOT_FILES, write_plots, write_readings_plot};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::verdict::{Grade, target_model};
@@ -85,40 +86,28 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    exit("magcal-fit", run(Args::parse()))
+    exit("magcal-fit", run(parse()))
 }
 
-/// Refuses outputs that would overwrite the recording or each other, files that cannot be made (a missing folder, a
-/// folder's name), or plots into a file's place, before anything is read or written.
+/// Refuses outputs that would overwrite the recording, each other or another recording, files that cannot be made
+/// (a missing folder, a folder's name), or plots into a file's place, before anything is read or written.
 fn check_paths(args: &Args) -> anyhow::Result<()> {
-    let mut outputs: Vec<(&str, &std::path::Path)> = Vec::new();
-    let named = [
-        ("--out", &args.out),
-        ("--report", &args.report),
-        ("--export-out", &args.export_out),
-        ("--plots", &args.plots),
-    ];
-    for (flag, path) in named {
-        if let Some(path) = path {
-            outputs.push((flag, path));
-        }
-    }
-    // The input first: an output naming it is refused as such.
-    check_outputs(&args.recording, &outputs)?;
-    for &(flag, path) in outputs.iter().filter(|(flag, _)| *flag != "--plots") {
-        check_file_output(flag, path)?;
-    }
-    if let Some(dir) = &args.plots
-        && dir.exists()
-        && !dir.is_dir()
-    {
-        bail!(
-            "--plots {}: a file is there, and --plots names a directory (the plots are written into it); nothing \
-             was written",
-            dir.display()
-        );
-    }
-    Ok(())
+    Ok(Guard::new("magcal-fit")
+        .input("<RECORDING>", &args.recording)
+        .file("--out", args.out.as_deref(), Replace::Products)
+        .file("--report", args.report.as_deref(), Replace::Products)
+        .file(
+            "--export-out",
+            args.export_out.as_deref(),
+            Replace::Products,
+        )
+        .folder(
+            "--plots",
+            args.plots.as_deref(),
+            &PLOT_FILES,
+            Replace::Products,
+        )
+        .check()?)
 }
 
 fn run(args: Args) -> anyhow::Result<()> {

@@ -5,13 +5,14 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse};
 use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::fit::{Calibration, Fit, Method};
+use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
-    RecordOptions, Routine, Stop, check_out, device_metadata, record, sim_field_note, ui,
+    RecordOptions, Routine, Stop, device_metadata, record, sim_field_note, ui,
 };
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
@@ -61,7 +62,7 @@ const PARAMS: &str = "params.toml";
 const REPORT: &str = "report.json";
 
 fn main() -> ExitCode {
-    exit("magcal", run(Args::parse()))
+    exit("magcal", run(parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
@@ -70,24 +71,13 @@ fn run(args: Args) -> anyhow::Result<()> {
     let mut opts = RecordOptions::new(routine, rec_path.clone());
     opts.force = args.force;
     opts.auto = args.device.is_sim();
-    if args.out_dir.exists() && !args.out_dir.is_dir() {
-        bail!(
-            "--out-dir {} is a file: name a folder (it is made if missing); nothing was recorded",
-            args.out_dir.display()
-        );
-    }
-    check_out(&rec_path, args.force).map_err(|e| e.for_option(OUT_DIR))?;
     // The fit's outputs of an earlier run are not replaced unasked either (its recording may be gone).
-    for name in [PARAMS, REPORT] {
-        let path = args.out_dir.join(name);
-        if path.exists() && !args.force {
-            bail!(
-                "{} exists (an earlier run's?): choose another {OUT_DIR}, or add --force to replace it (nothing was \
-                 recorded)",
-                path.display()
-            );
-        }
-    }
+    let dir = Some(args.out_dir.as_path());
+    Guard::new("magcal")
+        .force(args.force)
+        .folder(OUT_DIR, dir, &["recording.csv"], Replace::Recording)
+        .folder(OUT_DIR, dir, &[PARAMS, REPORT], Replace::New)
+        .check()?;
     std::fs::create_dir_all(&args.out_dir)
         .with_context(|| format!("creating {}", args.out_dir.display()))?;
 

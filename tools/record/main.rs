@@ -5,13 +5,13 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::field::resolve;
+use magcal_app::outputs::{Guard, Replace};
 use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
-    RecordOptions, RecordSummary, Routine, Stop, check_out, device_metadata, record,
-    sim_field_note, ui,
+    RecordOptions, RecordSummary, Routine, Stop, device_metadata, record, sim_field_note, ui,
 };
 use magcal_app::{sayln, tellln};
 
@@ -82,7 +82,8 @@ struct Args {
     /// The recording to write (a new file: an existing one is refused unless --force).
     #[arg(long, short, default_value = "recording.csv", value_name = "REC.csv")]
     out: PathBuf,
-    /// Replace --out if it exists (its old content is lost once the device is open and recording starts).
+    /// Replace --out (the path itself: a link there, not the file it points to) and --truth if they exist; the old
+    /// recording stays until the first sample of the new one is written.
     #[arg(long)]
     force: bool,
     /// The local field, written to the recording for the fit.
@@ -154,13 +155,14 @@ struct Args {
     /// sim: run at the pace of the wall clock (to watch it) instead of as fast as possible.
     #[arg(long)]
     realtime: bool,
-    /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against.
+    /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against (a new file, or
+    /// with --force any file but a recording).
     #[arg(long, value_name = "TRUTH.toml")]
     truth: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
-    exit("magcal-record", run(Args::parse()))
+    exit("magcal-record", run(parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
@@ -187,7 +189,11 @@ fn run(args: Args) -> anyhow::Result<()> {
     // Everything is checked before anything is opened or written.
     opts.check()?;
     open.check(&spec)?;
-    check_out(&args.out, args.force)?;
+    Guard::new("magcal-record")
+        .force(args.force)
+        .file("--out", Some(&args.out), Replace::Recording)
+        .file("--truth", args.truth.as_deref(), Replace::New)
+        .check()?;
     args.field.write_metadata(&mut opts.meta);
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     // A field given in another unit than µT is refused before anything is opened, as the fit would refuse it.
@@ -269,7 +275,14 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
         )?;
     }
     if let Some(g) = &s.garbage {
-        sayln!("garbage lines skipped: {} ({g})", g.total())?;
+        sayln!("{g}")?;
+    }
+    if s.untouched {
+        sayln!(
+            "no sample was recorded: {} was left as it was",
+            s.path.display()
+        )?;
+        return Ok(());
     }
     match s.shortfall(opts) {
         Some(short) => sayln!(

@@ -5,9 +5,10 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
-use magcal_app::cli::{exit, parse_floats};
+use magcal_app::cli::{excerpt, exit, parse, parse_floats};
 use magcal_app::effect_spec::{self, Defaults};
-use magcal_app::files::{check_file_output, check_recording_output};
+use magcal_app::outputs::{Guard, Replace};
+use magcal_app::sim_options::{MAX_NOISE_UT, SimNumbers};
 use magcal_app::tellln;
 use magcal_app::truth::TruthFile;
 use magcal_calib::effects::EffectId;
@@ -24,8 +25,8 @@ use magcal_sim::{
 #[derive(Parser, Debug)]
 #[command(version)]
 struct Args {
-    /// Output recording.
-    #[arg(long, short)]
+    /// Output recording (a new file, or one magcal-sim made: no other recording is replaced).
+    #[arg(long, short, value_name = "REC.csv")]
     out: PathBuf,
     /// Chip to simulate (resolution, noise, temperature sensor, rate): lis3mdl, lis2mdl, qmc5883l, hmc5883l,
     /// mmc5983ma.
@@ -74,7 +75,7 @@ struct Args {
     #[arg(long, value_name = "ID:SIZE_UT")]
     effect_rms: Vec<String>,
     /// Write the truth (A, b, noise, effects as specs) to this TOML file.
-    #[arg(long, value_name = "PATH")]
+    #[arg(long, value_name = "TRUTH.toml")]
     truth: Option<PathBuf>,
 }
 
@@ -101,7 +102,7 @@ enum Reference {
 fn parse_current(s: &str) -> Result<CurrentProfile, String> {
     let (name, rest) = s
         .split_once(':')
-        .ok_or_else(|| format!("{s:?}: expected NAME:ON_A,MEAN_ON_S,MEAN_OFF_S"))?;
+        .ok_or_else(|| format!("{}: expected NAME:ON_A,MEAN_ON_S,MEAN_OFF_S", excerpt(s)))?;
     let [on_a, mean_on_s, mean_off_s] = parse_floats::<3>(rest)?;
     let name = if name.starts_with("i_") {
         name.to_owned()
@@ -116,35 +117,37 @@ fn parse_current(s: &str) -> Result<CurrentProfile, String> {
     })
 }
 
-/// Most samples one run simulates: about 2 GB of memory while it runs.
-const MAX_SAMPLES: f64 = 2e7;
-
 fn main() -> ExitCode {
-    exit("magcal-sim", run(Args::parse()))
+    exit("magcal-sim", run(parse()))
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    check_recording_output("--out", &args.out, "simulated")?;
-    if let Some(truth) = &args.truth {
-        check_file_output("--truth", truth)?;
-    }
-    if !(args.duration > 0.0 && args.duration.is_finite()) {
-        bail!(
-            "--duration must be a positive number of seconds, got {}",
-            args.duration
-        );
-    }
-    if let Some(r) = args.rate
-        && !(r > 0.0 && r.is_finite())
-    {
-        bail!("--rate must be a positive number of Hz, got {r}");
-    }
+    Guard::new("magcal-sim")
+        .file(
+            "--out",
+            Some(&args.out),
+            Replace::Remakes("simulated", "magcal-sim"),
+        )
+        .file("--truth", args.truth.as_deref(), Replace::Products)
+        .check()?;
     let Some(chip) = ChipModel::by_name(&args.chip) else {
         bail!(
-            "unknown chip {:?}: use one of lis3mdl, lis2mdl, qmc5883l, hmc5883l, mmc5983ma",
-            args.chip
+            "unknown chip {}: use one of lis3mdl, lis2mdl, qmc5883l, hmc5883l, mmc5983ma",
+            excerpt(&args.chip)
         );
     };
+    // Every number in its range before anything is simulated or allocated.
+    SimNumbers {
+        duration_s: args.duration,
+        rate_hz: args.rate.unwrap_or(chip.rate_hz),
+        noise_ut: args.noise,
+        gyro_noise_rad_s: args.gyro_noise,
+        errors: args.errors,
+        field_ned_ut: args.field_ned,
+        temperature: args.temperature,
+        currents: &args.current,
+    }
+    .check()?;
     let trajectory = match args.routine {
         Routine::Tumble => Trajectory::Tumble {
             duration_s: args.duration,
@@ -163,15 +166,6 @@ fn run(args: Args) -> anyhow::Result<()> {
     let mut s = Scenario::new(&chip, trajectory, args.seed);
     if let Some(r) = args.rate {
         s.sample_rate_hz = r;
-    }
-    let samples = args.duration * s.sample_rate_hz;
-    if samples > MAX_SAMPLES {
-        bail!(
-            "--duration {} s at {} Hz is {samples:.3e} samples: at most {MAX_SAMPLES:.0e} are simulated at once \
-             (shorten the run or lower the rate)",
-            args.duration,
-            s.sample_rate_hz
-        );
     }
     if let Some(f) = args.field_ned {
         s.field_ned_ut = f;
@@ -213,18 +207,32 @@ fn run(args: Args) -> anyhow::Result<()> {
     for spec in &args.effect_rms {
         let (id, size) = spec
             .split_once(':')
-            .with_context(|| format!("--effect-rms {spec:?}: expected ID:SIZE_UT"))?;
-        let id = EffectId::parse(id)
-            .with_context(|| format!("--effect-rms {spec:?}: unknown effect {id:?}"))?;
+            .with_context(|| format!("--effect-rms {}: expected ID:SIZE_UT", excerpt(spec)))?;
+        let id = EffectId::parse(id).with_context(|| {
+            format!(
+                "--effect-rms {}: unknown effect {}",
+                excerpt(spec),
+                excerpt(id)
+            )
+        })?;
         let size: f64 = size
             .parse()
-            .with_context(|| format!("--effect-rms {spec:?}: {size:?} is not a size in µT"))?;
+            .ok()
+            .filter(|v: &f64| (0.0..=MAX_NOISE_UT).contains(v))
+            .with_context(|| {
+                format!(
+                    "--effect-rms {}: {} is not a size in µT from 0 to {MAX_NOISE_UT}",
+                    excerpt(spec),
+                    excerpt(size)
+                )
+            })?;
         let shape = study::random_effect(id, &s, args.seed);
         let effect = study::scale_to_rms(&s, &shape, size);
         if !effect.params().0.iter().all(|v| v.is_finite()) {
             anyhow::bail!(
-                "--effect-rms {spec:?}: {} does not change the readings of this bench, so it cannot be scaled to \
-                 {size} µT (temperature effects need --temperature, current effects --current)",
+                "--effect-rms {}: {} does not change the readings of this bench, so it cannot be scaled to {size} µT \
+                 (temperature effects need --temperature, current effects --current)",
+                excerpt(spec),
                 id.as_str()
             );
         }

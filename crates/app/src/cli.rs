@@ -15,9 +15,33 @@ pub fn parse_floats<const N: usize>(s: &str) -> Result<[f64; N], String> {
         .split(',')
         .map(|x| x.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|e| format!("{s:?}: {e}"))?;
+        .map_err(|e| format!("{}: {e}", excerpt(s)))?;
     v.try_into()
-        .map_err(|_| format!("expected {N} comma-separated numbers, got {s:?}"))
+        .map_err(|_| format!("expected {N} comma-separated numbers, got {}", excerpt(s)))
+}
+
+/// A number as an error quotes it: as Rust writes it (`0.25`, `10000000`), or in scientific notation when that
+/// would take many digits (`1e30`, `1e-9`, `1e-300`), never hundreds of them.
+pub fn number(value: f64) -> String {
+    let size = value.abs();
+    if size >= 1e16 || (size > 0.0 && size < 1e-4) {
+        format!("{value:e}")
+    } else {
+        value.to_string()
+    }
+}
+
+/// At most this many characters of a user's argument are quoted in an error.
+pub const EXCERPT_CHARS: usize = 40;
+
+/// A short, escaped excerpt of a user's argument for an error: its first [`EXCERPT_CHARS`] characters (`…` when it
+/// had more), quoted with control characters escaped, so that a long or hostile argument never floods the terminal
+/// or writes escape sequences to it.
+pub fn excerpt(text: &str) -> String {
+    match text.char_indices().nth(EXCERPT_CHARS) {
+        Some((end, _)) => format!("{:?}", format!("{}…", &text[..end])),
+        None => format!("{text:?}"),
+    }
 }
 
 /// The local world field, given directly or by place and date for the World Magnetic Model.
@@ -136,20 +160,109 @@ macro_rules! tellln {
     };
 }
 
-/// The process exit for a tool's result: the error chain on stderr, prefixed with the tool's name.
+/// The process exit for a tool's result: the error chain on stderr, prefixed with the tool's name, with any long
+/// command-line argument it quotes cut to a short excerpt ([`shortened`]).
 pub fn exit(tool: &str, result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            crate::tellln!("{tool}: error: {e:#}");
+            crate::tellln!("{tool}: error: {}", shortened(&format!("{e:#}")));
             ExitCode::FAILURE
         }
     }
 }
 
+/// Parses the command line as clap does, except that an error quotes a long argument as a short excerpt
+/// ([`shortened`]), where clap would quote all of it (and a value parser's message, again).
+pub fn parse<T: clap::Parser>() -> T {
+    T::try_parse().unwrap_or_else(|e| {
+        if !e.use_stderr() {
+            // --help, --version.
+            e.exit();
+        }
+        tell(format_args!("{}", shortened(&e.render().to_string())));
+        std::process::exit(e.exit_code());
+    })
+}
+
+/// `text` without terminal escape sequences (`ESC [ … letter`) and other control characters.
+fn without_escapes(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' && chars.peek() == Some(&'[') {
+            chars.next();
+            while chars.next().is_some_and(|c| !('@'..='~').contains(&c)) {}
+        } else if !c.is_control() {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The longest line of an error message shown whole: a message longer than this quotes something it should not.
+const MAX_ERROR_LINE_CHARS: usize = 2000;
+
+/// An argument longer than this, bytes, is no path (Linux's `PATH_MAX`): an error quotes an excerpt of it.
+const MAX_PATH_BYTES: usize = 4096;
+
+/// `message` with every command-line argument it quotes that is longer than a path can be ([`MAX_PATH_BYTES`]) or
+/// holds control characters (whole, after an `=`, or a piece between `:`, `;`, `=` and `,`), as is or escaped,
+/// replaced by a short, escaped excerpt, and any line still over [`MAX_ERROR_LINE_CHARS`] characters cut. Paths, which
+/// errors name, are left whole.
+pub fn shortened(message: &str) -> String {
+    let mut pieces: Vec<String> = Vec::new();
+    for arg in std::env::args_os().skip(1) {
+        let arg = arg.to_string_lossy().into_owned();
+        pieces.extend(arg.split([':', ';', '=', ',']).map(str::to_owned));
+        if let Some((_, value)) = arg.split_once('=') {
+            pieces.push(value.to_owned());
+        }
+        pieces.push(arg);
+    }
+    // clap drops escape sequences from what it quotes.
+    let plain: Vec<String> = pieces.iter().map(|p| without_escapes(p)).collect();
+    pieces.extend(plain);
+    pieces.retain(|p| p.len() > MAX_PATH_BYTES || p.chars().any(char::is_control));
+    // The longest first, so that a piece is not cut out of an argument before the argument itself.
+    pieces.sort_by_key(|p| std::cmp::Reverse(p.len()));
+    let mut out = message.to_owned();
+    for piece in &pieces {
+        let short = excerpt(piece);
+        out = out.replace(&format!("{piece:?}"), &short);
+        out = out.replace(&format!("'{piece}'"), &short);
+        out = out.replace(piece.as_str(), &short);
+    }
+    out.lines()
+        .map(|line| match line.char_indices().nth(MAX_ERROR_LINE_CHARS) {
+            Some((end, _)) => format!(
+                "{}… ({} characters more)",
+                &line[..end],
+                line[end..].chars().count()
+            ),
+            None => line.to_owned(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        + if message.ends_with('\n') { "\n" } else { "" }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_and_arguments_are_quoted_short() {
+        assert_eq!(number(0.25), "0.25");
+        assert_eq!(number(1e12), "1000000000000");
+        assert_eq!(number(1e30), "1e30");
+        assert_eq!(number(-1e-300), "-1e-300");
+        assert_eq!(number(f64::NAN), "NaN");
+        assert_eq!(excerpt("ab\u{1b}[2J"), "\"ab\\u{1b}[2J\"");
+        let long = "x".repeat(100_000);
+        assert_eq!(excerpt(&long), format!("\"{}…\"", "x".repeat(40)));
+        assert_eq!(without_escapes("a\u{1b}[2Jb\u{7}c"), "abc");
+    }
 
     #[test]
     fn numbers_lists_say_what_is_wrong() {

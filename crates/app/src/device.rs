@@ -16,6 +16,7 @@ use magcal_driver::serial::{DeviceSpec as SerialSpec, PatternKind, Protocol};
 use magcal_driver::{AnyMagnetometer, ChipKind};
 pub use magcal_mockhw::Fault;
 
+use crate::cli::number;
 use crate::record::clock::WallClock;
 use crate::record::source::{ChipSource, LineSource, Source, SourceError};
 
@@ -227,7 +228,27 @@ pub fn positive_at_most(option: &str, value: f64, max: f64, unit: &str) -> Resul
         return Ok(());
     }
     Err(BadOption(format!(
-        "{option} {value} {unit}: must be a number > 0 and at most {max} {unit}"
+        "{option} {} {unit}: must be a number > 0 and at most {max} {unit}",
+        number(value)
+    )))
+}
+
+/// `Ok` if `value` is a number in `[min, max]`; otherwise an error naming the option, what was given (in a short
+/// form) and the range.
+pub fn within(option: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), BadOption> {
+    if (min..=max).contains(&value) {
+        return Ok(());
+    }
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
+    Err(BadOption(format!(
+        "{option} {}{unit}: must be a number from {} to {}{unit}",
+        number(value),
+        number(min),
+        number(max)
     )))
 }
 
@@ -251,7 +272,7 @@ impl OpenOptions {
             if self.rate_hz < slowest / 10.0 || self.rate_hz > fastest * 10.0 {
                 return Err(BadOption(format!(
                     "--rate {} Hz: the {chip} runs at {slowest}–{fastest} Hz",
-                    self.rate_hz
+                    number(self.rate_hz)
                 )));
             }
         }

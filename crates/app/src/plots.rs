@@ -10,7 +10,8 @@
 //! - `residual_orientation.svg` — the residual over the directions of the field in sensor axes, with a colour bar.
 //! - `residual_channel.svg` (diagnosis) — the residual against the channel it is blamed on.
 //!
-//! Every axis carries its unit; legends sit in a strip above the data, never on it.
+//! Every axis carries its unit; legends sit in a strip above the data, never on it. Each file is drawn in memory and
+//! written atomically, so a link in the folder is replaced, never written through.
 
 use std::path::{Path, PathBuf};
 
@@ -24,6 +25,7 @@ use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
+use crate::files::write_atomic;
 use crate::fit::{Calibration, Fit};
 use crate::heading::{Face, HeadingErrors};
 use crate::readings::calibrate_rows;
@@ -56,6 +58,15 @@ const OUTLINE: RGBColor = RGBColor(214, 39, 40);
 const SPAN: RGBColor = RGBColor(255, 187, 120);
 const EVENT: RGBColor = RGBColor(148, 103, 189);
 const GREY: RGBColor = RGBColor(90, 90, 90);
+
+/// The files `--plots` may write, in the folder it names (each through [`crate::outputs`] first).
+pub const PLOT_FILES: [&str; 5] = [
+    "readings.svg",
+    "heading.svg",
+    "residual_time.svg",
+    "residual_orientation.svg",
+    "residual_channel.svg",
+];
 
 /// Writes the plots of a calibration of `rec` into `dir` (created if needed) and returns their paths.
 pub fn write_plots(
@@ -108,9 +119,18 @@ impl<'a> Plots<'a> {
         })
     }
 
-    fn plot(&mut self, name: &str, draw: &dyn Fn(&Path) -> PlotResult<()>) -> anyhow::Result<()> {
+    /// Draws a plot and writes it to `name` in the folder atomically (never through a link there).
+    fn plot(
+        &mut self,
+        name: &str,
+        draw: &dyn Fn(&mut String) -> PlotResult<()>,
+    ) -> anyhow::Result<()> {
+        debug_assert!(PLOT_FILES.contains(&name), "{name} is not in PLOT_FILES");
         let path = self.dir.join(name);
-        draw(&path).map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))?;
+        let mut svg = String::new();
+        draw(&mut svg).map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))?;
+        write_atomic(&path, svg.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
         self.written.push(path);
         Ok(())
     }
@@ -303,11 +323,12 @@ fn ellipsoid_shadow(
 }
 
 /// `readings.svg`: raw readings (top) and calibrated ones (bottom), three projections each.
-fn readings(path: &Path, rec: &Recording, cal: Option<&Calibration>) -> PlotResult<()> {
+fn readings(svg: &mut String, rec: &Recording, cal: Option<&Calibration>) -> PlotResult<()> {
     let panel_w = PANEL_PX + 56 + 16;
     let panel_h = PANEL_PX + 36 + 16 + 24;
     let rows = if cal.is_some() { 2 } else { 1 };
-    let root = SVGBackend::new(path, (3 * panel_w, LEGEND_PX + rows * panel_h)).into_drawing_area();
+    let root =
+        SVGBackend::with_string(svg, (3 * panel_w, LEGEND_PX + rows * panel_h)).into_drawing_area();
     let raw = thin(&rec.mag_ut, PROJECTION_POINTS);
     let field_ut = cal.map(|c| {
         c.fit
@@ -399,8 +420,8 @@ fn unwrapped_pieces(errors_deg: &[f64]) -> Vec<Vec<(f64, f64)>> {
 }
 
 /// `heading.svg`: the raw readings' heading error (top) and what the calibration leaves (bottom), per heading.
-fn heading(path: &Path, h: &HeadingErrors) -> PlotResult<()> {
-    let root = SVGBackend::new(path, (1000, 740)).into_drawing_area();
+fn heading(svg: &mut String, h: &HeadingErrors) -> PlotResult<()> {
+    let root = SVGBackend::with_string(svg, (1000, 740)).into_drawing_area();
     let body = with_legend(
         &root,
         &[
@@ -641,7 +662,7 @@ impl Series {
 }
 
 /// `residual_time.svg`: binned residual RMS against time, the noise floor, located spans and events.
-fn residual_time(path: &Path, s: &Series) -> PlotResult<()> {
+fn residual_time(svg: &mut String, s: &Series) -> PlotResult<()> {
     let (t0, t1) = (s.t_s[0], s.t_s[s.t_s.len() - 1]);
     let bin = |res: &[f64]| -> Vec<(f64, f64)> {
         let mut sum = vec![0.0; TIME_BINS];
@@ -669,7 +690,7 @@ fn residual_time(path: &Path, s: &Series) -> PlotResult<()> {
         .map(|p| p.1)
         .fold(s.floor_ut, f64::max)
         * 1.1;
-    let root = SVGBackend::new(path, (1000, 460)).into_drawing_area();
+    let root = SVGBackend::with_string(svg, (1000, 460)).into_drawing_area();
     let mut entries = vec![(
         Mark::Line(BEFORE, 1),
         if after.is_some() {
@@ -750,7 +771,7 @@ fn shade(v: f64, lo: f64, hi: f64) -> RGBColor {
 
 /// `residual_orientation.svg`: residual RMS in cells of azimuth × elevation of the field direction (sensor axes),
 /// the fit (and, when diagnosed, the fit with the effects found), with a colour bar.
-fn residual_orientation(path: &Path, s: &Series) -> PlotResult<()> {
+fn residual_orientation(svg: &mut String, s: &Series) -> PlotResult<()> {
     const AZ: usize = 36;
     const EL: usize = 18;
     let grid = |res: &[f64]| -> Vec<Option<f64>> {
@@ -793,7 +814,7 @@ fn residual_orientation(path: &Path, s: &Series) -> PlotResult<()> {
         .unwrap_or(0.0);
     let (lo, hi) = (s.floor_ut, p95.max(2.0 * s.floor_ut));
     let width = 60 + 520 * maps.len() as u32 + 120;
-    let root = SVGBackend::new(path, (width, 400)).into_drawing_area();
+    let root = SVGBackend::with_string(svg, (width, 400)).into_drawing_area();
     root.fill(&WHITE)?;
     let (maps_area, bar_area) = root.split_horizontally(width - 120);
     let panels = maps_area.split_evenly((1, maps.len()));
@@ -903,7 +924,7 @@ fn channel_unit(name: &str) -> &'static str {
 }
 
 /// `residual_channel.svg`: the residual component most correlated with the channel, against the channel.
-fn residual_channel(path: &Path, d: &Diagnosis, name: &str, values: &[f64]) -> PlotResult<()> {
+fn residual_channel(svg: &mut String, d: &Diagnosis, name: &str, values: &[f64]) -> PlotResult<()> {
     let r = &d.residuals;
     let dims = r.base.dims;
     let n = values.len() as f64;
@@ -962,7 +983,7 @@ fn residual_channel(path: &Path, d: &Diagnosis, name: &str, values: &[f64]) -> P
         .fold(1e-6, f64::max)
         * 1.1;
     let axis = if dims == 3 { ["x", "y", "z"][j] } else { "|B|" };
-    let root = SVGBackend::new(path, (800, 540)).into_drawing_area();
+    let root = SVGBackend::with_string(svg, (800, 540)).into_drawing_area();
     let body = with_legend(
         &root,
         &[

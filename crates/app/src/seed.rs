@@ -51,6 +51,27 @@ impl Default for SeedExperiment {
     }
 }
 
+/// The largest noise the experiment takes, µT: a fifth of its 50 µT field (beyond, the scalar fit fails to find
+/// an ellipsoid).
+pub const MAX_NOISE_UT: f64 = 10.0;
+/// The largest misalignment, degrees, either way.
+pub const MAX_MOUNT_DEG: f64 = 180.0;
+
+impl SeedExperiment {
+    /// Checks the settings against their ranges before anything is simulated.
+    pub fn check(&self) -> Result<(), crate::device::BadOption> {
+        use crate::device::within;
+        within("--noise", self.noise_ut, 0.0, MAX_NOISE_UT, "µT")?;
+        within(
+            "--mount-deg",
+            self.mount_deg,
+            -MAX_MOUNT_DEG,
+            MAX_MOUNT_DEG,
+            "°",
+        )
+    }
+}
+
 /// What the experiment found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SeedComparison {

@@ -81,6 +81,9 @@ pub enum BoardFault {
     /// The port runs at another baud rate than the board: every byte arrives garbled (high bit set, so no line
     /// ever ends).
     WrongBaud,
+    /// The sample line after this many lost bytes on the way and reads as a field of −4.2·10⁶ µT on x (MotionCal
+    /// `Raw:` and CSV output; the line still counts as sent).
+    CorruptedAt(u64),
 }
 
 /// How long a reset board takes to boot, s of bench time.
@@ -258,7 +261,10 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 _ => {}
             }
             let sample = self.bench.sample(bench_t_s);
-            let line = self.sample_line(&sample);
+            let mut line = self.sample_line(&sample);
+            if self.config.fault == Some(BoardFault::CorruptedAt(i)) {
+                line = self.corrupted(&line);
+            }
             self.send(line.as_bytes());
             self.report.sample_mag_ut.push(sample.raw_ut);
             self.report.sample_quat.push(sample.quat);
@@ -334,6 +340,20 @@ impl<P: Read + Write> MotionCalFirmware<P> {
                 )
             }
         }
+    }
+
+    /// A sample line whose x field lost bytes: −4.2·10⁶ µT (in the output's unit).
+    fn corrupted(&self, line: &str) -> String {
+        let (prefix, body) = line.split_at(if line.starts_with("Raw:") { 4 } else { 0 });
+        let mut fields: Vec<&str> = body.trim_end().split(',').collect();
+        let (at, value) = match self.config.output {
+            Output::MotionCal => (6, "-42000000"),
+            _ => (1, "-4200000.00"),
+        };
+        if let Some(f) = fields.get_mut(at) {
+            *f = value;
+        }
+        format!("{prefix}{}\r\n", fields.join(","))
     }
 
     /// Prints the calibration held.
@@ -498,6 +518,24 @@ mod tests {
         let crc = crc16_modbus(&p);
         p.extend_from_slice(&crc.to_le_bytes());
         p
+    }
+
+    #[test]
+    fn a_corrupted_line_reads_as_a_field_out_of_range() {
+        for (output, field) in [
+            (Output::MotionCal, ",-42000000,"),
+            (Output::Csv, ",-4200000.00,"),
+        ] {
+            let mut config = FirmwareConfig::new(BenchConfig::ideal([20.0, 0.0, 45.0], 1));
+            config.output = output;
+            config.lines_per_wall_s = 1e6;
+            config.raw_lines = Some(5);
+            config.fault = Some(BoardFault::CorruptedAt(2));
+            let (report, text) = run(Vec::new(), config);
+            assert_eq!(report.raw_lines, 5);
+            let lines: Vec<&str> = text.lines().filter(|l| l.contains(field)).collect();
+            assert_eq!(lines.len(), 1, "{output:?}: {text}");
+        }
     }
 
     #[test]

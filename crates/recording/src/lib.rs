@@ -27,8 +27,9 @@
 //!
 //! [`Recording::read`] checks all of it and reports the first problem with file, line and column
 //! ([`ReadError`], one [`ReadErrorKind`] per kind of failure), quoting at most a short escaped excerpt of the file.
-//! [`Recording::write`] writes a whole recording atomically; [`RecordingWriter`] writes one row at a time, locked,
-//! so that a killed recorder leaves a readable file and a second writer is refused.
+//! [`Recording::write`] writes a whole recording atomically ([`atomic`]); [`RecordingWriter`] writes one row at a
+//! time, locked, so that a killed recorder leaves a readable file and a second writer is refused. [`probe`] tells
+//! whether a file holds a recording, however it was saved, before an output would replace it.
 //!
 //! ```
 //! use magcal_recording::{Layout, Metadata, ReadErrorKind, Recording, RecordingWriter, Sample};
@@ -50,6 +51,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod atomic;
 mod blocks;
 mod decimal;
 mod error;
@@ -57,6 +59,7 @@ mod layout;
 pub mod limits;
 mod line_ends;
 mod metadata;
+pub mod probe;
 mod read;
 mod recording;
 mod rows;

@@ -15,6 +15,9 @@ pub const MAX_CURRENT_A: f64 = 1e6;
 /// The `sample_rate_hz` metadata value, Hz.
 pub const MAX_SAMPLE_RATE_HZ: f64 = 1e9;
 
+/// How far from 1 the norm of a quaternion (`qw..qz`) may be before it is refused.
+pub const QUAT_NORM_TOLERANCE: f64 = 0.01;
+
 /// Columns in the header row: a recording has a few dozen; a file with more is something else, and is refused
 /// before its names take memory.
 pub const MAX_COLUMNS: usize = 10_000;

@@ -22,7 +22,7 @@ use crate::rows::RowParser;
 const BUFFER_BYTES: usize = 256 * 1024;
 
 /// The UTF-8 byte order mark some editors put at the start of a file.
-const BOM: &[u8] = b"\xef\xbb\xbf";
+pub(crate) const BOM: &[u8] = b"\xef\xbb\xbf";
 
 /// The attitude turned into the expected field in sensor axes, `[w, x, y, z]` (normalised) → µT.
 pub type AttitudeToReference<'a> = &'a (dyn Fn([f64; 4]) -> [f64; 3] + Sync);
@@ -298,7 +298,7 @@ fn read_metadata(
 }
 
 /// The signatures of compressed files, and what they are.
-const COMPRESSED: [(&[u8], &str); 5] = [
+pub(crate) const COMPRESSED: [(&[u8], &str); 5] = [
     (b"\x1f\x8b", "gzip"),
     (b"BZh", "bzip2"),
     (b"\xfd7zXZ\x00", "xz"),

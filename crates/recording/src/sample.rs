@@ -3,8 +3,7 @@
 use crate::layout::Flags;
 use crate::limits::{self, Limit};
 
-/// How far from 1 the norm of a quaternion may be before it is rejected.
-pub(crate) const QUAT_NORM_TOLERANCE: f64 = 0.01;
+use crate::limits::QUAT_NORM_TOLERANCE;
 
 /// One row of a recording, owned. NaN marks a value that is absent (no such column, or missing in this row);
 /// a group (`quat`, `ref_ut`, `gyro_rad_s`) with any NaN component is missing as a whole.

@@ -10,9 +10,9 @@ use std::fmt::Write as _;
 use std::fs::{self, File, OpenOptions, TryLockError};
 use std::io::{self, Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use crate::atomic::{self, Staged, Temp};
 use crate::layout::{Flags, Layout};
 use crate::metadata::{MAGIC, Metadata};
 use crate::recording::Recording;
@@ -129,14 +129,12 @@ fn invalid_input(e: impl std::error::Error + Send + Sync + 'static) -> io::Error
     io::Error::new(io::ErrorKind::InvalidInput, e)
 }
 
-/// Distinguishes temporary files of one process.
-static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
 impl Recording {
-    /// Writes the whole recording to `path` atomically: to a temporary file in the same directory, synced, then
-    /// renamed over `path`. Fails with [`io::ErrorKind::InvalidInput`] (and leaves `path` alone) if the
-    /// recording breaks the rules of the format (see [`crate::SampleError`], [`crate::HeaderError`]), e.g. after
-    /// its public fields were edited by hand.
+    /// Writes the whole recording to `path` atomically ([`crate::atomic::replace`]: a temporary file in the same
+    /// folder, synced, then renamed over `path`, which keeps its mode; a file another process holds the lock of is
+    /// not replaced). Fails with [`io::ErrorKind::InvalidInput`] (and leaves `path` alone) if the recording breaks
+    /// the rules of the format (see [`crate::SampleError`], [`crate::HeaderError`]), e.g. after its public fields
+    /// were edited by hand.
     pub fn write(&self, path: &Path) -> io::Result<()> {
         let layout = self.layout();
         self.meta
@@ -147,36 +145,11 @@ impl Recording {
             .map_err(|e| invalid_input(crate::HeaderError(e)))?;
         self.check_lengths()
             .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
-        let file_name = path
-            .file_name()
-            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "the path names no file"))?;
-        let dir = match path.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir,
-            _ => Path::new("."),
-        };
-        let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-        let temp = dir.join(format!(
-            ".{}.{}.{n}.tmp",
-            file_name.to_string_lossy(),
-            std::process::id()
-        ));
-        let result = self
-            .write_new(&temp, &layout)
-            .and_then(|()| fs::rename(&temp, path));
-        if result.is_err() {
-            let _ = fs::remove_file(&temp);
-        }
-        result?;
-        // Make the rename itself durable; directories cannot be opened for this on every platform.
-        if let Ok(d) = File::open(dir) {
-            let _ = d.sync_all();
-        }
-        Ok(())
+        atomic::replace(path, |file| self.write_rows(file, &layout))
     }
 
-    /// Writes the recording to a new file and syncs it.
-    fn write_new(&self, path: &Path, layout: &Layout) -> io::Result<()> {
-        let mut file = OpenOptions::new().write(true).create_new(true).open(path)?;
+    /// Writes the recording to an open file.
+    fn write_rows(&self, file: &mut File, layout: &Layout) -> io::Result<()> {
         let mut buf = String::with_capacity(2 * BLOCK_BYTES);
         push_header(&mut buf, &self.meta, layout, &[]);
         let flags = self.flags();
@@ -205,8 +178,7 @@ impl Recording {
                 buf.clear();
             }
         }
-        file.write_all(buf.as_bytes())?;
-        file.sync_all()
+        file.write_all(buf.as_bytes())
     }
 }
 
@@ -229,8 +201,10 @@ pub struct Note {
 /// How [`RecordingWriter::create_with`] creates its file.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct CreateOptions {
-    /// Replace an existing file (it is emptied once the writer holds its lock); otherwise an existing file is an
-    /// error of kind [`io::ErrorKind::AlreadyExists`] and is left alone.
+    /// Replace an existing file: the recording is written to a temporary file beside it, which replaces it (the
+    /// path itself: a link there is replaced, not the file it points to) once the first row reaches it, so that a
+    /// device that gives no sample leaves the old file as it was; meanwhile the old file's lock is held. Otherwise
+    /// an existing file is an error of kind [`io::ErrorKind::AlreadyExists`] and is left alone.
     pub overwrite: bool,
     /// Metadata lines to rewrite while recording, written after the metadata.
     pub notes: Vec<Note>,
@@ -247,7 +221,8 @@ pub struct CreateOptions {
 /// [`RecordingWriter::finish`] and drop. So if the process is killed, the file parses and holds every row written
 /// before the last flush. If a write fails (a full disk), the part of it that reached the file is cut off again, so
 /// the file still ends with a whole line and parses; [`RecordingWriter::rows_in_file`] says how many rows it holds.
-/// Only [`RecordingWriter::finish`] syncs to disk (power-loss safety).
+/// Only [`RecordingWriter::finish`] syncs to disk (power-loss safety). An existing file it replaces
+/// ([`CreateOptions::overwrite`]) stays as it was until the first row is in the new one.
 #[derive(Debug)]
 pub struct RecordingWriter {
     file: File,
@@ -269,38 +244,52 @@ pub struct RecordingWriter {
     notes: Vec<(String, u64, usize)>,
     /// Set when writing to the file failed: what is in the file is then unknown, so nothing more is written.
     failed: bool,
+    /// While the file is a temporary one that will replace an existing file: what renames it, and the existing
+    /// file's lock.
+    replacing: Option<(Staged, Option<File>)>,
 }
 
-/// Opens `path` for a writer and locks it: a new file, or with `overwrite` an existing one, emptied once locked.
-fn open_locked(path: &Path, overwrite: bool) -> io::Result<File> {
-    let file = if overwrite {
-        OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(path)?
-    } else {
-        OpenOptions::new().write(true).create_new(true).open(path)?
-    };
+/// `e` with what it means, when it is a full disk or a reached file size limit.
+fn with_reason(e: io::Error) -> io::Error {
+    match atomic::storage_reason(&e) {
+        Some(why) => io::Error::new(e.kind(), format!("{e} ({why})")),
+        None => e,
+    }
+}
+
+/// Opens `path` for a writer, new, and locks it.
+fn open_locked(path: &Path) -> io::Result<File> {
+    let file = OpenOptions::new().write(true).create_new(true).open(path)?;
     match file.try_lock() {
         Ok(()) => {}
-        Err(TryLockError::WouldBlock) => {
-            return Err(io::Error::new(
-                io::ErrorKind::WouldBlock,
-                format!(
-                    "{} is being written by another process (it holds the file's lock)",
-                    path.display()
-                ),
-            ));
-        }
+        Err(TryLockError::WouldBlock) => return Err(atomic::busy(path)),
         // Some file systems have no locks: write without one.
         Err(TryLockError::Error(e)) if e.kind() == io::ErrorKind::Unsupported => {}
         Err(TryLockError::Error(e)) => return Err(e),
     }
-    if overwrite {
-        file.set_len(0)?;
-    }
     Ok(file)
+}
+
+/// Takes the lock of the existing file at `path` (a regular file, links followed), refusing one another process
+/// holds; `None` for what has no lock to take (a link to nothing, a file system without locks).
+fn hold_existing(path: &Path) -> io::Result<Option<File>> {
+    match fs::metadata(path) {
+        Ok(m) if m.is_dir() => {
+            return Err(io::Error::new(
+                io::ErrorKind::IsADirectory,
+                format!("{} is a folder", path.display()),
+            ));
+        }
+        Ok(m) if m.is_file() => {}
+        _ => return Ok(None),
+    }
+    let file = File::open(path)?;
+    match file.try_lock() {
+        Ok(()) => Ok(Some(file)),
+        Err(TryLockError::WouldBlock) => Err(atomic::busy(path)),
+        Err(TryLockError::Error(e)) if e.kind() == io::ErrorKind::Unsupported => Ok(None),
+        Err(TryLockError::Error(e)) => Err(e),
+    }
 }
 
 impl RecordingWriter {
@@ -351,21 +340,27 @@ impl RecordingWriter {
         layout
             .check()
             .map_err(|e| invalid_input(crate::HeaderError(e)))?;
-        let mut file = open_locked(path, opts.overwrite)?;
+        let replaces = opts.overwrite && fs::symlink_metadata(path).is_ok();
+        let (mut file, replacing) = if replaces {
+            let held = hold_existing(path)?;
+            let (file, staged) = Temp::beside(path)?.into_parts();
+            (file, Some((staged, held)))
+        } else {
+            (open_locked(path)?, None)
+        };
         let mut header = String::new();
         let offsets = push_header(&mut header, meta, layout, &opts.notes);
         if let Err(e) = file
             .write_all(header.as_bytes())
             .and_then(|()| file.flush())
         {
-            // Nothing was recorded: leave no half header behind (a new file goes, a replaced one stays empty).
-            if opts.overwrite {
-                let _ = file.set_len(0);
-            } else {
+            // Nothing was recorded: leave no half header behind (a new file goes; a temporary one goes with its
+            // `Staged`, and the file it would have replaced stays).
+            if !replaces {
                 drop(file);
                 let _ = fs::remove_file(path);
             }
-            return Err(e);
+            return Err(with_reason(e));
         }
         Ok(RecordingWriter {
             file,
@@ -386,6 +381,7 @@ impl RecordingWriter {
                 .map(|(n, at)| (n.key.clone(), at, n.width))
                 .collect(),
             failed: false,
+            replacing,
         })
     }
 
@@ -489,9 +485,16 @@ impl RecordingWriter {
     }
 
     /// Writes all buffered rows to the file. If that fails, the file is cut back to the last whole row that
-    /// reached it.
+    /// reached it. The first rows to reach the file make it replace the file it replaces.
     pub fn flush(&mut self) -> io::Result<()> {
         self.check_not_failed()?;
+        let written = self.write_buffer();
+        let settled = self.settle();
+        written.and(settled)
+    }
+
+    /// Writes the buffer out; on failure cuts the file back to its whole rows.
+    fn write_buffer(&mut self) -> io::Result<()> {
         let bytes = self.buf.as_bytes();
         let mut written = 0;
         while written < bytes.len() {
@@ -510,7 +513,7 @@ impl RecordingWriter {
             self.file_len += whole_bytes as u64;
             self.rows_in_file += whole_rows as u64;
             let _ = self.file.set_len(self.file_len);
-            return Err(error);
+            return Err(with_reason(error));
         }
         self.file_len += bytes.len() as u64;
         self.rows_in_file = self.rows;
@@ -520,7 +523,38 @@ impl RecordingWriter {
         Ok(())
     }
 
-    /// Writes all buffered rows and syncs the file to disk.
+    /// Once rows are in a temporary file, renames it over the file it replaces. If that fails, the temporary file
+    /// is kept, and the error names it.
+    fn settle(&mut self) -> io::Result<()> {
+        if self.rows_in_file == 0 {
+            return Ok(());
+        }
+        let Some((staged, held)) = self.replacing.take() else {
+            return Ok(());
+        };
+        let temp = staged.temp_path().map(Path::to_owned);
+        staged.persist_or_keep(held).map_err(|e| {
+            self.failed = true;
+            io::Error::new(
+                e.kind(),
+                format!(
+                    "{} could not be replaced ({e}); the {} rows recorded are in {}",
+                    self.path.display(),
+                    self.rows_in_file,
+                    temp.as_deref().unwrap_or(Path::new("?")).display()
+                ),
+            )
+        })
+    }
+
+    /// Whether the file at the path is still the one this writer replaces ([`CreateOptions::overwrite`]): no row
+    /// has reached the new one yet.
+    pub fn replacing(&self) -> bool {
+        self.replacing.is_some()
+    }
+
+    /// Writes all buffered rows and syncs the file to disk. A writer that replaces a file and got no row leaves that
+    /// file as it was.
     pub fn finish(mut self) -> io::Result<()> {
         self.flush()?;
         self.file.sync_all()

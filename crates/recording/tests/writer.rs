@@ -347,3 +347,53 @@ fn notes_are_rewritten_in_place_and_read_as_metadata() {
     assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
     assert_eq!(read(&path).len(), 6, "refused before the file was touched");
 }
+
+#[test]
+fn a_replaced_file_stays_until_the_first_row_and_a_link_is_replaced_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = |d: &Path| std::fs::read_dir(d).unwrap().count();
+    let path = dir.path().join("rec.csv");
+    std::fs::write(&path, "precious").unwrap();
+    // No row: the old file stays, and no temporary file remains.
+    let w = RecordingWriter::create(&path, &meta(), &layout()).unwrap();
+    assert!(w.replacing());
+    w.finish().unwrap();
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "precious");
+    assert_eq!(files(dir.path()), 1);
+    // The first row replaces it. (The lock the first writer held may linger for a moment in a child process another
+    // test forks, until it execs: try again briefly.)
+    let mut w = (0..100)
+        .find_map(|_| {
+            RecordingWriter::create(&path, &meta(), &layout())
+                .inspect_err(|e| {
+                    assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock, "{e}");
+                    std::thread::sleep(Duration::from_millis(10));
+                })
+                .ok()
+        })
+        .expect("the lock is released")
+        .with_flush_interval(Duration::ZERO);
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "precious");
+    w.write_sample(&sample(0)).unwrap();
+    assert!(!w.replacing());
+    assert_eq!(read(&path).len(), 1);
+    w.write_sample(&sample(1)).unwrap();
+    w.finish().unwrap();
+    assert_eq!(read(&path).len(), 2);
+    // A symbolic link and a hard link: the name given is replaced, the other names keep their bytes.
+    let kept = dir.path().join("kept.csv");
+    std::fs::write(&kept, "kept").unwrap();
+    let symbolic = dir.path().join("symbolic.csv");
+    std::os::unix::fs::symlink(&kept, &symbolic).unwrap();
+    let hard = dir.path().join("hard.csv");
+    std::fs::hard_link(&kept, &hard).unwrap();
+    for link in [&symbolic, &hard] {
+        let mut w = RecordingWriter::create(link, &meta(), &layout()).unwrap();
+        w.write_sample(&sample(0)).unwrap();
+        w.finish().unwrap();
+        assert_eq!(read(link).len(), 1);
+        assert_eq!(std::fs::read_to_string(&kept).unwrap(), "kept");
+    }
+    assert!(!std::fs::symlink_metadata(&symbolic).unwrap().is_symlink());
+    assert_eq!(files(dir.path()), 4);
+}

@@ -120,11 +120,48 @@ pub enum SimError {
     /// The scenario's channels do not make a valid recording.
     #[error("invalid recording layout: {0}")]
     Layout(String),
+    /// A current switches faster than the samples, or is no number of amperes.
+    #[error(
+        "current {name}: on {on_a} A, on for {mean_on_s} s and off for {mean_off_s} s on average: each mean must be \
+         at least one sample period ({period_s} s), and the current a finite number"
+    )]
+    Current {
+        /// The channel.
+        name: String,
+        /// Its current when on, A.
+        on_a: f64,
+        /// Its mean time on, s.
+        mean_on_s: f64,
+        /// Its mean time off, s.
+        mean_off_s: f64,
+        /// The sample period, s.
+        period_s: f64,
+    },
+}
+
+/// Refuses currents that would switch faster than the samples: their switching times would take memory without
+/// bound (a mean of zero never ends).
+fn check_currents(currents: &[CurrentProfile], rate_hz: f64) -> Result<(), SimError> {
+    let period_s = 1.0 / rate_hz;
+    match currents
+        .iter()
+        .find(|c| !(c.on_a.is_finite() && c.mean_on_s >= period_s && c.mean_off_s >= period_s))
+    {
+        Some(c) => Err(SimError::Current {
+            name: c.name.clone(),
+            on_a: c.on_a,
+            mean_on_s: c.mean_on_s,
+            mean_off_s: c.mean_off_s,
+            period_s,
+        }),
+        None => Ok(()),
+    }
 }
 
 /// Simulates a scenario.
 pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
     check_channels(&s.effects, s.temperature.is_some(), s.currents.len())?;
+    check_currents(&s.currents, s.sample_rate_hz)?;
     let poses = s
         .trajectory
         .poses(s.sample_rate_hz, &mut stream_rng(s.seed, 1));

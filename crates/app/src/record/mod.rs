@@ -20,12 +20,15 @@
 //! which changes it, is said live and shown while it lasts; its samples are written but do not count as coverage.
 //! Saturated samples (counted by the source) are not written.
 //!
-//! An existing file is never replaced unless asked ([`RecordOptions::force`]; [`check_out`] says so before the
-//! device is opened), and the file is locked while it is written, so a second recorder on it is refused. The file
-//! is created (metadata and header flushed) before the first sample, so an unwritable path fails before anything
-//! is recorded; rows reach the file as they are taken, at least every [`FLUSH_INTERVAL`], so a killed recorder
-//! leaves a file that parses and holds all but the last moments, and a failed write (a full disk) leaves whole
-//! lines only. A device that fails (a bus that stays down after retries, a serial line that disconnects or goes
+//! An existing file is never replaced unless asked ([`RecordOptions::force`]; [`crate::outputs`] says so before the
+//! device is opened), and then only once the first sample is written (until then the old file stays; the path
+//! itself is replaced, not what a link there points to); the file is locked while it is written, so a second
+//! recorder, or any tool's output, on it is refused. The file is created (metadata and header flushed) before the
+//! first sample, so an unwritable path fails before anything is recorded; rows reach the file as they are taken, at
+//! least every [`FLUSH_INTERVAL`], so a killed recorder leaves a file that parses and holds all but the last
+//! moments, and a failed write (a full disk, a file size limit) leaves whole lines only. Whatever the device does (a
+//! chip saturated for minutes, a silent line), the loop ([`session`]) looks at Ctrl-C and the clock at least every
+//! few tens of milliseconds. A device that fails (a bus that stays down after retries, a serial line that disconnects or goes
 //! silent, outputs that stop changing) ends the recording with an error naming the device and how many samples the
 //! file keeps.
 
@@ -33,28 +36,27 @@ pub mod clock;
 pub mod coverage;
 pub mod magnitude;
 pub mod quality;
+mod session;
 pub mod sim;
 pub mod source;
 pub mod still;
 pub mod tty;
 pub mod ui;
 
-use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use magcal_driver::serial::GarbageCounts;
 use magcal_recording::{CreateOptions, Layout, Metadata, Note, RecordingWriter, Sample};
 use magcal_sim::{CubePose, cube24_poses};
 
 use crate::checks::EARTH_FIELD_UT;
-use crate::device::{BadOption, DeviceSpec, positive_at_most};
+use crate::device::{BadOption, DeviceSpec, positive_at_most, within};
 
 pub use coverage::CoverageMap;
 pub use magnitude::{Disturbance, MagnitudeEvent, MagnitudeWatch};
 pub use quality::Quality;
-pub use source::{Reading, Source, SourceError};
+pub use source::{Reading, Skipped, Source, SourceError};
 pub use still::StillWindow;
 pub use ui::{Progress, Ui};
 
@@ -123,6 +125,9 @@ impl RecordOptions {
 
 /// The longest dwell, s: a pose held for longer is no better measured.
 pub const MAX_DWELL_S: f64 = 60.0;
+/// The shortest dwell, s: a pose held for less cannot be told still (and the device's rate may ask for more:
+/// [`MIN_DWELL_SAMPLES`]).
+pub const MIN_DWELL_S: f64 = 0.1;
 /// The longest recording, s (a week).
 pub const MAX_DURATION_S: f64 = 604_800.0;
 /// The shortest `--max-duration`, s: less records too few samples to turn through any directions (1e-9 s wrote an
@@ -151,7 +156,7 @@ impl RecordOptions {
                 self.max_duration_s
             )));
         }
-        positive_at_most("--dwell", self.dwell_s, MAX_DWELL_S, "s")?;
+        within("--dwell", self.dwell_s, MIN_DWELL_S, MAX_DWELL_S, "s")?;
         positive_at_most("--still-ut", self.still_ut, MAX_STILL_UT, "µT")?;
         positive_at_most("transition", self.transition_s, MAX_DWELL_S, "s")
     }
@@ -159,33 +164,6 @@ impl RecordOptions {
 
 /// The option that names the recording in magcal-record, said in [`RecordError::Exists`] and [`RecordError::Busy`].
 const OUT_OPTION: &str = "--out";
-
-/// Checks, before the device is opened, that `path` can take a new recording: it does not exist, or `force` says
-/// to replace it; and no recorder is writing it now.
-pub fn check_out(path: &Path, force: bool) -> Result<(), RecordError> {
-    if path.is_dir() {
-        return Err(RecordError::Create {
-            path: path.to_owned(),
-            io: std::io::Error::other("it is a directory"),
-        });
-    }
-    let Ok(file) = File::open(path) else {
-        return Ok(());
-    };
-    if let Err(std::fs::TryLockError::WouldBlock) = file.try_lock() {
-        return Err(RecordError::Busy {
-            path: path.to_owned(),
-            option: OUT_OPTION,
-        });
-    }
-    if !force {
-        return Err(RecordError::Exists {
-            path: path.to_owned(),
-            option: OUT_OPTION,
-        });
-    }
-    Ok(())
-}
 
 /// Why a recording ended without an error.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -221,7 +199,9 @@ pub struct RecordSummary {
     /// Times at which the device's clock restarted and a new segment of time began, s of recording time.
     pub clock_restarts: Vec<f64>,
     /// Garbage lines skipped (line streams).
-    pub garbage: Option<GarbageCounts>,
+    pub garbage: Option<Skipped>,
+    /// No sample came, and the file `--force` was to replace was left as it was.
+    pub untouched: bool,
     /// Why it stopped.
     pub stop: Stop,
 }
@@ -306,9 +286,13 @@ pub enum RecordError {
     },
     /// The device failed; the file keeps what was recorded.
     #[error(
-        "{error}; {} keeps the {kept} samples recorded before{}",
-        path.display(),
-        garbage.as_deref().map(|g| format!("; garbage lines skipped: {} ({g})", g.total())).unwrap_or_default()
+        "{error}; {}{}",
+        if *untouched {
+            format!("no sample was recorded, and {} was left as it was", path.display())
+        } else {
+            format!("{} keeps the {kept} samples recorded before", path.display())
+        },
+        garbage.as_deref().map(|g| format!("; {g}")).unwrap_or_default()
     )]
     Device {
         /// What the device did.
@@ -318,7 +302,23 @@ pub enum RecordError {
         /// Rows in the file.
         kept: u64,
         /// Garbage lines skipped (line streams).
-        garbage: Option<Box<GarbageCounts>>,
+        garbage: Option<Box<Skipped>>,
+        /// No sample came, and the file `--force` was to replace was left as it was.
+        untouched: bool,
+    },
+    /// A cube dwell too short at the device's rate: nothing was recorded.
+    #[error(
+        "--dwell {} s holds {:.0} samples at the {rate_hz} Hz the device gives: a pose needs at least \
+         {MIN_DWELL_SAMPLES} to tell a still jig from a moving one; give --dwell {:.2} or more (nothing was recorded)",
+        crate::cli::number(*dwell_s),
+        (dwell_s * rate_hz).round(),
+        MIN_DWELL_SAMPLES / rate_hz
+    )]
+    Dwell {
+        /// The dwell asked for, s.
+        dwell_s: f64,
+        /// The device's rate, Hz.
+        rate_hz: f64,
     },
     /// The device's outputs stopped changing.
     #[error(
@@ -355,8 +355,6 @@ impl RecordError {
     }
 }
 
-/// Identical consecutive readings that mean the outputs are stuck: this many, or two seconds' worth if more.
-const STUCK_REPEATS: u64 = 100;
 /// A pose counts as left when the field's mean moved this far from where the last pose was taken, µT.
 const MOVED_UT: f64 = 5.0;
 
@@ -369,28 +367,6 @@ enum PoseState {
     AwaitStill,
     /// Settled: samples are taken while they keep it still (or whatever they hold, after Enter).
     Hold,
-}
-
-/// Watches for readings that repeat exactly.
-struct StuckWatch {
-    last: Option<[f64; 3]>,
-    repeats: u64,
-    from: u64,
-    limit: u64,
-}
-
-impl StuckWatch {
-    /// Whether the outputs look stuck after `r`, the `n`-th reading.
-    fn stuck(&mut self, r: [f64; 3], n: u64) -> bool {
-        if self.last == Some(r) {
-            self.repeats += 1;
-        } else {
-            self.last = Some(r);
-            self.repeats = 1;
-            self.from = n;
-        }
-        self.repeats >= self.limit
-    }
 }
 
 /// The writer with its bookkeeping.
@@ -432,6 +408,63 @@ fn segments_note(restarts_s: &[f64]) -> String {
 }
 
 impl Out {
+    /// Creates the file `opts.out` (metadata and header flushed, locked) for a recording from `source`.
+    fn create(source: &dyn Source, opts: &RecordOptions) -> Result<Out, RecordError> {
+        let layout = Layout {
+            t: true,
+            temp: source.has_temperature(),
+            quat: opts.routine == Routine::Cube24 || source.has_quaternion(),
+            ..Layout::default()
+        };
+        let mut meta = opts.meta.clone();
+        meta.sensor.get_or_insert_with(|| source.sensor());
+        meta.sample_rate_hz = source.rate_hz();
+        meta.routine = Some(opts.routine.name().to_owned());
+        meta.started = Some(utc_rfc3339(SystemTime::now()));
+        let create = CreateOptions {
+            overwrite: opts.force,
+            notes: source
+                .clock_may_restart()
+                .then(|| Note {
+                    key: SEGMENTS_NOTE.to_owned(),
+                    value: segments_note(&[]),
+                    width: SEGMENTS_WIDTH,
+                })
+                .into_iter()
+                .collect(),
+        };
+        let path = &opts.out;
+        let writer = RecordingWriter::create_with(path, &meta, &layout, &create)
+            .map_err(|io| match io.kind() {
+                std::io::ErrorKind::AlreadyExists => RecordError::Exists {
+                    path: path.clone(),
+                    option: OUT_OPTION,
+                },
+                std::io::ErrorKind::WouldBlock => RecordError::Busy {
+                    path: path.clone(),
+                    option: OUT_OPTION,
+                },
+                // A folder that is not there is named: the system's "No such file" does not say which.
+                std::io::ErrorKind::NotFound => RecordError::Create {
+                    path: path.clone(),
+                    io: std::io::Error::other(format!(
+                        "its folder {} does not exist",
+                        magcal_recording::atomic::folder_of(path).display()
+                    )),
+                },
+                _ => RecordError::Create {
+                    path: path.clone(),
+                    io,
+                },
+            })?
+            .with_flush_interval(FLUSH_INTERVAL);
+        Ok(Out {
+            writer,
+            layout,
+            t0_s: source.now_s(),
+        })
+    }
+
     fn write(&mut self, r: &Reading, quat: Option<[f64; 4]>) -> Result<(), RecordError> {
         let sample = Sample {
             t_s: r.t_s - self.t0_s,
@@ -480,10 +513,12 @@ impl Out {
         self.writer.path()
     }
 
-    /// Writes what is buffered and syncs; returns the rows the file holds, and the error if that failed.
-    fn finish(mut self) -> (u64, Result<(), RecordError>) {
+    /// Writes what is buffered and syncs; returns the rows the file holds, whether a file it was to replace was
+    /// left as it was (no row came), and the error if that failed.
+    fn finish(mut self) -> (u64, bool, Result<(), RecordError>) {
         let flushed = self.writer.flush();
         let kept = self.writer.rows_in_file();
+        let untouched = self.writer.replacing();
         let path = self.path().to_owned();
         let result = match flushed {
             Ok(()) => self.writer.finish(),
@@ -491,6 +526,7 @@ impl Out {
         };
         (
             kept,
+            untouched,
             result.map_err(|io| RecordError::Write { path, kept, io }),
         )
     }
@@ -556,82 +592,52 @@ pub fn record(
     ui: &mut dyn Ui,
     interrupt: &AtomicBool,
 ) -> Result<RecordSummary, RecordError> {
-    let cube = opts.routine == Routine::Cube24;
-    let layout = Layout {
-        t: true,
-        temp: source.has_temperature(),
-        quat: cube || source.has_quaternion(),
-        ..Layout::default()
-    };
-    let mut meta = opts.meta.clone();
-    meta.sensor.get_or_insert_with(|| source.sensor());
-    meta.sample_rate_hz = source.rate_hz();
-    meta.routine = Some(opts.routine.name().to_owned());
-    meta.started = Some(utc_rfc3339(SystemTime::now()));
-    let create = CreateOptions {
-        overwrite: opts.force,
-        notes: source
-            .clock_may_restart()
-            .then(|| Note {
-                key: SEGMENTS_NOTE.to_owned(),
-                value: segments_note(&[]),
-                width: SEGMENTS_WIDTH,
-            })
-            .into_iter()
-            .collect(),
-    };
-    let writer = RecordingWriter::create_with(&opts.out, &meta, &layout, &create)
-        .map_err(|source| match source.kind() {
-            std::io::ErrorKind::AlreadyExists => RecordError::Exists {
-                path: opts.out.clone(),
-                option: OUT_OPTION,
-            },
-            std::io::ErrorKind::WouldBlock => RecordError::Busy {
-                path: opts.out.clone(),
-                option: OUT_OPTION,
-            },
-            // A folder that is not there is named: the system's "No such file" does not say which.
-            std::io::ErrorKind::NotFound => RecordError::Create {
-                path: opts.out.clone(),
-                io: std::io::Error::other(format!(
-                    "its folder {} does not exist",
-                    opts.out
-                        .parent()
-                        .filter(|p| !p.as_os_str().is_empty())
-                        .unwrap_or(Path::new("."))
-                        .display()
-                )),
-            },
-            _ => RecordError::Create {
-                path: opts.out.clone(),
-                io: source,
-            },
-        })?
-        .with_flush_interval(FLUSH_INTERVAL);
-    let mut out = Out {
-        writer,
-        layout,
-        t0_s: source.now_s(),
-    };
-    let result = run(source, opts, ui, interrupt, &mut out);
+    check_dwell(source, opts)?;
+    let mut out = Out::create(source, opts)?;
+    let result = session::run(source, opts, ui, interrupt, &mut out);
     ui.finish();
-    let (kept, finished) = out.finish();
+    let (kept, untouched, finished) = out.finish();
     match (result, finished) {
         (Ok(mut summary), Ok(())) => {
             summary.samples = kept;
+            summary.untouched = untouched;
             Ok(summary)
         }
         (Err(mut e), _) => {
             // The file may have lost its last buffered rows with the error: count what it holds.
-            if let RecordError::Device { kept: k, .. } | RecordError::Stuck { kept: k, .. } = &mut e
-            {
-                *k = kept;
+            match &mut e {
+                RecordError::Device {
+                    kept: k,
+                    untouched: u,
+                    ..
+                } => (*k, *u) = (kept, untouched),
+                RecordError::Stuck { kept: k, .. } => *k = kept,
+                _ => {}
             }
             Err(e)
         }
         (Ok(_), Err(e)) => Err(e),
     }
 }
+
+/// Fewest samples a cube pose's dwell may hold: fewer cannot tell a still jig from a moving one.
+pub const MIN_DWELL_SAMPLES: f64 = 10.0;
+
+/// Refuses, once the device's rate is known and before the file is made, a cube dwell of fewer than
+/// [`MIN_DWELL_SAMPLES`].
+fn check_dwell(source: &dyn Source, opts: &RecordOptions) -> Result<(), RecordError> {
+    let rate_hz = source.rate_hz().unwrap_or(DEFAULT_RATE_HZ);
+    if opts.routine == Routine::Cube24 && (opts.dwell_s * rate_hz).round() < MIN_DWELL_SAMPLES {
+        return Err(RecordError::Dwell {
+            dwell_s: opts.dwell_s,
+            rate_hz,
+        });
+    }
+    Ok(())
+}
+
+/// The rate a source that does not say its own is taken to have, Hz.
+const DEFAULT_RATE_HZ: f64 = 100.0;
 
 /// Where the cube routine is with the current pose.
 struct Cube {
@@ -676,175 +682,6 @@ impl Cube {
         self.window.is_still(still_ut)
             && (0..3).all(|k| (r.mag_ut[k] - self.settled_ut[k]).abs() <= 3.0 * still_ut)
     }
-}
-
-/// The routine itself; `out` is finished by the caller whatever happens.
-fn run(
-    source: &mut dyn Source,
-    opts: &RecordOptions,
-    ui: &mut dyn Ui,
-    interrupt: &AtomicBool,
-    out: &mut Out,
-) -> Result<RecordSummary, RecordError> {
-    let cube = opts.routine == Routine::Cube24;
-    let device = source.device().to_owned();
-    let rate_hz = source.rate_hz().unwrap_or(100.0);
-    let mut stuck = StuckWatch {
-        last: None,
-        repeats: 0,
-        from: 0,
-        limit: STUCK_REPEATS.max((2.0 * rate_hz) as u64),
-    };
-    let mut map = CoverageMap::new();
-    let mut magnitude = MagnitudeWatch::new();
-    let mut units_told = false;
-    let mut jig = Cube::new((opts.dwell_s * rate_hz).round() as usize);
-    let mut seen = 0u64;
-    // Rows written while the magnitude departed (between cube poses, readings are looked at and not written).
-    let mut disturbed = 0u64;
-    let mut saturated_told = 0;
-    let mut restarts_told = 0;
-    let t0_s = out.t0_s;
-    let device_failed = |error: SourceError, out: &Out, source: &dyn Source| RecordError::Device {
-        error,
-        path: out.path().to_owned(),
-        kept: out.rows(),
-        garbage: source.garbage().map(Box::new),
-    };
-
-    match opts.routine {
-        Routine::Free => {
-            ui.message(&format!(
-                "free rotation: turn the sensor through every orientation until {:.0} % of the sphere is covered \
-                 (Ctrl-C stops early; the file keeps everything)",
-                100.0 * opts.target_coverage
-            ));
-            if let Some(bench) = source.bench() {
-                ui.message("sim: the virtual hand tumbles the sensor");
-                bench.borrow_mut().hand_mut().tumble(source.now_s(), 1.0);
-            }
-        }
-        Routine::Cube24 => prompt_pose(source, opts, ui, 0, &jig.poses[0]),
-    }
-
-    let stop = loop {
-        if interrupt.load(Ordering::Relaxed) {
-            break Stop::Interrupted;
-        }
-        let r = match source.next_reading() {
-            Ok(Some(r)) => r,
-            Ok(None) => {
-                out.flush_if_due()?;
-                continue;
-            }
-            Err(e) => return Err(device_failed(e, out, source)),
-        };
-        let t_s = r.t_s - t0_s;
-        if t_s > opts.max_duration_s {
-            break Stop::MaxDuration;
-        }
-        if source.saturated() > saturated_told {
-            ui.message(&format!(
-                "{device}: {} samples saturated so far (field out of the chip's range: a magnet nearby?); they \
-                 are not recorded",
-                source.saturated()
-            ));
-            saturated_told = source.saturated();
-        }
-        let restarts = source.clock_restarts();
-        if restarts.len() > restarts_told {
-            ui.message(&format!(
-                "{device}: the device's clock restarted (a reset?) at t = {:.3} s: time goes on from the host's \
-                 clock, as segment {} (noted in the file's metadata)",
-                restarts[restarts.len() - 1] - t0_s,
-                restarts.len() + 1
-            ));
-            restarts_told = restarts.len();
-            let restarts = restarts.to_vec();
-            out.note_segments(&restarts)?;
-        }
-        seen += 1;
-        if stuck.stuck(r.mag_ut, seen - 1) {
-            return Err(RecordError::Stuck {
-                device,
-                value: r.mag_ut,
-                repeats: stuck.repeats,
-                from: stuck.from,
-                path: out.path().to_owned(),
-                kept: out.rows(),
-            });
-        }
-        match magnitude.add(t_s, r.mag_ut) {
-            Some(MagnitudeEvent::Departed {
-                t_s,
-                magnitude_ut,
-                usual_ut,
-            }) => ui.message(&format!(
-                "t = {t_s:.1} s: the field magnitude is {magnitude_ut:.1} µT, not the {usual_ut:.1} µT of the rest: a \
-                 magnet or iron near the sensor? Move it away; these samples are recorded but do not count as \
-                 coverage"
-            )),
-            Some(MagnitudeEvent::Returned { t_s, lasted_s }) => ui.message(&format!(
-                "t = {t_s:.1} s: the field magnitude is back to the rest's (disturbed for {lasted_s:.1} s)"
-            )),
-            None => {}
-        }
-        if !units_told && let Some(usual_ut) = magnitude.usual_ut() {
-            units_told = true;
-            if let Some(note) = units_note(usual_ut) {
-                ui.message(&note);
-            }
-        }
-        match opts.routine {
-            Routine::Free => {
-                out.write(&r, r.quat)?;
-                disturbed += u64::from(magnitude.last_departed());
-                map.add(r.mag_ut);
-                // The live figure counts around a sphere up to 2 µT old: the stop is decided on the final one.
-                if map.fraction() >= opts.target_coverage && {
-                    map.finish();
-                    map.fraction() >= opts.target_coverage
-                } {
-                    ui.progress(&progress(t_s, out, &map, &magnitude, opts, None));
-                    break Stop::Coverage;
-                }
-            }
-            Routine::Cube24 => {
-                let rows = out.rows();
-                let done = cube_step(&mut jig, &r, source, opts, ui, out, &mut map)?;
-                if out.rows() > rows {
-                    disturbed += u64::from(magnitude.last_departed());
-                }
-                if done {
-                    ui.progress(&progress(t_s, out, &map, &magnitude, opts, Some(jig.taken)));
-                    break Stop::AllPoses;
-                }
-            }
-        }
-        // Rows taken a while ago reach the file even when no row follows them (between two cube poses).
-        out.flush_if_due()?;
-        ui.progress(&progress(
-            t_s,
-            out,
-            &map,
-            &magnitude,
-            opts,
-            cube.then_some(jig.taken),
-        ));
-    };
-    map.finish();
-    Ok(RecordSummary {
-        path: out.path().to_owned(),
-        samples: out.rows(),
-        duration_s: source.now_s() - t0_s,
-        coverage: map.fraction(),
-        poses: jig.taken,
-        saturated: source.saturated(),
-        disturbed,
-        clock_restarts: source.clock_restarts().iter().map(|t| t - t0_s).collect(),
-        garbage: source.garbage(),
-        stop,
-    })
 }
 
 /// One reading of the cube routine: moves the pose state on and writes the reading if it is taken. Returns whether
@@ -1030,11 +867,15 @@ mod tests {
         for (edit, says) in [
             (
                 (|o: &mut RecordOptions| o.dwell_s = 1e30) as fn(&mut RecordOptions),
-                "--dwell 1000000000000000000000000000000 s",
+                "--dwell 1e30 s",
             ),
             (
                 |o| o.dwell_s = 1e7,
-                "--dwell 10000000 s: must be a number > 0 and at most 60 s",
+                "--dwell 10000000 s: must be a number from 0.1 to 60 s",
+            ),
+            (
+                |o| o.dwell_s = 1e-30,
+                "--dwell 1e-30 s: must be a number from 0.1 to 60 s",
             ),
             (|o| o.dwell_s = f64::NAN, "--dwell NaN"),
             (|o| o.max_duration_s = -1.0, "--max-duration -1"),
@@ -1050,30 +891,6 @@ mod tests {
             let e = o.check().unwrap_err().to_string();
             assert!(e.starts_with(says), "{e}");
         }
-    }
-
-    #[test]
-    fn an_existing_or_busy_out_is_refused_before_the_device_opens() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("rec.csv");
-        assert!(check_out(&path, false).is_ok());
-        std::fs::write(&path, "precious").unwrap();
-        assert!(matches!(
-            check_out(&path, false),
-            Err(RecordError::Exists { .. })
-        ));
-        assert!(check_out(&path, true).is_ok());
-        let holder = File::open(&path).unwrap();
-        holder.lock().unwrap();
-        assert!(matches!(
-            check_out(&path, true),
-            Err(RecordError::Busy { .. })
-        ));
-        drop(holder);
-        assert!(matches!(
-            check_out(dir.path(), true),
-            Err(RecordError::Create { .. })
-        ));
     }
 
     #[test]

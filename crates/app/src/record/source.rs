@@ -21,7 +21,12 @@ pub const TEMPERATURE_PERIOD_S: f64 = 1.0;
 /// A chip with no new sample for this many sample periods (and at least 1 s) is reported as not measuring.
 const SILENT_PERIODS: f64 = 20.0;
 /// How long a serial source waits for a line before it lets the recorder look at Ctrl-C and the clock.
-const SERIAL_POLL: Duration = Duration::from_millis(100);
+const SERIAL_POLL: Duration = Duration::from_millis(50);
+/// How long a chip source waits for a sample before it lets the recorder look at Ctrl-C and the clock, s of the
+/// device's clock.
+const CHIP_POLL_S: f64 = 0.05;
+/// How many of the garbage lines of a stream are placed ([`Source::skipped_at`]).
+const PLACED_GARBAGE: usize = 5;
 
 /// One sample from a device.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -119,9 +124,9 @@ pub trait Source {
     fn has_quaternion(&self) -> bool {
         false
     }
-    /// The next sample, waiting for it on the device's clock; `None` when none came within a short wait (call
-    /// again: the caller meanwhile looks at Ctrl-C). A saturated sample is not a field value: it is counted
-    /// ([`Source::saturated`]) and skipped.
+    /// The next sample, waiting for it on the device's clock; `None` when none came within a short wait, or the
+    /// device gave a saturated sample (call again: the caller meanwhile looks at Ctrl-C and the clock). A saturated
+    /// sample is not a field value: it is counted ([`Source::saturated`]) and skipped.
     fn next_reading(&mut self) -> Result<Option<Reading>, SourceError>;
     /// The time on the device's clock, s.
     fn now_s(&self) -> f64;
@@ -129,6 +134,11 @@ pub trait Source {
     fn saturated(&self) -> u64;
     /// Garbage lines skipped so far, for line streams.
     fn garbage(&self) -> Option<GarbageCounts>;
+    /// Where the first garbage lines of a line stream were skipped: how many samples came before each, and what it
+    /// was.
+    fn skipped_at(&self) -> Vec<(u64, GarbageKind)> {
+        Vec::new()
+    }
     /// The simulated bench, for `sim` devices: its virtual hand performs the routine.
     fn bench(&self) -> Option<&SharedBench>;
     /// Whether the device's own clock may restart (a board that resets): the recording then notes its segments.
@@ -154,6 +164,8 @@ pub struct ChipSource<M, C> {
     temp_c: Option<f64>,
     temp_read_s: f64,
     bench: Option<SharedBench>,
+    /// Since when (device clock, s) no sample came.
+    waiting_since_s: Option<f64>,
 }
 
 impl<M, C, E> ChipSource<M, C>
@@ -192,6 +204,7 @@ where
             temp_c: None,
             temp_read_s: f64::NEG_INFINITY,
             bench: None,
+            waiting_since_s: None,
         })
     }
 
@@ -258,11 +271,14 @@ where
         self.has_temperature
     }
 
+    /// Polls for data-ready for at most [`CHIP_POLL_S`] per call; no sample for [`SILENT_PERIODS`] periods
+    /// (at least 1 s) across calls is an error. A saturated sample ends the call at once.
     fn next_reading(&mut self) -> Result<Option<Reading>, SourceError> {
         let period_s = 1.0 / self.rate_hz;
         let poll_s = period_s / 4.0;
         let give_up_s = (SILENT_PERIODS * period_s).max(1.0);
-        let mut start_s = self.clock.now_s();
+        let call_s = self.clock.now_s();
+        let since_s = *self.waiting_since_s.get_or_insert(call_s);
         loop {
             match self.retried(|m| m.read_ut()) {
                 Ok(m) => {
@@ -275,6 +291,7 @@ where
                         self.temp_read_s = t_s;
                     }
                     self.samples += 1;
+                    self.waiting_since_s = None;
                     return Ok(Some(Reading {
                         t_s,
                         mag_ut: m.map(f64::from),
@@ -284,19 +301,23 @@ where
                 }
                 Err(ChipError::NotReady) => {}
                 Err(ChipError::Saturated) => {
-                    // Measuring, but not a field value: count it and wait for the next.
+                    // Measuring, but not a field value: count it, and let the recorder look at the clock.
                     self.saturated += 1;
-                    start_s = self.clock.now_s();
+                    self.waiting_since_s = None;
+                    return Ok(None);
                 }
                 Err(e) => return Err(self.bus_error(&e)),
             }
-            let waited_s = self.clock.now_s() - start_s;
-            if waited_s > give_up_s {
+            let now_s = self.clock.now_s();
+            if now_s - since_s > give_up_s {
                 return Err(SourceError::Silent {
                     device: self.device.clone(),
                     samples: self.samples,
-                    waited_s,
+                    waited_s: now_s - since_s,
                 });
+            }
+            if now_s - call_s >= CHIP_POLL_S {
+                return Ok(None);
             }
             self.clock.sleep_s(poll_s);
         }
@@ -316,6 +337,59 @@ where
 
     fn bench(&self) -> Option<&SharedBench> {
         self.bench.as_ref()
+    }
+}
+
+/// The garbage lines a line stream skipped: how many of each kind, and where the first were.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Skipped {
+    /// How many of each kind.
+    pub counts: GarbageCounts,
+    /// The first ones: how many samples came before each, and what it was.
+    pub at: Vec<(u64, GarbageKind)>,
+}
+
+impl Skipped {
+    /// What `source` skipped, for line streams.
+    pub fn of(source: &dyn Source) -> Option<Skipped> {
+        source.garbage().map(|counts| Skipped {
+            counts,
+            at: source.skipped_at(),
+        })
+    }
+}
+
+impl std::fmt::Display for Skipped {
+    /// How many lines of each kind, where the first were (after how many samples), and that a line that lost bytes
+    /// yet still reads as a sample cannot be told from one.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let counts = &self.counts;
+        write!(f, "garbage lines skipped: {} ({counts})", counts.total())?;
+        if self.at.is_empty() {
+            return Ok(());
+        }
+        let places: Vec<String> = self
+            .at
+            .iter()
+            .map(|(n, kind)| format!("{n} ({kind})"))
+            .collect();
+        let more = counts.total().saturating_sub(self.at.len() as u64);
+        write!(
+            f,
+            "; {} after sample {}{}: a line that lost bytes but still reads as a sample in range cannot be told \
+             from one, so look at the rows there",
+            if self.at.len() == 1 {
+                "it came"
+            } else {
+                "the first came"
+            },
+            places.join(", "),
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        )
     }
 }
 
@@ -355,6 +429,8 @@ pub struct LineSource {
     restarts: Vec<f64>,
     idle_timeout: Duration,
     last_sample_at: Instant,
+    /// Where the first garbage lines were skipped.
+    skipped_at: Vec<(u64, GarbageKind)>,
 }
 
 impl LineSource {
@@ -371,6 +447,19 @@ impl LineSource {
             restarts: Vec::new(),
             idle_timeout,
             last_sample_at: Instant::now(),
+            skipped_at: Vec::new(),
+        }
+    }
+
+    /// Places the garbage lines skipped since `before` (the counts then), up to [`PLACED_GARBAGE`] in all.
+    fn place_garbage(&mut self, before: &GarbageCounts) {
+        let now = self.source.counts().garbage;
+        for kind in GarbageKind::ALL {
+            for _ in before.get(kind)..now.get(kind) {
+                if self.skipped_at.len() < PLACED_GARBAGE {
+                    self.skipped_at.push((self.samples, kind));
+                }
+            }
         }
     }
 
@@ -485,7 +574,10 @@ impl Source for LineSource {
     /// The next sample, or `None` after a short wait; no sample for the idle timeout is an error, and so is a
     /// disconnect.
     fn next_reading(&mut self) -> Result<Option<Reading>, SourceError> {
-        match self.source.read_sample() {
+        let before = self.source.counts().garbage;
+        let read = self.source.read_sample();
+        self.place_garbage(&before);
+        match read {
             Ok(r) => {
                 self.samples += 1;
                 self.last_sample_at = Instant::now();
@@ -523,6 +615,10 @@ impl Source for LineSource {
 
     fn garbage(&self) -> Option<GarbageCounts> {
         Some(self.source.counts().garbage)
+    }
+
+    fn skipped_at(&self) -> Vec<(u64, GarbageKind)> {
+        self.skipped_at.clone()
     }
 
     fn bench(&self) -> Option<&SharedBench> {

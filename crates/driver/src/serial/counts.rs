@@ -13,7 +13,7 @@ pub enum GarbageKind {
     Truncated,
     /// A line of a known form with the wrong number of fields (a half line, two lines run together).
     FieldCount,
-    /// A field that should be a number is not one (or is not finite, or out of range).
+    /// A field that should be a number is not one (or is not finite, or out of its type's range).
     BadNumber,
     /// A native CSV data line before any header line: the header was missed.
     NoHeader,
@@ -23,11 +23,14 @@ pub enum GarbageKind {
     /// Text of no form this protocol knows: other firmware chatter (`Uni:` lines, start-up
     /// banners, "Wrote calibration"), or a line cut at its start.
     Unrecognized,
+    /// A sample whose values are beyond what a recording holds ([`magcal_recording::limits`]: a
+    /// field over 10⁶ µT, a quaternion far from unit length): a line that lost bytes.
+    OutOfRange,
 }
 
 impl GarbageKind {
     /// Every kind, in a fixed order.
-    pub const ALL: [GarbageKind; 8] = [
+    pub const ALL: [GarbageKind; 9] = [
         GarbageKind::Binary,
         GarbageKind::Overlong,
         GarbageKind::Truncated,
@@ -36,6 +39,7 @@ impl GarbageKind {
         GarbageKind::NoHeader,
         GarbageKind::BadHeader,
         GarbageKind::Unrecognized,
+        GarbageKind::OutOfRange,
     ];
 
     /// A short snake_case name, for logs and summaries.
@@ -49,6 +53,7 @@ impl GarbageKind {
             GarbageKind::NoHeader => "no_header",
             GarbageKind::BadHeader => "bad_header",
             GarbageKind::Unrecognized => "unrecognized",
+            GarbageKind::OutOfRange => "out_of_range",
         }
     }
 }

@@ -41,6 +41,27 @@ pub struct StreamParser {
     counts: LineCounts,
 }
 
+/// Whether a sample's values are within what a recording holds ([`magcal_recording::limits`]), so that the
+/// recorder can write it.
+fn fits_a_recording(s: &Sample) -> bool {
+    use magcal_recording::limits::{
+        MAX_CURRENT_A, MAX_FIELD_UT, MAX_GYRO_RAD_S, MAX_T_S, MAX_TEMP_C, QUAT_NORM_TOLERANCE,
+    };
+    // NaN is a missing value, not one out of range; an infinite one is out of range.
+    let within = |values: &[f64], max: f64| values.iter().all(|v| v.is_nan() || v.abs() <= max);
+    let unit = |q: [f64; 4]| {
+        let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        norm.is_nan() || (norm - 1.0).abs() <= QUAT_NORM_TOLERANCE
+    };
+    s.mag_ut.iter().all(|v| v.is_finite())
+        && within(&s.mag_ut, MAX_FIELD_UT)
+        && within(&[s.t_s.unwrap_or(f64::NAN)], MAX_T_S)
+        && within(&[s.temp_c.unwrap_or(f64::NAN)], MAX_TEMP_C)
+        && within(&s.gyro_rad_s.unwrap_or([f64::NAN; 3]), MAX_GYRO_RAD_S)
+        && within(&s.inputs, MAX_CURRENT_A)
+        && s.quat_wxyz.is_none_or(unit)
+}
+
 /// Whether `bytes` is a line of text: printable ASCII (tabs allowed), or with `utf8` any UTF-8 without control
 /// characters (pattern formats may print `µT`).
 fn as_text(bytes: &[u8], utf8: bool) -> Option<&str> {
@@ -92,7 +113,10 @@ impl StreamParser {
 
     /// Parses and counts one line (without its terminator; empty lines are not lines).
     pub fn parse(&mut self, line: &[u8]) -> Parsed {
-        let parsed = self.classify(line);
+        let parsed = match self.classify(line) {
+            Parsed::Sample(s) if !fits_a_recording(&s) => Parsed::Garbage(GarbageKind::OutOfRange),
+            other => other,
+        };
         let c = &mut self.counts;
         c.lines += 1;
         match &parsed {
@@ -181,6 +205,32 @@ mod tests {
             c.lines,
             c.samples + c.echoes + c.headers + c.comments + g.total()
         );
+    }
+
+    #[test]
+    fn samples_beyond_what_a_recording_holds_are_garbage() {
+        let mut p = StreamParser::new(Protocol::MotionCal);
+        // A line that lost bytes: 0.1 µT units, −4.2·10⁶ µT.
+        assert_eq!(
+            p.parse(b"Raw:0,0,8192,0,0,0,-42000000,10,20"),
+            Parsed::Garbage(GarbageKind::OutOfRange)
+        );
+        assert!(matches!(
+            p.parse(b"Raw:0,0,8192,0,0,0,-420000,10,20"),
+            Parsed::Sample(_)
+        ));
+        let mut p = StreamParser::new(Protocol::Csv);
+        assert_eq!(p.parse(b"t,mx,my,mz,temp"), Parsed::Header);
+        for line in [&b"0.1,1,2,3,20000"[..], b"1e12,1,2,3,20", b"0.1,1e7,2,3,20"] {
+            assert_eq!(
+                p.parse(line),
+                Parsed::Garbage(GarbageKind::OutOfRange),
+                "{}",
+                String::from_utf8_lossy(line)
+            );
+        }
+        assert!(matches!(p.parse(b"0.2,1,2,3,20"), Parsed::Sample(_)));
+        assert_eq!(p.counts().garbage.get(GarbageKind::OutOfRange), 3);
     }
 
     #[test]
