@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse_serial};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::record::sim::TruthFile;
@@ -85,6 +85,10 @@ struct Args {
     /// Replace --out if it exists (its old content is lost once the device is open and recording starts).
     #[arg(long)]
     force: bool,
+    /// The board's identifier (e.g. its serial number), written to the recording's metadata as `serial`: a batch's
+    /// table (magcal-batch) names the board by it.
+    #[arg(long, value_name = "ID", value_parser = parse_serial)]
+    serial: Option<String>,
     /// The local field, written to the recording for the fit.
     #[command(flatten)]
     field: WorldFieldOpts,
@@ -189,6 +193,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     open.check(&spec)?;
     check_out(&args.out, args.force)?;
     args.field.write_metadata(&mut opts.meta);
+    opts.meta.serial = args.serial.clone();
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     // A field given in another unit than µT is refused before anything is opened, as the fit would refuse it.
     resolve(&args.field.field_args(None), &opts.meta)?;
