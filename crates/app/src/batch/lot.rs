@@ -47,7 +47,7 @@ pub struct Lot {
     pub rows: usize,
     /// Whether there were enough boards ([`MIN_BOARDS`]) to judge outliers.
     pub judged: bool,
-    /// Each parameter's median and spread over the boards.
+    /// Each parameter's median and spread over the boards (none without boards).
     pub parameters: Vec<ParameterStats>,
     /// The boards beyond [`OUTLIER_Z`], one entry per parameter.
     pub outliers: Vec<Outlier>,
@@ -121,7 +121,8 @@ fn lot_of(rows: &mut [Row], chip: String) -> Lot {
         .filter_map(|&i| rows[i].fit.as_ref())
         .collect();
     let boards = graded.len();
-    let parameters: Vec<ParameterStats> = PARAMETERS
+    // No boards, no statistics (rather than NaNs).
+    let parameters: Vec<ParameterStats> = PARAMETERS[..if boards == 0 { 0 } else { PARAMETERS.len() }]
         .iter()
         .map(|&(name, _, get)| {
             let values: Vec<f64> = graded.iter().map(|f| get(f)).collect();

@@ -46,7 +46,7 @@ pub fn summary(batch: &Batch, required: Option<Grade>) -> String {
     };
     if !short.is_empty() {
         let below = required.map_or("usable".to_owned(), |g| g.name().to_owned());
-        let _ = writeln!(out, "\n{} boards below {below}:", short.len());
+        let _ = writeln!(out, "\n{} below {below}:", boards(short.len()));
         for row in short {
             let _ = writeln!(
                 out,
@@ -70,6 +70,15 @@ pub fn summary(batch: &Batch, required: Option<Grade>) -> String {
     out
 }
 
+/// `n board` or `n boards`.
+fn boards(n: usize) -> String {
+    if n == 1 {
+        "1 board".to_owned()
+    } else {
+        format!("{n} boards")
+    }
+}
+
 /// A lot's medians and spreads, and its outliers.
 fn lot_summary(out: &mut String, lot: &Lot, outlier_z: f64) {
     let chip = if lot.chip.is_empty() {
@@ -79,8 +88,14 @@ fn lot_summary(out: &mut String, lot: &Lot, outlier_z: f64) {
     };
     let _ = writeln!(
         out,
-        "lot {chip}: {} boards graded good or usable ({} rows); median ± robust spread:",
-        lot.boards, lot.rows
+        "lot {chip}: {} graded good or usable ({} in the table){}",
+        boards(lot.boards),
+        lot.rows,
+        if lot.boards == 0 {
+            ""
+        } else {
+            "; median ± robust spread:"
+        }
     );
     if lot.boards == 0 {
         return;
@@ -106,13 +121,13 @@ fn lot_summary(out: &mut String, lot: &Lot, outlier_z: f64) {
             "  no board far from the lot (robust z above {outlier_z})"
         );
     } else {
-        let mut boards: Vec<&str> = lot.outliers.iter().map(|o| o.id.as_str()).collect();
-        boards.dedup();
+        let mut ids: Vec<&str> = lot.outliers.iter().map(|o| o.id.as_str()).collect();
+        ids.dedup();
         let _ = writeln!(
             out,
-            "  {} boards far from the lot (robust z above {outlier_z}): its own fit may be sound, but the board \
-             differs from its siblings — a magnet, a steel screw or a different part near the sensor:",
-            boards.len()
+            "  {} far from the lot (robust z above {outlier_z}): its own fit may be sound, but the board differs \
+             from its siblings — a magnet, a steel screw or a different part near the sensor:",
+            boards(ids.len())
         );
         for o in &lot.outliers {
             let stats = lot.parameters.iter().find(|p| p.name == o.parameter);
