@@ -130,16 +130,25 @@ fn lot_summary(out: &mut String, lot: &Lot, outlier_z: f64) {
             boards(ids.len())
         );
         for o in &lot.outliers {
-            let stats = lot.parameters.iter().find(|p| p.name == o.parameter);
+            let Some((stats, &(_, unit, _))) = lot
+                .parameters
+                .iter()
+                .zip(&PARAMETERS)
+                .find(|(p, _)| p.name == o.parameter)
+            else {
+                continue;
+            };
+            let decimals = if unit.is_empty() { 4 } else { 2 };
             let _ = writeln!(
                 out,
-                "    {} ({}): {} = {:.4} (lot {:.4} ± {:.4}), z {:+.1}",
+                "    {} ({}): {} = {:.decimals$}{}{unit} (lot {:.decimals$} ± {:.decimals$}), z {:+.1}",
                 o.id,
                 o.file,
                 o.parameter,
                 o.value,
-                stats.map_or(f64::NAN, |s| s.median),
-                stats.map_or(f64::NAN, |s| s.spread),
+                if unit.is_empty() { "" } else { " " },
+                stats.median,
+                stats.spread,
                 o.z
             );
         }
