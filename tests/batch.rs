@@ -61,7 +61,8 @@ fn same_numbers(a: &Value, b: &Value) -> bool {
         }
         (Value::Object(x), Value::Object(y)) => {
             x.len() == y.len()
-                && x.iter().all(|(k, v)| y.get(k).is_some_and(|w| same_numbers(v, w)))
+                && x.iter()
+                    .all(|(k, v)| y.get(k).is_some_and(|w| same_numbers(v, w)))
         }
         _ => a == b,
     }
@@ -78,7 +79,8 @@ fn check_rows(batch: &Batch, boards: &[Board]) -> HashSet<String> {
             Kind::Truncated => {
                 assert_eq!(row.grade, "failed", "{row:?}");
                 assert!(
-                    row.reason.contains("cut off") && row.reason.contains(&board.path.display().to_string()),
+                    row.reason.contains("cut off")
+                        && row.reason.contains(&board.path.display().to_string()),
                     "{}",
                     row.reason
                 );
@@ -99,9 +101,18 @@ fn check_rows(batch: &Batch, boards: &[Board]) -> HashSet<String> {
                         fit.offset_se_ut[k]
                     );
                     let err = fit.a_diag[k] - board.truth.a[k][k];
-                    assert!(err.abs() < 2e-3, "{}: A[{k}][{k}] off by {err}", board.serial);
+                    assert!(
+                        err.abs() < 2e-3,
+                        "{}: A[{k}][{k}] off by {err}",
+                        board.serial
+                    );
                 }
-                assert!(fit.effects.is_empty(), "{}: {:?}", board.serial, fit.effects);
+                assert!(
+                    fit.effects.is_empty(),
+                    "{}: {:?}",
+                    board.serial,
+                    fit.effects
+                );
             }
         }
     }
@@ -150,11 +161,17 @@ fn a_small_lot_gives_a_row_per_board_flags_the_magnet_and_names_the_failures() {
     let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
     assert!(!out.status.success(), "{stdout}\n{stderr}");
     // The failing boards are listed on screen with the reason, and named in the error.
-    for board in boards.iter().filter(|b| matches!(b.kind, Kind::Truncated | Kind::NotRotated)) {
+    for board in boards
+        .iter()
+        .filter(|b| matches!(b.kind, Kind::Truncated | Kind::NotRotated))
+    {
         assert!(stdout.contains(&board.serial), "{stdout}");
         assert!(stderr.contains(&board.serial), "{stderr}");
     }
-    assert!(stderr.contains("--require usable: 2 of 14 boards fall short"), "{stderr}");
+    assert!(
+        stderr.contains("--require usable: 2 of 14 boards fall short"),
+        "{stderr}"
+    );
     let batch = read_json(&json);
     let flagged = check_rows(&batch, &boards);
     assert_eq!(flagged, serials(&boards, Kind::MagnetNear), "{stdout}");
@@ -180,7 +197,10 @@ fn a_small_lot_gives_a_row_per_board_flags_the_magnet_and_names_the_failures() {
         );
     }
     let csv_text = std::fs::read_to_string(&table).unwrap();
-    assert!(csv_text.contains(" z=+") || csv_text.contains(" z=-"), "{csv_text}");
+    assert!(
+        csv_text.contains(" z=+") || csv_text.contains(" z=-"),
+        "{csv_text}"
+    );
     // A re-run fits nothing again; the table is the batch, its failures still there.
     let again = run_batch(&[&lot_dir], &["--out", table.to_str().unwrap()]);
     assert!(again.status.success(), "{}", text(&again.stderr));
@@ -232,8 +252,14 @@ fn a_batch_killed_midway_completes_on_a_rerun_without_a_row_twice() {
     child.kill().unwrap(); // SIGKILL: no chance to tidy up.
     child.wait().unwrap();
     let left = rows_in(&table);
-    assert!((3..10).contains(&left), "killed with {left} rows in the table");
-    let out = run_batch(&[&lot_dir], &["--no-diagnose", "--out", table.to_str().unwrap()]);
+    assert!(
+        (3..10).contains(&left),
+        "killed with {left} rows in the table"
+    );
+    let out = run_batch(
+        &[&lot_dir],
+        &["--no-diagnose", "--out", table.to_str().unwrap()],
+    );
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(
         text(&out.stdout).contains(&format!("{} fitted now", 10 - left)),
@@ -242,7 +268,10 @@ fn a_batch_killed_midway_completes_on_a_rerun_without_a_row_twice() {
     );
     // The table is complete, each recording once, and as an uninterrupted batch makes it.
     let whole = dir.path().join("whole.csv");
-    let out = run_batch(&[&lot_dir], &["--no-diagnose", "--out", whole.to_str().unwrap()]);
+    let out = run_batch(
+        &[&lot_dir],
+        &["--no-diagnose", "--out", whole.to_str().unwrap()],
+    );
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(
         std::fs::read_to_string(&table).unwrap(),
@@ -251,7 +280,64 @@ fn a_batch_killed_midway_completes_on_a_rerun_without_a_row_twice() {
     // Options other than the table's are refused, not mixed in.
     let out = run_batch(&[&lot_dir], &["--out", table.to_str().unwrap()]);
     assert!(!out.status.success());
-    assert!(text(&out.stderr).contains("--no-diagnose"), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("--no-diagnose"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn the_serial_magcal_record_writes_names_the_board_in_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
+        .args([
+            "--device",
+            "sim",
+            "--routine",
+            "free",
+            "--serial",
+            "SN-0042 rev B",
+            "--out",
+        ])
+        .arg(&rec)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        std::fs::read_to_string(&rec)
+            .unwrap()
+            .contains("\n# serial: SN-0042 rev B\n")
+    );
+    let json = dir.path().join("t.json");
+    let out = run_batch(
+        &[&rec],
+        &["--no-diagnose", "--json", json.to_str().unwrap()],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let batch = read_json(&json);
+    assert_eq!(batch.rows[0].id, "SN-0042 rev B");
+    assert_eq!(batch.rows[0].chip, "lis3mdl");
+    let bad = Command::new(env!("CARGO_BIN_EXE_magcal-record"))
+        .args([
+            "--device",
+            "sim",
+            "--routine",
+            "free",
+            "--serial",
+            " x",
+            "--out",
+        ])
+        .arg(dir.path().join("bad.csv"))
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("--serial"),
+        "{}",
+        text(&bad.stderr)
+    );
 }
 
 /// Fits each recording with `magcal-fit --report` and compares its figures with the batch's row of it: the same to
@@ -279,10 +365,7 @@ fn same_as_magcal_fit(files: &[PathBuf]) {
         let Some(f) = &row.fit else {
             assert!(!fit.status.success(), "{}", file.display());
             let said = text(&fit.stderr);
-            let reason = row
-                .reason
-                .strip_prefix("not read: ")
-                .unwrap_or(&row.reason);
+            let reason = row.reason.strip_prefix("not read: ").unwrap_or(&row.reason);
             assert!(said.contains(reason), "{said}\nvs\n{reason}");
             continue;
         };
@@ -380,8 +463,14 @@ fn a_lot_of_200_boards() {
         .iter()
         .filter(|b| matches!(b.kind, Kind::Normal | Kind::MagnetNear))
         .collect();
-    println!("parameter       lot median   lot spread   simulated median   simulated spread   ratio");
-    for (stats, &(name, _, _)) in lot.parameters.iter().zip(&magcal_app::batch::lot::PARAMETERS) {
+    println!(
+        "parameter       lot median   lot spread   simulated median   simulated spread   ratio"
+    );
+    for (stats, &(name, _, _)) in lot
+        .parameters
+        .iter()
+        .zip(&magcal_app::batch::lot::PARAMETERS)
+    {
         let truth: Vec<f64> = fitted.iter().map(|b| true_parameter(b, name)).collect();
         let (median, spread) = median_spread(&truth);
         let ratio = stats.spread / spread;
@@ -389,7 +478,11 @@ fn a_lot_of_200_boards() {
             "{name:<14} {:>11.4} {:>12.4} {median:>18.4} {spread:>18.4} {ratio:>7.3}",
             stats.median, stats.spread
         );
-        assert!((ratio - 1.0).abs() < 0.1, "{name}: spread {} vs {spread}", stats.spread);
+        assert!(
+            (ratio - 1.0).abs() < 0.1,
+            "{name}: spread {} vs {spread}",
+            stats.spread
+        );
     }
     println!("200 boards in {elapsed_s:.1} s");
 }

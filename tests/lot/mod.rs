@@ -124,7 +124,9 @@ pub fn write_lot(dir: &Path, spec: &LotSpec) -> Vec<Board> {
         let serial = format!("SN-{i:04}");
         run.recording.meta.serial = Some(serial.clone());
         let path = dir.join(format!("board-{i:04}.csv"));
-        run.recording.write(&path).expect("the recording is written");
+        run.recording
+            .write(&path)
+            .expect("the recording is written");
         if kind == Kind::Truncated {
             cut_mid_row(&path);
         }
@@ -165,8 +167,17 @@ fn kinds(spec: &LotSpec, rng: &mut ChaCha8Rng) -> Vec<Kind> {
 fn cut_mid_row(path: &Path) {
     let mut bytes = std::fs::read(path).expect("the recording reads");
     let from = bytes.len() * 3 / 5;
-    let row = from + bytes[from..].iter().position(|&b| b == b'\n').expect("rows follow") + 1;
-    let comma = row + bytes[row..].iter().position(|&b| b == b',').expect("a row has fields");
+    let row = from
+        + bytes[from..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .expect("rows follow")
+        + 1;
+    let comma = row
+        + bytes[row..]
+            .iter()
+            .position(|&b| b == b',')
+            .expect("a row has fields");
     bytes.truncate(comma + 3);
     std::fs::write(path, bytes).expect("the recording is cut");
 }

@@ -176,7 +176,10 @@ mod tests {
 
     #[test]
     fn a_serial_is_plain_text_on_one_line() {
-        assert_eq!(parse_serial("SN-0042 rev B"), Ok("SN-0042 rev B".to_owned()));
+        assert_eq!(
+            parse_serial("SN-0042 rev B"),
+            Ok("SN-0042 rev B".to_owned())
+        );
         for bad in ["", " SN", "SN\n2", "SN,"] {
             assert!(parse_serial(bad).is_err(), "{bad:?}");
         }

@@ -502,7 +502,10 @@ mod tests {
         let m = m.finish();
         assert_eq!(m.serial.as_deref(), Some("SN-0042"));
         assert!(m.other.is_empty());
-        assert!(m.pairs().contains(&("serial".to_owned(), "SN-0042".to_owned())));
+        assert!(
+            m.pairs()
+                .contains(&("serial".to_owned(), "SN-0042".to_owned()))
+        );
         assert!(m.check().is_ok());
         let bad = Metadata {
             serial: Some(" padded".into()),

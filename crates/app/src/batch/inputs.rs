@@ -108,7 +108,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
         std::fs::create_dir(d.join("day2")).unwrap();
-        for name in ["b.csv", "a.CSV", "notes.txt", ".hidden.csv", "day2/c.csv", "table.csv"] {
+        for name in [
+            "b.csv",
+            "a.CSV",
+            "notes.txt",
+            ".hidden.csv",
+            "day2/c.csv",
+            "table.csv",
+        ] {
             std::fs::write(d.join(name), "t,mx,my,mz\n").unwrap();
         }
         let table = d.join("table.csv");

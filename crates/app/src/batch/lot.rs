@@ -106,10 +106,7 @@ pub fn lots(rows: &mut [Row]) -> Vec<Lot> {
     let mut chips: Vec<String> = rows.iter().map(|r| r.chip.clone()).collect();
     chips.sort();
     chips.dedup();
-    chips
-        .into_iter()
-        .map(|chip| lot_of(rows, chip))
-        .collect()
+    chips.into_iter().map(|chip| lot_of(rows, chip)).collect()
 }
 
 /// The lot of kind `chip`, its boards' marks set.
@@ -122,7 +119,8 @@ fn lot_of(rows: &mut [Row], chip: String) -> Lot {
         .collect();
     let boards = graded.len();
     // No boards, no statistics (rather than NaNs).
-    let parameters: Vec<ParameterStats> = PARAMETERS[..if boards == 0 { 0 } else { PARAMETERS.len() }]
+    let parameters: Vec<ParameterStats> = PARAMETERS
+        [..if boards == 0 { 0 } else { PARAMETERS.len() }]
         .iter()
         .map(|&(name, _, get)| {
             let values: Vec<f64> = graded.iter().map(|f| get(f)).collect();
@@ -241,7 +239,10 @@ mod tests {
         let lots = lots(&mut rows);
         assert_eq!(lots.len(), 2);
         let lis = &lots[0];
-        assert_eq!((lis.chip.as_str(), lis.boards, lis.rows), ("lis3mdl", 20, 21));
+        assert_eq!(
+            (lis.chip.as_str(), lis.boards, lis.rows),
+            ("lis3mdl", 20, 21)
+        );
         assert!(lis.judged);
         assert_eq!(lis.outliers.len(), 1, "{:?}", lis.outliers);
         assert_eq!(lis.outliers[0].id, "b7");

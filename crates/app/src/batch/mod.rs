@@ -143,7 +143,9 @@ pub fn run(opts: &BatchOptions) -> anyhow::Result<Batch> {
         bail!(
             "{}: its rows were fitted with `{}`, and this run asks for `{fit_options}`: run with the options it was \
              started with to complete it, or name another --out for a new table",
-            opts.out.as_deref().map_or(String::new(), |p| p.display().to_string()),
+            opts.out
+                .as_deref()
+                .map_or(String::new(), |p| p.display().to_string()),
             row.fit_options
         );
     }

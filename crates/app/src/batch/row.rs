@@ -180,7 +180,8 @@ impl RowFit {
     /// The figures of a fit's report.
     fn of(report: &Report) -> RowFit {
         let a = report.calibration.a;
-        let off_diagonal = (0..3).flat_map(|j| (0..3).filter(move |&k| k != j).map(move |k| a[j][k]));
+        let off_diagonal =
+            (0..3).flat_map(|j| (0..3).filter(move |&k| k != j).map(move |k| a[j][k]));
         RowFit {
             method: report.method.clone(),
             left_worst_deg: report.heading.as_ref().map(|h| h.left_worst_deg),
