@@ -466,11 +466,12 @@ fn a_lot_of_200_boards() {
     println!(
         "parameter       lot median   lot spread   simulated median   simulated spread   ratio"
     );
-    for (stats, &(name, _, _)) in lot
+    for (stats, p) in lot
         .parameters
         .iter()
         .zip(&magcal_app::batch::lot::PARAMETERS)
     {
+        let name = p.name;
         let truth: Vec<f64> = fitted.iter().map(|b| true_parameter(b, name)).collect();
         let (median, spread) = median_spread(&truth);
         let ratio = stats.spread / spread;

@@ -24,16 +24,59 @@ pub const MIN_BOARDS: usize = 10;
 /// The median absolute deviation of a normal distribution times this is its standard deviation (1/Φ⁻¹(3/4)).
 pub const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
-/// The parameters the lot compares, by their column's name, with their unit as printed.
-pub const PARAMETERS: [(&str, &str, fn(&RowFit) -> f64); 8] = [
-    ("offset_ut.x", "µT", |f| f.offset_ut[0]),
-    ("offset_ut.y", "µT", |f| f.offset_ut[1]),
-    ("offset_ut.z", "µT", |f| f.offset_ut[2]),
-    ("A.xx", "", |f| f.a_diag[0]),
-    ("A.yy", "", |f| f.a_diag[1]),
-    ("A.zz", "", |f| f.a_diag[2]),
-    ("A_offdiag_min", "", |f| f.a_offdiag_min),
-    ("A_offdiag_max", "", |f| f.a_offdiag_max),
+/// A parameter the lot compares.
+#[derive(Clone, Copy, Debug)]
+pub struct Parameter {
+    /// Its column's name.
+    pub name: &'static str,
+    /// Its unit as printed (empty: none).
+    pub unit: &'static str,
+    /// Its value in a fit's row.
+    pub get: fn(&RowFit) -> f64,
+}
+
+/// The parameters the lot compares.
+pub const PARAMETERS: [Parameter; 8] = [
+    Parameter {
+        name: "offset_ut.x",
+        unit: "µT",
+        get: |f| f.offset_ut[0],
+    },
+    Parameter {
+        name: "offset_ut.y",
+        unit: "µT",
+        get: |f| f.offset_ut[1],
+    },
+    Parameter {
+        name: "offset_ut.z",
+        unit: "µT",
+        get: |f| f.offset_ut[2],
+    },
+    Parameter {
+        name: "A.xx",
+        unit: "",
+        get: |f| f.a_diag[0],
+    },
+    Parameter {
+        name: "A.yy",
+        unit: "",
+        get: |f| f.a_diag[1],
+    },
+    Parameter {
+        name: "A.zz",
+        unit: "",
+        get: |f| f.a_diag[2],
+    },
+    Parameter {
+        name: "A_offdiag_min",
+        unit: "",
+        get: |f| f.a_offdiag_min,
+    },
+    Parameter {
+        name: "A_offdiag_max",
+        unit: "",
+        get: |f| f.a_offdiag_max,
+    },
 ];
 
 /// The boards of one kind.
@@ -122,11 +165,11 @@ fn lot_of(rows: &mut [Row], chip: String) -> Lot {
     let parameters: Vec<ParameterStats> = PARAMETERS
         [..if boards == 0 { 0 } else { PARAMETERS.len() }]
         .iter()
-        .map(|&(name, _, get)| {
-            let values: Vec<f64> = graded.iter().map(|f| get(f)).collect();
+        .map(|p| {
+            let values: Vec<f64> = graded.iter().map(|f| (p.get)(f)).collect();
             let (median, spread) = median_spread(&values);
             ParameterStats {
-                name: name.to_owned(),
+                name: p.name.to_owned(),
                 median,
                 spread,
             }
@@ -145,11 +188,11 @@ fn lot_of(rows: &mut [Row], chip: String) -> Lot {
             outliers: Vec::new(),
         };
         if judged {
-            for (stats, &(name, _, get)) in parameters.iter().zip(&PARAMETERS) {
-                if !(stats.spread > 0.0) {
+            for (stats, p) in parameters.iter().zip(&PARAMETERS) {
+                if stats.spread.is_nan() || stats.spread <= 0.0 {
                     continue;
                 }
-                let value = get(fit);
+                let (name, value) = (p.name, (p.get)(fit));
                 let z = (value - stats.median) / stats.spread;
                 if mark.z_max.is_none_or(|m: f64| z.abs() > m) {
                     mark.z_max = Some(z.abs());

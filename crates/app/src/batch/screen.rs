@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use super::Batch;
-use super::lot::{Lot, MIN_BOARDS, PARAMETERS};
+use super::lot::{Lot, MIN_BOARDS, PARAMETERS, Parameter};
 use super::row::{FAILED, Row};
 use crate::verdict::Grade;
 
@@ -100,7 +100,7 @@ fn lot_summary(out: &mut String, lot: &Lot, outlier_z: f64) {
     if lot.boards == 0 {
         return;
     }
-    for (stats, &(name, unit, _)) in lot.parameters.iter().zip(&PARAMETERS) {
+    for (stats, &Parameter { name, unit, .. }) in lot.parameters.iter().zip(&PARAMETERS) {
         let decimals = if unit.is_empty() { 4 } else { 2 };
         let _ = writeln!(
             out,
@@ -130,7 +130,7 @@ fn lot_summary(out: &mut String, lot: &Lot, outlier_z: f64) {
             boards(ids.len())
         );
         for o in &lot.outliers {
-            let Some((stats, &(_, unit, _))) = lot
+            let Some((stats, &Parameter { unit, .. })) = lot
                 .parameters
                 .iter()
                 .zip(&PARAMETERS)
