@@ -3,9 +3,10 @@
 use std::process::Command;
 
 /// Each tool and a word its first help line must hold.
-const TOOLS: [(&str, &str); 6] = [
+const TOOLS: [(&str, &str); 7] = [
     (env!("CARGO_BIN_EXE_magcal"), "workflow"),
     (env!("CARGO_BIN_EXE_magcal-fit"), "Fit"),
+    (env!("CARGO_BIN_EXE_magcal-batch"), "recording of a lot"),
     (env!("CARGO_BIN_EXE_magcal-apply"), "Check a calibration"),
     (env!("CARGO_BIN_EXE_magcal-record"), "Record"),
     (env!("CARGO_BIN_EXE_magcal-sim"), "simulated recording"),

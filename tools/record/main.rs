@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse};
+use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse, parse_serial};
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
@@ -86,6 +86,10 @@ struct Args {
     /// recording stays until the first sample of the new one is written.
     #[arg(long)]
     force: bool,
+    /// The board's identifier (e.g. its serial number), written to the recording's metadata as `serial`: a batch's
+    /// table (magcal-batch) names the board by it.
+    #[arg(long, value_name = "ID", value_parser = parse_serial)]
+    serial: Option<String>,
     /// The local field, written to the recording for the fit.
     #[command(flatten)]
     field: WorldFieldOpts,
@@ -195,6 +199,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         .file("--truth", args.truth.as_deref(), Replace::New)
         .check()?;
     args.field.write_metadata(&mut opts.meta);
+    opts.meta.serial = args.serial.clone();
     opts.meta = device_metadata(&spec, args.sim_seed, opts.meta);
     // A field given in another unit than µT is refused before anything is opened, as the fit would refuse it.
     resolve(&args.field.field_args(None), &opts.meta)?;

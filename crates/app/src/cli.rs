@@ -44,6 +44,22 @@ pub fn excerpt(text: &str) -> String {
     }
 }
 
+/// Checks a board's identifier (`magcal-record --serial`): text a recording's metadata line can hold as it is —
+/// not empty, no surrounding blanks, no control character, no trailing `,` or `;` (a spreadsheet's padding).
+pub fn parse_serial(s: &str) -> Result<String, String> {
+    let plain = !s.is_empty()
+        && s.trim() == s
+        && !s.ends_with([',', ';'])
+        && !s.chars().any(char::is_control);
+    if plain {
+        Ok(s.to_owned())
+    } else {
+        Err(format!(
+            "{s:?}: a serial is plain text on one line, without surrounding blanks or a trailing ',' or ';'"
+        ))
+    }
+}
+
 /// The local world field, given directly or by place and date for the World Magnetic Model.
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct WorldFieldOpts {
@@ -269,5 +285,16 @@ mod tests {
         assert_eq!(parse_floats::<3>("19.8, 1.2,45.3"), Ok([19.8, 1.2, 45.3]));
         assert!(parse_floats::<3>("1,2").unwrap_err().contains("expected 3"));
         assert!(parse_floats::<2>("1,x").unwrap_err().contains("\"1,x\""));
+    }
+
+    #[test]
+    fn a_serial_is_plain_text_on_one_line() {
+        assert_eq!(
+            parse_serial("SN-0042 rev B"),
+            Ok("SN-0042 rev B".to_owned())
+        );
+        for bad in ["", " SN", "SN\n2", "SN,"] {
+            assert!(parse_serial(bad).is_err(), "{bad:?}");
+        }
     }
 }

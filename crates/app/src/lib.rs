@@ -5,6 +5,7 @@
 //! The tools in `tools/` are thin: they parse arguments and call in here.
 
 pub mod apply;
+pub mod batch;
 pub mod calibrate;
 pub mod checks;
 pub mod cli;

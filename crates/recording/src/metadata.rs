@@ -14,8 +14,9 @@ pub(crate) const MAGIC: &str = "# magcal-recording v1";
 pub(crate) const MAGIC_WORD: &str = "magcal-recording";
 
 /// Metadata keys this crate types and validates; every other key lands in [`Metadata::other`].
-pub(crate) const KNOWN_KEYS: [&str; 7] = [
+pub(crate) const KNOWN_KEYS: [&str; 8] = [
     "sensor",
+    "serial",
     "sample_rate_hz",
     "field_ned_ut",
     "location",
@@ -29,6 +30,9 @@ pub(crate) const KNOWN_KEYS: [&str; 7] = [
 pub struct Metadata {
     /// `sensor`: which magnetometer (free text).
     pub sensor: Option<String>,
+    /// `serial`: the board's own identifier (free text, e.g. its serial number), as `magcal-record --serial` writes
+    /// it; a batch's table names the board by it.
+    pub serial: Option<String>,
     /// `sample_rate_hz`: nominal sample rate, > 0.
     pub sample_rate_hz: Option<f64>,
     /// `field_ned_ut`: the local geomagnetic field in world NED axes (north, east, down), µT.
@@ -209,6 +213,7 @@ impl Metadata {
         }
         match key {
             "sensor" => put(&mut self.sensor, value.to_owned()).ok_or_else(duplicate),
+            "serial" => put(&mut self.serial, value.to_owned()).ok_or_else(duplicate),
             "routine" => put(&mut self.routine, value.to_owned()).ok_or_else(duplicate),
             "started" => put(&mut self.started, value.to_owned()).ok_or_else(duplicate),
             "sample_rate_hz" => {
@@ -258,6 +263,7 @@ impl Metadata {
             }
         };
         push("sensor", self.sensor.clone());
+        push("serial", self.serial.clone());
         push("sample_rate_hz", self.sample_rate_hz.map(|r| r.to_string()));
         push(
             "field_ned_ut",
@@ -303,6 +309,7 @@ impl Metadata {
         }
         let texts = [
             ("sensor", &self.sensor),
+            ("serial", &self.serial),
             ("routine", &self.routine),
             ("started", &self.started),
         ];
@@ -482,6 +489,29 @@ mod tests {
             ..Metadata::default()
         };
         assert!(m.check().is_err(), "would not read back");
+    }
+
+    #[test]
+    fn serial_is_a_known_key_read_and_written() {
+        let mut m = MetadataBuilder::default();
+        m.set("serial", "SN-0042").unwrap();
+        assert!(matches!(
+            m.set("serial", "SN-0043"),
+            Err(ReadErrorKind::DuplicateMetadata { .. })
+        ));
+        let m = m.finish();
+        assert_eq!(m.serial.as_deref(), Some("SN-0042"));
+        assert!(m.other.is_empty());
+        assert!(
+            m.pairs()
+                .contains(&("serial".to_owned(), "SN-0042".to_owned()))
+        );
+        assert!(m.check().is_ok());
+        let bad = Metadata {
+            serial: Some(" padded".into()),
+            ..Metadata::default()
+        };
+        assert!(bad.check().is_err());
     }
 
     #[test]
