@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{fit_report, floats, magcal_fit, magcal_sim, simulate};
-use magcal_app::record::sim::TruthFile;
+use magcal_app::source::sim::TruthFile;
 use magcal_calib::frames;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

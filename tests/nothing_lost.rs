@@ -14,7 +14,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use magcal_app::record::sim::bench_config;
+use magcal_app::source::sim::bench_config;
 use magcal_driver::ChipKind;
 use magcal_mockhw::firmware::{BoardFault, FirmwareConfig, Output as BoardOutput};
 use magcal_recording::Recording;

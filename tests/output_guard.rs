@@ -11,8 +11,9 @@ use magcal_app::outputs::{OPTIONS, Role};
 use proptest::prelude::*;
 
 /// Each tool and its binary.
-const TOOLS: [(&str, &str); 6] = [
+const TOOLS: [(&str, &str); 7] = [
     ("magcal", env!("CARGO_BIN_EXE_magcal")),
+    ("magcal-batch", env!("CARGO_BIN_EXE_magcal-batch")),
     ("magcal-fit", env!("CARGO_BIN_EXE_magcal-fit")),
     ("magcal-apply", env!("CARGO_BIN_EXE_magcal-apply")),
     ("magcal-record", env!("CARGO_BIN_EXE_magcal-record")),
@@ -21,8 +22,9 @@ const TOOLS: [(&str, &str); 6] = [
 ];
 
 /// Value names (as `--help` shows them) of what is no file: numbers, lists of them, choices, devices, specs.
-const NOT_PATHS: [&str; 27] = [
+const NOT_PATHS: [&str; 28] = [
     "DEV",
+    "ID",
     "ROUTINE",
     "N,E,D",
     "LAT,LON,ALT",
@@ -206,6 +208,7 @@ fn arguments(
         ],
         ("magcal-fit", _) => vec![rec, "--no-diagnose".into()],
         ("magcal-apply", "--out") => vec![params, rec],
+        ("magcal-batch", _) => vec![rec, "--no-diagnose".into()],
         ("magcal-record", "--out") => vec![
             "--routine".into(),
             "free".into(),

@@ -19,7 +19,7 @@ use common::{floats, magcal_fit, matrix};
 use magcal_app::calibrate::calibrate;
 use magcal_app::field::ReferenceField;
 use magcal_app::fit::Method;
-use magcal_app::record::sim::TruthFile;
+use magcal_app::source::sim::TruthFile;
 use magcal_calib::frames::{self, Mat3};
 use magcal_recording::{Metadata, Recording};
 use magcal_sim::{SensorTruth, stream_rng};

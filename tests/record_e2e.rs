@@ -12,7 +12,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::Instant;
 
-use magcal_app::record::sim::TruthFile;
+use magcal_app::source::sim::TruthFile;
 use nalgebra::Matrix3;
 
 const CHIPS: [&str; 5] = ["lis3mdl", "lis2mdl", "qmc5883l", "hmc5883l", "mmc5983ma"];

@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use magcal_app::record::sim::bench_config;
+use magcal_app::source::sim::bench_config;
 use magcal_driver::ChipKind;
 use magcal_mockhw::firmware::FirmwareConfig;
 use magcal_recording::Recording;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::rc::Rc;
 
-use magcal_app::record::sim::bench_config;
+use magcal_app::source::sim::bench_config;
 use magcal_app::writeback::{WriteBackError, write_lis2mdl_offset};
 use magcal_driver::ChipKind;
 use magcal_mockhw::{Fault, SimChip, VirtualClock};

@@ -11,7 +11,7 @@ use std::process::{Command, Output};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use magcal_app::record::sim::bench_config;
+use magcal_app::source::sim::bench_config;
 use magcal_driver::ChipKind;
 use magcal_mockhw::firmware::{EchoMode, FirmwareConfig, FirmwareReport};
 use nalgebra::{Matrix3, Vector3};

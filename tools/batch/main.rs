@@ -54,7 +54,7 @@ struct Args {
     #[command(flatten)]
     field: WorldFieldOpts,
     /// Field magnitude in µT, for the scalar method (as magcal-fit's --field-ut).
-    #[arg(allow_negative_numbers = true, long)]
+    #[arg(allow_negative_numbers = true, long, value_name = "UT")]
     field_ut: Option<f64>,
     /// No progress bar.
     #[arg(long)]

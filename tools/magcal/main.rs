@@ -10,11 +10,11 @@ use magcal_app::device::{self, DeviceSpec, OpenOptions};
 use magcal_app::fit::{Calibration, Fit, Method};
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
-use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
     RecordOptions, Routine, Stop, device_metadata, record, sim_field_note, ui,
 };
 use magcal_app::report::Report;
+use magcal_app::source::sim::TruthFile;
 use magcal_app::summary::summary;
 use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
 use magcal_app::{say, sayln, tellln};

@@ -9,10 +9,10 @@ use magcal_app::cli::{WorldFieldOpts, exit, interrupt_flag, parse, parse_serial}
 use magcal_app::device::{self, DeviceSpec, Fault, OpenOptions};
 use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
-use magcal_app::record::sim::TruthFile;
 use magcal_app::record::{
     RecordOptions, RecordSummary, Routine, Stop, device_metadata, record, sim_field_note, ui,
 };
+use magcal_app::source::sim::TruthFile;
 use magcal_app::{sayln, tellln};
 
 /// Record a magnetometer while you turn it, into a magcal-recording v1 file for magcal-fit.

@@ -116,7 +116,7 @@ pub fn interrupt_flag(tool: &'static str) -> anyhow::Result<Arc<AtomicBool>> {
     let flag = interrupt.clone();
     ctrlc::set_handler(move || {
         if flag.swap(true, Ordering::Relaxed) {
-            crate::record::tty::restore();
+            crate::tty::restore();
             crate::tellln!(
                 "{tool}: interrupted again: stopping now (the file keeps what was written)"
             );

@@ -17,8 +17,8 @@ use magcal_driver::{AnyMagnetometer, ChipKind};
 pub use magcal_mockhw::Fault;
 
 use crate::cli::number;
-use crate::record::clock::WallClock;
-use crate::record::source::{ChipSource, LineSource, Source, SourceError};
+use crate::source::clock::WallClock;
+use crate::source::{ChipSource, LineSource, Source, SourceError};
 
 /// Chip of `sim` without one.
 pub const DEFAULT_SIM_CHIP: ChipKind = ChipKind::Lis3mdl;
@@ -285,7 +285,7 @@ impl OpenOptions {
 pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, SourceError> {
     let device = spec.to_string();
     match spec {
-        DeviceSpec::Sim { chip } => Ok(Box::new(crate::record::sim::open(
+        DeviceSpec::Sim { chip } => Ok(Box::new(crate::source::sim::open(
             *chip,
             opts.sim_seed,
             &opts.sim_faults,

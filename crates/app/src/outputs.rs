@@ -66,6 +66,9 @@ pub const OPTIONS: &[(&str, &str, Role)] = &[
     ("magcal-record", "--truth", Role::Output),
     ("magcal-sim", "--out", Role::Output),
     ("magcal-sim", "--truth", Role::Output),
+    ("magcal-batch", "<DIR|FILE|GLOB>...", Role::Input),
+    ("magcal-batch", "--out", Role::Output),
+    ("magcal-batch", "--json", Role::Output),
 ];
 
 /// The tools whose refusals say that nothing was recorded.

@@ -21,7 +21,7 @@ use magcal_sim::bench::Bench;
 
 use crate::device::DeviceSpec;
 use crate::fit::Calibration;
-use crate::record::sim::bench_config;
+use crate::source::sim::bench_config;
 
 /// How long the firmware gets to echo a calibration (Adafruit's sketches echo about once a second).
 pub const ECHO_TIMEOUT: Duration = Duration::from_secs(5);

@@ -27,8 +27,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
 use crate::field::FieldArgs;
-use crate::files::{check_file_output, same_file};
 use crate::fit::Method;
+use crate::outputs::{Guard, Replace};
 use crate::verdict::{GOOD_DEG, USABLE_DEG};
 use crate::workflow::{FitRequest, fit_file};
 use lot::Lot;
@@ -119,17 +119,10 @@ pub fn run(opts: &BatchOptions) -> anyhow::Result<Batch> {
         .into_iter()
         .filter_map(|(flag, p)| p.as_deref().map(|p| (flag, p)))
         .collect();
-    for &(flag, path) in &outputs {
-        check_file_output(flag, path)?;
-    }
-    if let [(_, a), (_, b)] = outputs[..]
-        && same_file(a, b)
-    {
-        bail!(
-            "--out and --json both name {}: one would overwrite the other; nothing was written",
-            a.display()
-        );
-    }
+    Guard::new("magcal-batch")
+        .file("--out", opts.out.as_deref(), Replace::Products)
+        .file("--json", opts.json.as_deref(), Replace::Products)
+        .check()?;
     let output_paths: Vec<&Path> = outputs.iter().map(|&(_, p)| p).collect();
     let recordings = inputs::recordings(&opts.inputs, &output_paths)?;
     let fit_options = opts.fit.describe();

@@ -32,15 +32,11 @@
 //! silent, outputs that stop changing) ends the recording with an error naming the device and how many samples the
 //! file keeps.
 
-pub mod clock;
 pub mod coverage;
 pub mod magnitude;
 pub mod quality;
 mod session;
-pub mod sim;
-pub mod source;
 pub mod still;
-pub mod tty;
 pub mod ui;
 
 use std::path::{Path, PathBuf};
@@ -52,11 +48,12 @@ use magcal_sim::{CubePose, cube24_poses};
 
 use crate::checks::EARTH_FIELD_UT;
 use crate::device::{BadOption, DeviceSpec, positive_at_most, within};
+use crate::source::sim;
 
+pub use crate::source::{Reading, Skipped, Source, SourceError};
 pub use coverage::CoverageMap;
 pub use magnitude::{Disturbance, MagnitudeEvent, MagnitudeWatch};
 pub use quality::Quality;
-pub use source::{Reading, Skipped, Source, SourceError};
 pub use still::StillWindow;
 pub use ui::{Progress, Ui};
 

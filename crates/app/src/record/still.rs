@@ -2,7 +2,7 @@
 
 use std::collections::VecDeque;
 
-use super::source::Reading;
+use crate::source::Reading;
 
 /// The last `len` readings, and whether they are still.
 #[derive(Clone, Debug, PartialEq)]

@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use super::coverage::CoverageMap;
 use super::magnitude::Disturbance;
 use super::quality::{MOTIONCAL_LIMITS, Quality};
-use super::tty::EchoOff;
+use crate::tty::EchoOff;
 
 /// What the recorder reports while it runs.
 #[derive(Clone, Copy, Debug)]

@@ -1,5 +1,8 @@
 //! Where samples come from: a chip driver polled over I2C (real or simulated), or a serial line stream.
 
+pub mod clock;
+pub mod sim;
+
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
@@ -10,7 +13,7 @@ use magcal_driver::{Error as ChipError, Magnetometer};
 
 use magcal_mockhw::SharedBench;
 
-use super::clock::Clock;
+use clock::Clock;
 
 /// How many times a failed bus transfer is tried again before the recording stops.
 pub const RETRIES: u32 = 3;

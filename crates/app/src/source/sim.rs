@@ -10,7 +10,7 @@ use magcal_sim::bench::{Bench, BenchConfig};
 use magcal_sim::{ChipModel, SensorTruth, TemperatureProfile, stream_rng};
 
 use super::clock::SimClock;
-use super::source::{ChipSource, SourceError};
+use super::{ChipSource, SourceError};
 pub use crate::truth::{TRUTH_FORMAT, TruthFile};
 
 /// The world field of the simulated bench, NED, µT (a mid-latitude field of 49.45 µT).
