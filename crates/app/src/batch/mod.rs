@@ -115,52 +115,21 @@ pub struct Batch {
 /// the JSON.
 pub fn run(opts: &BatchOptions) -> anyhow::Result<Batch> {
     let start = Instant::now();
-    let outputs: Vec<(&str, &Path)> = [("--out", &opts.out), ("--json", &opts.json)]
-        .into_iter()
-        .filter_map(|(flag, p)| p.as_deref().map(|p| (flag, p)))
-        .collect();
     Guard::new("magcal-batch")
         .file("--out", opts.out.as_deref(), Replace::Products)
         .file("--json", opts.json.as_deref(), Replace::Products)
         .check()?;
-    let output_paths: Vec<&Path> = outputs.iter().map(|&(_, p)| p).collect();
+    let output_paths: Vec<&Path> = [&opts.out, &opts.json]
+        .into_iter()
+        .filter_map(|p| p.as_deref())
+        .collect();
     let recordings = inputs::recordings(&opts.inputs, &output_paths)?;
     let fit_options = opts.fit.describe();
-
-    // Rows already in the table: kept for recordings unchanged since, fitted again otherwise.
-    let earlier = match &opts.out {
-        Some(path) => table::read(path)?,
-        None => Vec::new(),
-    };
-    if let Some(row) = earlier.iter().find(|r| r.fit_options != fit_options) {
-        bail!(
-            "{}: its rows were fitted with `{}`, and this run asks for `{fit_options}`: run with the options it was \
-             started with to complete it, or name another --out for a new table",
-            opts.out
-                .as_deref()
-                .map_or(String::new(), |p| p.display().to_string()),
-            row.fit_options
-        );
-    }
-    let key = |file: &Path| std::fs::canonicalize(file).unwrap_or_else(|_| file.to_owned());
-    let mut by_file: HashMap<PathBuf, Row> = earlier
-        .iter()
-        .map(|r| (key(Path::new(&r.file)), r.clone()))
-        .collect();
-    let mut slots: Vec<Option<Row>> = recordings
-        .iter()
-        .map(|p| {
-            by_file
-                .remove(&key(p))
-                .filter(|r| (r.file_bytes, r.modified_ns) == row::stamp(p))
-        })
-        .collect();
-    let kept = slots.iter().filter(|s| s.is_some()).count();
-    // Rows of recordings not named this time stay, in their order.
-    let others: Vec<Row> = earlier
-        .into_iter()
-        .filter(|r| by_file.remove(&key(Path::new(&r.file))).is_some())
-        .collect();
+    let Earlier {
+        mut slots,
+        others,
+        kept,
+    } = earlier(opts, &recordings, &fit_options)?;
     let mut journal = match &opts.out {
         Some(path) => Some(table::Journal::open(
             path,
@@ -172,47 +141,15 @@ pub fn run(opts: &BatchOptions) -> anyhow::Result<Batch> {
         )?),
         None => None,
     };
-
     let todo: Vec<usize> = (0..slots.len()).filter(|&i| slots[i].is_none()).collect();
     let jobs = opts.jobs.clamp(1, todo.len().max(1));
     let bar = progress_bar(opts.progress, recordings.len(), kept);
-    let request = FitRequest {
-        method: opts.fit.method,
-        diagnose: opts.fit.diagnose,
-        field: &opts.fit.field,
-        linear_only: false,
-    };
-    let next = AtomicUsize::new(0);
-    let stop = AtomicBool::new(false);
-    let (tx, rx) = mpsc::channel::<(usize, Row)>();
-    let written: anyhow::Result<()> = std::thread::scope(|s| {
-        for _ in 0..jobs {
-            let tx = tx.clone();
-            let (next, stop, todo, request) = (&next, &stop, &todo, &request);
-            let (recordings, fit_options) = (&recordings, &fit_options);
-            s.spawn(move || {
-                while !stop.load(Ordering::Relaxed) {
-                    let Some(&i) = todo.get(next.fetch_add(1, Ordering::Relaxed)) else {
-                        break;
-                    };
-                    let row = fit_one(&recordings[i], request, fit_options);
-                    if tx.send((i, row)).is_err() {
-                        break;
-                    }
-                }
-            });
+    let written = fit_all(opts, &recordings, &fit_options, &todo, jobs, |i, row| {
+        if let Some(journal) = &mut journal {
+            journal.append(&row)?;
         }
-        drop(tx);
-        for (i, row) in rx {
-            if let Some(journal) = &mut journal
-                && let Err(e) = journal.append(&row)
-            {
-                stop.store(true, Ordering::Relaxed);
-                return Err(e);
-            }
-            bar.inc(1);
-            slots[i] = Some(row);
-        }
+        bar.inc(1);
+        slots[i] = Some(row);
         Ok(())
     });
     bar.finish_and_clear();
@@ -239,6 +176,108 @@ pub fn run(opts: &BatchOptions) -> anyhow::Result<Batch> {
         table::write_json(path, &batch)?;
     }
     Ok(batch)
+}
+
+/// The rows a batch takes from its table as it was.
+struct Earlier {
+    /// Per recording named, its row when the table has one for it and it is unchanged since.
+    slots: Vec<Option<Row>>,
+    /// The rows of recordings not named this time, in their order.
+    others: Vec<Row>,
+    /// Rows kept for recordings named.
+    kept: usize,
+}
+
+/// The rows already in `--out`: kept for recordings unchanged since, fitted again otherwise; refused when they were
+/// fitted with other options.
+fn earlier(
+    opts: &BatchOptions,
+    recordings: &[PathBuf],
+    fit_options: &str,
+) -> anyhow::Result<Earlier> {
+    let earlier = match &opts.out {
+        Some(path) => table::read(path)?,
+        None => Vec::new(),
+    };
+    if let Some(row) = earlier.iter().find(|r| r.fit_options != fit_options) {
+        bail!(
+            "{}: its rows were fitted with `{}`, and this run asks for `{fit_options}`: run with the options it was \
+             started with to complete it, or name another --out for a new table",
+            opts.out
+                .as_deref()
+                .map_or(String::new(), |p| p.display().to_string()),
+            row.fit_options
+        );
+    }
+    let key = |file: &Path| std::fs::canonicalize(file).unwrap_or_else(|_| file.to_owned());
+    let mut by_file: HashMap<PathBuf, Row> = earlier
+        .iter()
+        .map(|r| (key(Path::new(&r.file)), r.clone()))
+        .collect();
+    let slots: Vec<Option<Row>> = recordings
+        .iter()
+        .map(|p| {
+            by_file
+                .remove(&key(p))
+                .filter(|r| (r.file_bytes, r.modified_ns) == row::stamp(p))
+        })
+        .collect();
+    let kept = slots.iter().filter(|s| s.is_some()).count();
+    let others: Vec<Row> = earlier
+        .into_iter()
+        .filter(|r| by_file.remove(&key(Path::new(&r.file))).is_some())
+        .collect();
+    Ok(Earlier {
+        slots,
+        others,
+        kept,
+    })
+}
+
+/// Fits the recordings `todo` (indices into `recordings`) on `jobs` worker threads, each holding one recording at a
+/// time, and hands each row to `done` on this thread as it comes; the first error of `done` stops the workers.
+fn fit_all(
+    opts: &BatchOptions,
+    recordings: &[PathBuf],
+    fit_options: &str,
+    todo: &[usize],
+    jobs: usize,
+    mut done: impl FnMut(usize, Row) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let request = FitRequest {
+        method: opts.fit.method,
+        diagnose: opts.fit.diagnose,
+        field: &opts.fit.field,
+        linear_only: false,
+    };
+    let next = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel::<(usize, Row)>();
+    std::thread::scope(|s| {
+        for _ in 0..jobs {
+            let tx = tx.clone();
+            let (next, stop, request) = (&next, &stop, &request);
+            s.spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    let Some(&i) = todo.get(next.fetch_add(1, Ordering::Relaxed)) else {
+                        break;
+                    };
+                    let row = fit_one(&recordings[i], request, fit_options);
+                    if tx.send((i, row)).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (i, row) in rx {
+            if let Err(e) = done(i, row) {
+                stop.store(true, Ordering::Relaxed);
+                return Err(e);
+            }
+        }
+        Ok(())
+    })
 }
 
 /// Fits one recording into its row; a panic in the fit (a fault of magcal's) is a row too.
