@@ -1,19 +1,16 @@
 //! `magcal-apply`: calibrate a recording with a parameters file and say how well the parameters fit it.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use magcal_app::apply::check;
 use magcal_app::cli::{WorldFieldOpts, exit, parse};
-use magcal_app::field::resolve;
 use magcal_app::outputs::{Guard, Replace};
-use magcal_app::params::{ParamsError, ParamsFile};
 use magcal_app::summary::check_summary;
 use magcal_app::verdict::Grade;
+use magcal_app::workflow::{Checked, check_file};
 use magcal_app::{say, sayln};
-use magcal_recording::Recording;
 
 /// Check a calibration on another recording: apply a parameters file (magcal-fit --out) and say how well it fits.
 ///
@@ -48,16 +45,6 @@ fn main() -> ExitCode {
     exit("magcal-apply", run(parse()))
 }
 
-/// A recording given where the parameters go, with the order of the arguments; other errors as they are.
-fn swapped_hint(e: ParamsError) -> anyhow::Error {
-    match e {
-        ParamsError::Recording { .. } => anyhow::anyhow!(
-            "{e}: the parameters come first (magcal-apply PARAMS.toml RECORDING.csv)"
-        ),
-        e => e.into(),
-    }
-}
-
 fn run(args: Args) -> anyhow::Result<()> {
     // Neither input is ever overwritten, nor any recording but a calibrated copy, before anything is read.
     Guard::new("magcal-apply")
@@ -69,18 +56,17 @@ fn run(args: Args) -> anyhow::Result<()> {
             Replace::Remakes("calibrated_with", ""),
         )
         .check()?;
-    let params = ParamsFile::read(&args.params).map_err(swapped_hint)?;
-    let rec = Recording::read(&args.recording)?;
+    let Checked {
+        params,
+        rec,
+        field,
+        check: c,
+    } = check_file(
+        &args.params,
+        &args.recording,
+        &args.field.field_args(args.field_ut),
+    )?;
     let name = args.recording.display().to_string();
-    let field = resolve(&args.field.field_args(args.field_ut), &rec.meta)?;
-    // The recording the parameters were fitted on, by its file name.
-    let fitted_on_it = params
-        .recording
-        .as_deref()
-        .map(|r| Path::new(r).file_name())
-        == Some(args.recording.file_name());
-    let c = check(&params, &rec, &field, fitted_on_it)
-        .with_context(|| format!("{name}: cannot apply {}", args.params.display()))?;
     say!("{}", check_summary(&c, &params, &field, &name))?;
     if let Some(path) = &args.out {
         let bad = c

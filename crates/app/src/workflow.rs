@@ -1,18 +1,21 @@
-//! The fit workflow every tool runs, in one place: read the recording (as much of it as the fit needs), leave out
-//! the rows a fault of the sensor's output made, calibrate (checks, the robust base fit, the diagnosis) and grade
-//! the result (the heading figures and the verdict). `magcal` and `magcal-fit` call [`fit_file`]; `magcal-apply`
-//! checks parameters already fitted with [`crate::apply::check`], which locates and leaves out the disturbed spans
-//! the same way.
+//! The workflows the tools run, in one place. [`fit_file`] (`magcal`, `magcal-fit`, `magcal-batch`): read the
+//! recording (as much of it as the fit needs), leave out the rows a fault of the sensor's output made, calibrate
+//! (checks, the robust base fit, the diagnosis) and grade the result (the heading figures and the verdict).
+//! [`check_file`] (`magcal-apply`): read a parameters file and a recording, and check the parameters on it
+//! ([`crate::apply::check`]: the disturbed spans located and left out as a fit leaves them out, then graded).
 
 use std::path::Path;
 
 use magcal_recording::Recording;
 
+use crate::apply::{Check, check};
 use crate::calibrate::{
     CalibrateError, attitude_worth_checking, calibrate, drop_faulty, read_to_calibrate,
 };
+use crate::field::ReferenceField;
 use crate::field::{FieldArgs, resolve};
 use crate::fit::{Calibration, Method};
+use crate::params::{ParamsError, ParamsFile};
 use crate::verdict::{Assessment, assess};
 
 /// What a fit is asked for.
@@ -94,4 +97,50 @@ pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitt
         cal,
         assessment,
     })
+}
+
+/// A parameters file checked on a recording.
+#[derive(Debug)]
+pub struct Checked {
+    /// The parameters.
+    pub params: ParamsFile,
+    /// The recording, as read.
+    pub rec: Recording,
+    /// The world field it was checked against.
+    pub field: ReferenceField,
+    /// The check.
+    pub check: Check,
+}
+
+/// Reads the parameters file at `params` and the recording at `path` and checks the one on the other, against the
+/// world field `field_args` gives (or the recording's metadata). Corrections tied to a recording's clock hold only
+/// on the recording they were fitted on, recognised by its file name.
+pub fn check_file(params: &Path, path: &Path, field_args: &FieldArgs) -> anyhow::Result<Checked> {
+    let params_file = ParamsFile::read(params).map_err(swapped_hint)?;
+    let rec = Recording::read(path)?;
+    let field = resolve(field_args, &rec.meta)?;
+    let fitted_on_it = params_file
+        .recording
+        .as_deref()
+        .map(|r| Path::new(r).file_name())
+        == Some(path.file_name());
+    let check = check(&params_file, &rec, &field, fitted_on_it).map_err(|e| {
+        anyhow::anyhow!("{}: cannot apply {}: {e}", path.display(), params.display())
+    })?;
+    Ok(Checked {
+        params: params_file,
+        rec,
+        field,
+        check,
+    })
+}
+
+/// A recording given where the parameters go, with the order of the arguments; other errors as they are.
+fn swapped_hint(e: ParamsError) -> anyhow::Error {
+    match e {
+        ParamsError::Recording { .. } => anyhow::anyhow!(
+            "{e}: the parameters come first (magcal-apply PARAMS.toml RECORDING.csv)"
+        ),
+        e => e.into(),
+    }
 }
