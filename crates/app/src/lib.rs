@@ -21,6 +21,7 @@ pub mod outputs;
 pub mod params;
 pub mod plots;
 pub mod readings;
+pub mod reference_heading;
 pub mod record;
 pub mod report;
 pub mod seed;
