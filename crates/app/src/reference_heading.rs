@@ -64,7 +64,8 @@ pub fn search(
         Some(r) => reference_heading::estimate(&rec.mag_ut, quat, f, Some(&r.kept)),
         None => reference_heading::estimate_trimmed(&rec.mag_ut, quat, f, None),
     };
-    let Some(mut est) = found.filter(HeadingEstimate::material) else {
+    let noise_ut = |e: &HeadingEstimate| noise.calibrated_rms_ut(&e.a);
+    let Some(mut est) = found.filter(|e| e.material(noise_ut(e))) else {
         return Search::Left(found);
     };
     let mut last = None;
@@ -85,7 +86,7 @@ pub fn search(
             break;
         };
         let settled = angle_between(next.heading_deg, est.heading_deg) <= SETTLED_SE * next.se_deg;
-        let again = !settled && next.material();
+        let again = !settled && next.material(noise_ut(&next));
         last = Some((r, problem.expected_ut.into_owned(), turned, next));
         if !again {
             break;
@@ -93,7 +94,7 @@ pub fn search(
         est = next;
     }
     match last {
-        Some((mut robust, expected_ut, field_ned_ut, est)) if est.material() => {
+        Some((mut robust, expected_ut, field_ned_ut, est)) if est.material(noise_ut(&est)) => {
             reference_heading::widen(&mut robust.fit, &est);
             Search::Turned(Box::new(Turned {
                 robust,
