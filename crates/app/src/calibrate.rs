@@ -215,9 +215,14 @@ fn fit_looks_off(excluded: usize, total: usize, residual_ut: f64, noise_ut: f64)
     100 * excluded > total || residual_ut > 3.0 * noise_ut
 }
 
+/// A vector fit's residual this many times the noise may be a reference whose north is off true north: on a cube24
+/// of each of the five simulated chips, an edge 1° off leaves 1.14–1.39 times the noise (0.5°: 1.04–2.6).
+const HEADING_CHECK_RATIO: f64 = 1.1;
+
 /// Whether a vector fit made without the quaternions (turned into the expected field as they were read, see
 /// [`read_to_calibrate`]) looks off enough to be made again with them kept, so that a reference in another
-/// convention can be recognised ([`convention`]): [`fit_looks_off`], or a residual that is a good part of the field.
+/// convention ([`convention`]) or whose north is not true north ([`reference_heading`]) can be recognised:
+/// [`fit_looks_off`], a residual that is a good part of the field, or one [`HEADING_CHECK_RATIO`] times the noise.
 pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
     matches!(cal.fit, Fit::Vector(_))
         && rec.quat.is_none()
@@ -228,7 +233,8 @@ pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
             cal.samples.total,
             cal.residual_rms_ut,
             cal.noise_floor_ut,
-        ) || cal.fit.reference_off(&cal.field).is_some())
+        ) || cal.residual_rms_ut > HEADING_CHECK_RATIO * cal.noise_floor_ut
+            || cal.fit.reference_off(&cal.field).is_some())
 }
 
 /// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
