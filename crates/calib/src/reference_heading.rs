@@ -39,6 +39,9 @@ pub const MAX_SE_DEG: f64 = 2.0;
 /// (BROAD 29 +1.2° ± 0.8°, BROAD 33 −2.7° ± 0.5°): no property of the reference, and the diagnosis' field direction
 /// models it.
 pub const EXPLAINED_SHARE: f64 = 0.5;
+/// Samples the heading is found from, at most: whole chunks spread over the recording (at 10⁶ samples a fifth of
+/// them, 9 ms of CPU instead of 43; the heading's standard error is of the samples used).
+pub const MOST_SAMPLES: usize = 200_000;
 /// Blocks of time of the jackknife.
 pub const JACKKNIFE_BLOCKS: usize = 20;
 /// The jackknife is made when every block holds at least this many samples.
@@ -254,8 +257,8 @@ fn wrap(a: f64) -> f64 {
 
 /// The heading of the reference against which the readings `raw_ut` fit best, with the attitude `quat` (sensor →
 /// NED) and the world field `field_ned_ut`, on the samples `kept` (all when `None`; samples with a non-finite
-/// reading or attitude are left out). `None` when fewer samples than parameters remain or the readings span no
-/// volume.
+/// reading or attitude are left out; at most about [`MOST_SAMPLES`] of them, in whole chunks spread over the
+/// recording). `None` when fewer samples than parameters remain or the readings span no volume.
 pub fn estimate(
     raw_ut: &[[f64; 3]],
     quat: &[[f64; 4]],
@@ -265,8 +268,10 @@ pub fn estimate(
     let n = raw_ut.len().min(quat.len());
     let [f_n, f_e, f_d] = field_ned_ut;
     let basis = [[f_n, f_e, 0.0], [f_e, -f_n, 0.0], [0.0, 0.0, f_d]];
+    let stride = n.div_ceil(MOST_SAMPLES).max(1);
     let usable = |i: usize| {
-        kept.is_none_or(|kept| kept[i])
+        (i / chunks::CHUNK).is_multiple_of(stride)
+            && kept.is_none_or(|kept| kept[i])
             && raw_ut[i].iter().chain(&quat[i]).all(|v| v.is_finite())
     };
     let bounds = block_bounds(n, usable);
