@@ -161,7 +161,12 @@ struct Args {
     realtime: bool,
     /// sim: the jig's edge (against which the cube poses are taken) points this many degrees east of true north
     /// (negative: west), as when it was lined up with a compass or by eye.
-    #[arg(allow_negative_numbers = true, long, default_value_t = 0.0, value_name = "DEG")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 0.0,
+        value_name = "DEG"
+    )]
     sim_jig_heading: f64,
     /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against (a new file, or
     /// with --force any file but a recording).

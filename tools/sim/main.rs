@@ -77,7 +77,12 @@ struct Args {
     effect_rms: Vec<String>,
     /// Where the attitude reference's north (a cube jig's edge, a capture volume's axes) points, degrees east of
     /// true north (negative: west): the attitude is recorded against it, the sensor turns in the true field.
-    #[arg(allow_negative_numbers = true, long, default_value_t = 0.0, value_name = "DEG")]
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 0.0,
+        value_name = "DEG"
+    )]
     reference_heading: f64,
     /// Write the truth (A, b, noise, effects as specs) to this TOML file.
     #[arg(long, value_name = "TRUTH.toml")]

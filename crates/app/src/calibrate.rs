@@ -21,11 +21,11 @@ use crate::field::ReferenceField;
 use crate::fit::{
     Calibration, Fit, Method, ReferenceDoubt, ReferenceHeading, RobustSummary, SampleCounts,
 };
-use crate::reference_heading::{self, Search};
 use crate::readings::{
     MissingReference, calibrate_row, expected_field, noise_measurable, noise_source,
     radial_floor_ut,
 };
+use crate::reference_heading::{self, Search};
 
 /// The attitude in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds), then,
 /// if the fit `looks_off`, the reference `expected_ut` shifted in time; each fitted from the samples the robust fit
@@ -438,7 +438,9 @@ fn vector_base(
     let first = robust::fit(&problem, rec.t_s.as_deref());
     let expected = &problem.expected_ut;
     match reference_heading::search(rec, field, &noise, first.as_ref().ok()) {
-        Search::Turned(turned) => return Ok(turned_base(rec, field, expected, first, *turned, noise)),
+        Search::Turned(turned) => {
+            return Ok(turned_base(rec, field, expected, first, *turned, noise));
+        }
         Search::Left(Some(e)) if !e.determined() => {
             if let Ok(r) = &first
                 && looks_off(r, &noise)
@@ -449,7 +451,8 @@ fn vector_base(
         Search::Left(_) | Search::NoAttitude => {}
     }
     let r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-    let reference = reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
+    let reference =
+        reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
     Ok(vector_base_of(rec, expected, r, noise, reference, None))
 }
 
@@ -479,8 +482,9 @@ fn turned_base(
     let turned_off = looks_off(&turned.robust, &noise);
     if let Ok(r) = first {
         let worse = turned.robust.sigma_ut > r.sigma_ut;
-        let doubt = (worse || turned_off)
-            .then(|| reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise)));
+        let doubt = (worse || turned_off).then(|| {
+            reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise))
+        });
         if worse || doubt.as_ref().is_some_and(ReferenceDoubt::is_some) {
             return vector_base_of(rec, expected, r, noise, doubt.unwrap_or_default(), None);
         }
@@ -996,7 +1000,12 @@ fn diagnosis_input<'a>(
     cal: &'a Calibration,
     kept: &'a [bool],
 ) -> Result<DiagnosisInput<'a>, CalibrateError> {
-    let reference = match (&cal.fit, &rec.ref_ut, &rec.quat, cal.fitted_field().vector()) {
+    let reference = match (
+        &cal.fit,
+        &rec.ref_ut,
+        &rec.quat,
+        cal.fitted_field().vector(),
+    ) {
         (Fit::Vector(_), Some(r), _, _) => Reference::Field { expected_ut: r },
         (Fit::Vector(_), None, Some(q), Some(f)) => Reference::Attitude {
             quat: q,

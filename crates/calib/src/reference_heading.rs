@@ -471,7 +471,10 @@ mod tests {
             assert!(est.se_deg < 0.05, "{est:?}");
             assert!((est.rms_ut / 0.3 - 1.0).abs() < 0.1, "{est:?}");
             assert_eq!(est.material(0.3), heading_deg != 0.0, "{est:?}");
-            assert!(heading_deg == 0.0 || est.explained_share(0.3) > 0.95, "{est:?}");
+            assert!(
+                heading_deg == 0.0 || est.explained_share(0.3) > 0.95,
+                "{est:?}"
+            );
             for j in 0..3 {
                 assert!((est.b_ut[j] - B[j]).abs() < 0.1, "{est:?}");
                 for k in 0..3 {
@@ -522,7 +525,10 @@ mod tests {
             m[2] += 1.5 * (0.7 * t + 1.0).cos();
         }
         let est = estimate(&raw, &quat, FIELD, None).unwrap();
-        assert!(est.heading_deg.abs() > SIGNIFICANT_SE * est.se_deg, "{est:?}");
+        assert!(
+            est.heading_deg.abs() > SIGNIFICANT_SE * est.se_deg,
+            "{est:?}"
+        );
         assert!(est.explained_share(0.3) < EXPLAINED_SHARE, "{est:?}");
         assert!(!est.material(0.3), "{est:?}");
     }
