@@ -439,7 +439,7 @@ fn vector_base(
     let expected = &problem.expected_ut;
     match reference_heading::search(rec, field, &noise, first.as_ref().ok()) {
         Search::Turned(turned) => {
-            return Ok(turned_base(rec, field, expected, first, *turned, noise));
+            return Ok(turned_base(rec, field, expected, first, turned, noise));
         }
         Search::Left(Some(e)) if !e.determined() => {
             if let Ok(r) = &first

@@ -26,6 +26,10 @@ pub const MAX_ROUNDS: usize = 3;
 const SETTLED_SE: f64 = 0.1;
 
 /// What the search for the reference's heading found.
+#[allow(
+    clippy::large_enum_variant,
+    reason = "one per calibration; boxing buys nothing"
+)]
 #[derive(Debug)]
 pub enum Search {
     /// No attitude with a world field vector: there is nothing to turn.
@@ -34,7 +38,7 @@ pub enum Search {
     /// given stands.
     Left(Option<HeadingEstimate>),
     /// A heading fitted.
-    Turned(Box<Turned>),
+    Turned(Turned),
 }
 
 /// The robust fit against the field turned by the reference's heading.
@@ -96,7 +100,7 @@ pub fn search(
     match last {
         Some((mut robust, expected_ut, field_ned_ut, est)) if est.material(noise_ut(&est)) => {
             reference_heading::widen(&mut robust.fit, &est);
-            Search::Turned(Box::new(Turned {
+            Search::Turned(Turned {
                 robust,
                 expected_ut,
                 heading: ReferenceHeading {
@@ -104,7 +108,7 @@ pub fn search(
                     field_ned_ut,
                     jig: rec.meta.routine.as_deref() == Some("cube24"),
                 },
-            }))
+            })
         }
         Some((.., est)) => Search::Left(Some(est)),
         None => Search::Left(Some(est)),
