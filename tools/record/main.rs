@@ -159,6 +159,15 @@ struct Args {
     /// sim: run at the pace of the wall clock (to watch it) instead of as fast as possible.
     #[arg(long)]
     realtime: bool,
+    /// sim: the jig's edge (against which the cube poses are taken) points this many degrees east of true north
+    /// (negative: west), as when it was lined up with a compass or by eye.
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 0.0,
+        value_name = "DEG"
+    )]
+    sim_jig_heading: f64,
     /// sim: write the simulated sensor's true A and b (TOML) here, to check a fit against (a new file, or
     /// with --force any file but a recording).
     #[arg(long, value_name = "TRUTH.toml")]
@@ -172,8 +181,15 @@ fn main() -> ExitCode {
 fn run(args: Args) -> anyhow::Result<()> {
     let spec: DeviceSpec = args.device.parse()?;
     let routine = args.routine;
-    if !spec.is_sim() && (args.truth.is_some() || !args.sim_fault.is_empty() || args.realtime) {
-        bail!("--truth, --sim-fault and --realtime are for sim devices, not {spec}");
+    if !spec.is_sim()
+        && (args.truth.is_some()
+            || !args.sim_fault.is_empty()
+            || args.realtime
+            || args.sim_jig_heading != 0.0)
+    {
+        bail!(
+            "--truth, --sim-fault, --sim-jig-heading and --realtime are for sim devices, not {spec}"
+        );
     }
     let mut opts = RecordOptions::new(routine, args.out.clone());
     opts.force = args.force;
@@ -188,6 +204,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         sim_seed: args.sim_seed,
         sim_faults: args.sim_fault.clone(),
         sim_paced: args.realtime,
+        sim_jig_heading_deg: args.sim_jig_heading,
         idle_timeout_s: args.idle_timeout,
     };
     // Everything is checked before anything is opened or written.

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::{Parser, ValueEnum};
 use magcal_app::cli::{excerpt, exit, parse, parse_floats};
+use magcal_app::device::within;
 use magcal_app::effect_spec::{self, Defaults};
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::sim_options::{MAX_NOISE_UT, SimNumbers};
@@ -74,6 +75,15 @@ struct Args {
     /// axis over the recording: ID:SIZE (repeatable).
     #[arg(long, value_name = "ID:SIZE_UT")]
     effect_rms: Vec<String>,
+    /// Where the attitude reference's north (a cube jig's edge, a capture volume's axes) points, degrees east of
+    /// true north (negative: west): the attitude is recorded against it, the sensor turns in the true field.
+    #[arg(
+        allow_negative_numbers = true,
+        long,
+        default_value_t = 0.0,
+        value_name = "DEG"
+    )]
+    reference_heading: f64,
     /// Write the truth (A, b, noise, effects as specs) to this TOML file.
     #[arg(long, value_name = "TRUTH.toml")]
     truth: Option<PathBuf>,
@@ -148,6 +158,13 @@ fn run(args: Args) -> anyhow::Result<()> {
         currents: &args.current,
     }
     .check()?;
+    within(
+        "--reference-heading",
+        args.reference_heading,
+        -180.0,
+        180.0,
+        "°",
+    )?;
     let trajectory = match args.routine {
         Routine::Tumble => Trajectory::Tumble {
             duration_s: args.duration,
@@ -181,6 +198,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         Reference::None => AttitudeOutput::None,
     };
     s.gyro_noise_rad_s = args.gyro_noise;
+    s.reference_heading_deg = args.reference_heading;
     if let Some([start_c, warmup_c, tau_s, wobble_c, wobble_period_s]) = args.temperature {
         s.temperature = Some(TemperatureProfile {
             start_c,

@@ -11,18 +11,21 @@ use magcal_calib::coverage::CoverageError;
 use magcal_calib::faults;
 use magcal_calib::robust;
 use magcal_calib::scalar::{self, ScalarProblem};
-use magcal_calib::vector::VectorProblem;
+use magcal_calib::vector::{VectorFit, VectorProblem};
 use magcal_calib::{FitError, Frame, Model};
 use magcal_recording::{AttitudeToReference, Metadata, ReadOptions, Recording};
 use std::path::Path;
 
 use crate::checks;
 use crate::field::ReferenceField;
-use crate::fit::{Calibration, Fit, Method, ReferenceDoubt, RobustSummary, SampleCounts};
+use crate::fit::{
+    Calibration, Fit, Method, ReferenceDoubt, ReferenceHeading, RobustSummary, SampleCounts,
+};
 use crate::readings::{
     MissingReference, calibrate_row, expected_field, noise_measurable, noise_source,
     radial_floor_ut,
 };
+use crate::reference_heading::{self, Search};
 
 /// The attitude in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds), then,
 /// if the fit `looks_off`, the reference `expected_ut` shifted in time; each fitted from the samples the robust fit
@@ -212,9 +215,14 @@ fn fit_looks_off(excluded: usize, total: usize, residual_ut: f64, noise_ut: f64)
     100 * excluded > total || residual_ut > 3.0 * noise_ut
 }
 
+/// A vector fit's residual this many times the noise may be a reference whose north is off true north: on a cube24
+/// of each of the five simulated chips, an edge 1° off leaves 1.14–1.39 times the noise (0.5°: 1.04–2.6).
+const HEADING_CHECK_RATIO: f64 = 1.1;
+
 /// Whether a vector fit made without the quaternions (turned into the expected field as they were read, see
 /// [`read_to_calibrate`]) looks off enough to be made again with them kept, so that a reference in another
-/// convention can be recognised ([`convention`]): [`fit_looks_off`], or a residual that is a good part of the field.
+/// convention ([`convention`]) or whose north is not true north ([`reference_heading`]) can be recognised:
+/// [`fit_looks_off`], a residual that is a good part of the field, or one [`HEADING_CHECK_RATIO`] times the noise.
 pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
     matches!(cal.fit, Fit::Vector(_))
         && rec.quat.is_none()
@@ -225,7 +233,8 @@ pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
             cal.samples.total,
             cal.residual_rms_ut,
             cal.noise_floor_ut,
-        ) || cal.fit.reference_off(&cal.field).is_some())
+        ) || cal.residual_rms_ut > HEADING_CHECK_RATIO * cal.noise_floor_ut
+            || cal.fit.reference_off(&cal.field).is_some())
 }
 
 /// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
@@ -325,7 +334,7 @@ pub fn calibrate(
     warnings.extend(time_unit_mismatch(rec));
     let mut notes = Vec::new();
     let base = match method {
-        Method::Vector => vector_base(rec, &field)?,
+        Method::Vector => vector_base(rec, &field, &mut notes)?,
         _ => scalar_base(rec, &field, &mut notes, &mut warnings)?,
     };
     let mut cal = measured(rec, base, field, notes, warnings)?;
@@ -407,11 +416,18 @@ struct Base {
     /// The coverage of the sphere of directions by the rows the fit used.
     rows_coverage: f64,
     reference: ReferenceDoubt,
+    /// The reference's heading, when fitted (vector method).
+    heading: Option<ReferenceHeading>,
 }
 
-/// The vector method's robust base fit against the expected field per row, and the reference checked for another
-/// convention or clock when the fit looks off.
-fn vector_base(rec: &Recording, field: &ReferenceField) -> Result<Base, CalibrateError> {
+/// The vector method's robust base fit against the expected field per row, with the reference's heading found and
+/// fitted when it is material ([`reference_heading`]), and the reference checked for another convention or clock
+/// when the fit looks off; what the heading search says to know goes to `notes`.
+fn vector_base(
+    rec: &Recording,
+    field: &ReferenceField,
+    notes: &mut Vec<String>,
+) -> Result<Base, CalibrateError> {
     let expected = expected_field(rec, field)?;
     let noise = noise::estimate(&rec.mag_ut, Some(&expected));
     let problem = VectorProblem {
@@ -419,31 +435,103 @@ fn vector_base(rec: &Recording, field: &ReferenceField) -> Result<Base, Calibrat
         expected_ut: expected,
         raw_noise_var_ut2: noise.floor_ut.map(|f| f * f),
     };
-    let r = robust::fit(&problem, rec.t_s.as_deref())
-        .map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-    // The rows the fit used: kept, with a reference.
-    let e = &problem.expected_ut;
-    let rows_coverage = fraction_of(e.len(), |i| {
-        (r.kept[i] && e[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
-    });
-    // The search for a reference out of step is not made for a fit that fits (it takes about as long as the fit of
-    // 10⁶ rows).
-    let excluded = r.kept.iter().filter(|k| !**k).count();
-    let looks_off = fit_looks_off(
-        excluded,
+    let first = robust::fit(&problem, rec.t_s.as_deref());
+    let expected = &problem.expected_ut;
+    match reference_heading::search(rec, field, &noise, first.as_ref().ok()) {
+        Search::Turned(turned) => {
+            return Ok(turned_base(rec, field, expected, first, turned, noise));
+        }
+        Search::Left(Some(e)) if !e.determined() => {
+            if let Ok(r) = &first
+                && looks_off(r, &noise)
+            {
+                notes.push(reference_heading::undetermined_note(&e));
+            }
+        }
+        Search::Left(_) | Search::NoAttitude => {}
+    }
+    let r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+    let reference =
+        reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
+    Ok(vector_base_of(rec, expected, r, noise, reference, None))
+}
+
+/// Whether a robust vector fit looks off ([`fit_looks_off`]) against the raw readings' `noise`. The search for a
+/// reference out of step is not made for a fit that fits (it takes about as long as the fit of 10⁶ rows).
+fn looks_off(r: &robust::Robust<VectorFit>, noise: &NoiseFloor) -> bool {
+    fit_looks_off(
+        r.excluded(),
         r.kept.len(),
         rms3(r.fit.residual_rms_ut),
         rms3(noise.floor_ut),
+    )
+}
+
+/// The base of the fit against the field turned by the reference's heading, or of the fit against the field as
+/// given (`first`, against `expected`) when that one is no worse (its residual's scale) or, the turned fit still
+/// looking off, the reference as given is found in another convention or out of step: a heading that does not
+/// explain the mismatch is not fitted.
+fn turned_base(
+    rec: &Recording,
+    field: &ReferenceField,
+    expected: &[[f64; 3]],
+    first: Result<robust::Robust<VectorFit>, FitError>,
+    turned: reference_heading::Turned,
+    noise: NoiseFloor,
+) -> Base {
+    let turned_off = looks_off(&turned.robust, &noise);
+    if let Ok(r) = first {
+        let worse = turned.robust.sigma_ut > r.sigma_ut;
+        let doubt = (worse || turned_off).then(|| {
+            reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise))
+        });
+        if worse || doubt.as_ref().is_some_and(ReferenceDoubt::is_some) {
+            return vector_base_of(rec, expected, r, noise, doubt.unwrap_or_default(), None);
+        }
+    }
+    let in_reference = ReferenceField::Vector {
+        field_ned_ut: turned.heading.field_ned_ut,
+        source: field.source().to_owned(),
+    };
+    let reference = reference_out_of_convention(
+        rec,
+        &turned.expected_ut,
+        &in_reference,
+        &turned.robust.kept,
+        turned_off,
     );
-    let reference = reference_out_of_convention(rec, e, field, &r.kept, looks_off);
-    Ok(Base {
+    vector_base_of(
+        rec,
+        &turned.expected_ut,
+        turned.robust,
+        noise,
+        reference,
+        Some(turned.heading),
+    )
+}
+
+/// The base of a robust vector fit `r` against the expected field `expected`, with what was found of the reference.
+fn vector_base_of(
+    rec: &Recording,
+    expected: &[[f64; 3]],
+    r: robust::Robust<VectorFit>,
+    noise: NoiseFloor,
+    reference: ReferenceDoubt,
+    heading: Option<ReferenceHeading>,
+) -> Base {
+    // The rows the fit used: kept, with a reference.
+    let rows_coverage = fraction_of(expected.len(), |i| {
+        (r.kept[i] && expected[i].iter().all(|v| v.is_finite())).then_some(rec.mag_ut[i])
+    });
+    Base {
         used: r.fit.n,
         fit: Fit::Vector(r.fit),
         noise,
         robust: RobustSummary::of(r.kept, r.sigma_ut, rec, false),
         rows_coverage,
         reference,
-    })
+        heading,
+    }
 }
 
 /// The scalar method's robust base fit against the field's magnitude (given, or the raw ellipsoid's mean radius),
@@ -487,6 +575,7 @@ fn scalar_base(
         robust: RobustSummary::of(r.kept, r.sigma_ut, rec, true),
         rows_coverage,
         reference: ReferenceDoubt::default(),
+        heading: None,
     })
 }
 
@@ -506,6 +595,7 @@ fn measured(
         robust,
         rows_coverage,
         reference,
+        heading,
     } = base;
     if let Some(note) = robust.note() {
         notes.push(note);
@@ -556,6 +646,7 @@ fn measured(
         diagnosis: None,
         diagnosis_failed: None,
         reference,
+        reference_heading: heading,
     })
 }
 
@@ -882,7 +973,7 @@ fn diagnose_refitted(
             || {
                 Some(VectorProblem {
                     raw_ut: Cow::Borrowed(&rec.mag_ut),
-                    expected_ut: expected_field(rec, &cal.field).ok()?,
+                    expected_ut: expected_field(rec, &cal.fitted_field()).ok()?,
                     raw_noise_var_ut2: noise_var,
                 })
             },
@@ -909,7 +1000,12 @@ fn diagnosis_input<'a>(
     cal: &'a Calibration,
     kept: &'a [bool],
 ) -> Result<DiagnosisInput<'a>, CalibrateError> {
-    let reference = match (&cal.fit, &rec.ref_ut, &rec.quat, cal.field.vector()) {
+    let reference = match (
+        &cal.fit,
+        &rec.ref_ut,
+        &rec.quat,
+        cal.fitted_field().vector(),
+    ) {
         (Fit::Vector(_), Some(r), _, _) => Reference::Field { expected_ut: r },
         (Fit::Vector(_), None, Some(q), Some(f)) => Reference::Attitude {
             quat: q,

@@ -191,12 +191,15 @@ pub struct OpenOptions {
     pub sim_faults: Vec<Fault>,
     /// `sim`: keep virtual time to the wall clock instead of running as fast as possible.
     pub sim_paced: bool,
+    /// `sim`: where the bench's jig edge (the virtual hand's north) points, degrees east of true north.
+    pub sim_jig_heading_deg: f64,
     /// `serial`: no sample for this long is an error naming the likely cause, s.
     pub idle_timeout_s: f64,
 }
 
 impl Default for OpenOptions {
-    /// 100 Hz, the driver's range, seed 1, no faults, as fast as possible, 5 s serial idle timeout.
+    /// 100 Hz, the driver's range, seed 1, no faults, as fast as possible, the jig on true north, 5 s serial idle
+    /// timeout.
     fn default() -> OpenOptions {
         OpenOptions {
             rate_hz: 100.0,
@@ -204,6 +207,7 @@ impl Default for OpenOptions {
             sim_seed: 1,
             sim_faults: Vec::new(),
             sim_paced: false,
+            sim_jig_heading_deg: 0.0,
             idle_timeout_s: 5.0,
         }
     }
@@ -253,7 +257,8 @@ pub fn within(option: &str, value: f64, min: f64, max: f64, unit: &str) -> Resul
 }
 
 impl OpenOptions {
-    /// Checks the options for `spec` before anything is opened: rate, range and idle timeout in their ranges, and
+    /// Checks the options for `spec` before anything is opened: rate, range, idle timeout and jig heading in their
+    /// ranges, and
     /// the rate within a factor of ten of what the chip offers.
     pub fn check(&self, spec: &DeviceSpec) -> Result<(), BadOption> {
         positive_at_most("--rate", self.rate_hz, MAX_RATE_HZ, "Hz")?;
@@ -265,6 +270,13 @@ impl OpenOptions {
             self.idle_timeout_s,
             MAX_IDLE_TIMEOUT_S,
             "s",
+        )?;
+        within(
+            "--sim-jig-heading",
+            self.sim_jig_heading_deg,
+            -180.0,
+            180.0,
+            "°",
         )?;
         if let Some(chip) = spec.chip() {
             let rates = chip.info().rates_hz;
@@ -292,6 +304,7 @@ pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, So
             opts.sim_paced,
             opts.rate_hz,
             opts.range_ut,
+            opts.sim_jig_heading_deg,
         )?)),
         DeviceSpec::I2c {
             path,

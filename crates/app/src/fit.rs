@@ -7,6 +7,7 @@ use magcal_calib::convention;
 use magcal_calib::diagnosis::Diagnosis;
 use magcal_calib::fit::CalibrationFit;
 use magcal_calib::noise::NoiseFloor;
+use magcal_calib::reference_heading::HeadingEstimate;
 use magcal_calib::robust;
 use magcal_calib::scalar::ScalarFit;
 use magcal_calib::vector::VectorFit;
@@ -100,6 +101,21 @@ pub struct Calibration {
     /// What the reference was found to be instead of what it was taken for (a warning says so; the fit is then no
     /// calibration).
     pub reference: ReferenceDoubt,
+    /// The reference's north, found off true north and fitted: the readings were fitted against the field turned
+    /// into its axes ([`Calibration::fitted_field`]).
+    pub reference_heading: Option<ReferenceHeading>,
+}
+
+/// An attitude reference whose north is not true north (a cube jig's edge, a capture volume's axes), fitted
+/// ([`magcal_calib::reference_heading`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceHeading {
+    /// Where its north points, with the standard error, from the rows the fit kept.
+    pub estimate: HeadingEstimate,
+    /// The world field in its axes (the field given turned by the heading), NED, µT.
+    pub field_ned_ut: [f64; 3],
+    /// The reference is the cube jig (the recording's routine is `cube24`): its north is the jig's edge.
+    pub jig: bool,
 }
 
 /// What a vector fit's reference may be instead of what it was taken for ([`convention`]).
@@ -174,6 +190,21 @@ impl Calibration {
         match &self.diagnosis {
             Some(d) => d.model,
             None => self.base_model(),
+        }
+    }
+
+    /// The field the readings were fitted against: the field given, turned into the reference's axes when its north
+    /// was found off true north ([`Calibration::reference_heading`]).
+    pub fn fitted_field(&self) -> ReferenceField {
+        match (&self.reference_heading, &self.field) {
+            (Some(h), ReferenceField::Vector { source, .. }) => ReferenceField::Vector {
+                field_ned_ut: h.field_ned_ut,
+                source: format!(
+                    "{source}, turned {:.2}° about the vertical into the reference's axes",
+                    -h.estimate.heading_deg
+                ),
+            },
+            _ => self.field.clone(),
         }
     }
 

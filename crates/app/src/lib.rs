@@ -22,6 +22,7 @@ pub mod params;
 pub mod plots;
 pub mod readings;
 pub mod record;
+pub mod reference_heading;
 pub mod report;
 pub mod seed;
 pub mod sim_options;

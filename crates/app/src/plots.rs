@@ -622,7 +622,7 @@ impl Series {
         let cal_ut = |i: usize| frames::add(frames::mat_vec(&model.a, rec.mag_ut[i]), model.b_ut);
         let t = |i: usize| rec.t_s.as_ref().map_or(0.0, |t| t[i]);
         let (mut t_s, mut direction, mut base) = (Vec::new(), Vec::new(), Vec::new());
-        match (&cal.fit, expected_field(rec, &cal.field)) {
+        match (&cal.fit, expected_field(rec, &cal.fitted_field())) {
             (Fit::Vector(_), Ok(expected)) => {
                 for (i, e) in expected.iter().enumerate() {
                     if !e.iter().all(|v| v.is_finite()) {

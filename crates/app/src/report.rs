@@ -48,6 +48,10 @@ pub struct Report {
     /// calibration).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_offset: Option<OffsetReport>,
+    /// Where the attitude reference's north points, when found off true north and fitted (absent otherwise; the
+    /// calibration does not depend on it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_heading: Option<ReferenceHeadingReport>,
     /// The heading error before and after, when the local field's direction is known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heading: Option<HeadingReport>,
@@ -111,6 +115,42 @@ pub struct OffsetReport {
     pub explained: f64,
     /// The share as the file gives the reference.
     pub given_explained: f64,
+}
+
+/// The attitude reference's north, found off true north and fitted (`magcal_app::reference_heading`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceHeadingReport {
+    /// Where its north points, degrees east of true north (negative: west), in (−180, 180].
+    pub heading_deg: f64,
+    /// Its standard error, degrees.
+    pub se_deg: f64,
+    /// The declination of the field given, degrees east.
+    pub declination_deg: f64,
+    /// Whether the heading is the declination within its uncertainty: the reference was lined up with magnetic
+    /// north (a compass).
+    pub magnetic_north: bool,
+    /// The field given turned into the reference's axes, against which the readings were fitted, NED, µT.
+    pub field_in_reference_ned_ut: [f64; 3],
+    /// The reference is the cube jig (`routine: cube24`): its north is the jig's edge.
+    pub jig: bool,
+}
+
+impl ReferenceHeadingReport {
+    /// The reference's heading of a calibration, when fitted.
+    fn of(cal: &Calibration) -> Option<ReferenceHeadingReport> {
+        let h = cal.reference_heading.as_ref()?;
+        Some(ReferenceHeadingReport {
+            heading_deg: h.estimate.heading_deg,
+            se_deg: h.estimate.se_deg,
+            declination_deg: cal
+                .field
+                .vector()
+                .map_or(f64::NAN, |f| magcal_calib::frames::field_angles(f).0),
+            magnetic_north: crate::reference_heading::on_magnetic_north(h, &cal.field),
+            field_in_reference_ned_ut: h.field_ned_ut,
+            jig: h.jig,
+        })
+    }
 }
 
 /// The verdict.
@@ -633,6 +673,7 @@ impl Report {
                 explained: o.shifted.explained,
                 given_explained: o.given.explained,
             }),
+            reference_heading: ReferenceHeadingReport::of(cal),
             heading: None,
             verdict: None,
         }

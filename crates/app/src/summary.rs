@@ -182,6 +182,9 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
         let _ = writeln!(out, "  WARNING: {w}");
     }
     out += &field_line(&cal.field);
+    if let Some(h) = &cal.reference_heading {
+        out += &crate::reference_heading::line(h, &cal.field);
+    }
     out += &model_lines(cal);
     out += &residual_lines(cal);
     for note in &cal.notes {

@@ -271,6 +271,16 @@ fn declination_off_deg(d: &Diagnosis) -> Option<f64> {
     })
 }
 
+/// The declination a heading computed with the field given would be off by, degrees, when the reference's north was
+/// found off true north by more than [`GOOD_DEG`] and not on magnetic north: the recording cannot tell a capture
+/// volume turned from a declination given wrong ([`crate::reference_heading::declination_off_deg`]). Not for the
+/// cube jig, whose edge is lined up by hand with whatever is at hand: its heading is the likely story, and the summary
+/// names the other.
+fn heading_off_deg(cal: &Calibration) -> Option<f64> {
+    let h = cal.reference_heading.as_ref().filter(|h| !h.jig)?;
+    crate::reference_heading::declination_off_deg(h, &cal.field).filter(|d| d.abs() > GOOD_DEG)
+}
+
 /// The magnitude of the field in the model's calibrated units, µT: the field vector's, the scalar fit's target, or
 /// the mean of the expected field (`rx,ry,rz`).
 fn model_field_ut(cal: &Calibration, rec: &Recording) -> Option<f64> {
@@ -374,7 +384,11 @@ fn hints(cal: &Calibration, rec: &Recording) -> Hints {
         coverage: cal.sphere_coverage,
         diagnosis_skipped: cal.diagnosis.is_none() && cal.diagnosis_failed.is_none(),
         noise_unmeasured: !cal.noise_measured,
-        declination_off_deg: cal.diagnosis.as_ref().and_then(declination_off_deg),
+        declination_off_deg: cal
+            .diagnosis
+            .as_ref()
+            .and_then(declination_off_deg)
+            .or_else(|| heading_off_deg(cal)),
         excluded_share: cal.samples.excluded as f64
             / (cal.samples.used + cal.samples.excluded).max(1) as f64,
     }

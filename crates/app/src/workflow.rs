@@ -61,7 +61,8 @@ pub enum NotFitted {
 ///
 /// Without the diagnosis the quaternions are turned into the expected field as the rows are read
 /// ([`read_to_calibrate`]); a fit that looks off is then made again with them kept, and replaces the first if their
-/// convention is not magcal's ([`attitude_worth_checking`]).
+/// convention is not magcal's or their north is not true north ([`attitude_worth_checking`],
+/// [`crate::reference_heading`]).
 pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitted> {
     let field_args = request.field;
     let (mut rec, field) = read_to_calibrate(path, request.method, request.diagnose, |meta| {
@@ -85,7 +86,7 @@ pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitt
         .map_err(NotFitted::Unread)?;
         let full_faulty = drop_faulty(&mut full);
         if let Ok(again) = calibrate(&full, request.method, field, false)
-            && again.reference.convention.is_some()
+            && (again.reference.convention.is_some() || again.reference_heading.is_some())
         {
             (rec, cal, faulty) = (full, again, full_faulty);
         }

@@ -34,6 +34,8 @@ pub mod fit;
 #[cfg(feature = "std")]
 pub mod noise;
 #[cfg(feature = "std")]
+pub mod reference_heading;
+#[cfg(feature = "std")]
 pub mod robust;
 #[cfg(feature = "std")]
 pub mod scalar;

@@ -26,7 +26,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::environment::TemperatureProfile;
-use crate::scenario::SimError;
+use crate::scenario::{SimError, against_true_north};
 use crate::sensor::SensorTruth;
 use crate::stream_rng;
 use crate::trajectory::{Pose, TUMBLE_SUBSTEPS, TumbleRate, random_attitude, to_array};
@@ -118,6 +118,9 @@ pub struct BenchConfig {
     pub noise_ut: [f64; 3],
     /// Seed of the hand's random motion (stream 1) and of the noise (stream 3).
     pub seed: u64,
+    /// Where the jig's edge (the hand's north) points, degrees east of true north: the hand's attitudes, and the
+    /// cube poses the recorder writes, are against it; the sensor turns in the true field.
+    pub reference_heading_deg: f64,
 }
 
 impl BenchConfig {
@@ -130,6 +133,7 @@ impl BenchConfig {
             temperature: None,
             noise_ut: [0.0; 3],
             seed,
+            reference_heading_deg: 0.0,
         }
     }
 }
@@ -139,7 +143,8 @@ impl BenchConfig {
 pub struct BenchSample {
     /// Time, s.
     pub t_s: f64,
-    /// Attitude `[w, x, y, z]`, sensor → NED (for the jig: jig → NED).
+    /// Attitude `[w, x, y, z]`, sensor → NED (for the jig: jig → NED), against the hand's north (see
+    /// [`BenchConfig::reference_heading_deg`]).
     pub quat: [f64; 4],
     /// Angular rate in sensor axes, rad/s.
     pub omega_rad_s: [f64; 3],
@@ -366,7 +371,7 @@ impl Bench {
             self.config.field_ned_ut,
             &self.config.effects,
             &self.forward,
-            &pose,
+            &against_true_north(&pose, self.config.reference_heading_deg),
             temp_c,
             &[],
         );

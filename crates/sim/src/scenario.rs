@@ -2,6 +2,7 @@
 
 use magcal_calib::effects::{Effect, EffectId};
 use magcal_calib::frames;
+use magcal_calib::reference_heading;
 use magcal_recording::{Layout, Metadata, Recording, Sample};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand_distr::{Distribution, StandardNormal};
@@ -11,7 +12,7 @@ use crate::chips::ChipModel;
 use crate::environment::{CurrentProfile, TemperatureProfile};
 use crate::sensor::SensorTruth;
 use crate::stream_rng;
-use crate::trajectory::Trajectory;
+use crate::trajectory::{Pose, Trajectory};
 
 /// Which attitude reference the recording carries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -57,6 +58,9 @@ pub struct Scenario {
     pub attitude_noise_deg: f64,
     /// Record the gyro, with this white noise, rad/s.
     pub gyro_noise_rad_s: Option<f64>,
+    /// Where the attitude reference's north points, degrees east of true north (a cube jig's edge, a capture
+    /// volume's axes): the attitude is recorded against it, the sensor turns in the true field.
+    pub reference_heading_deg: f64,
 }
 
 impl Scenario {
@@ -80,6 +84,7 @@ impl Scenario {
             attitude: AttitudeOutput::Quaternion,
             attitude_noise_deg: 0.0,
             gyro_noise_rad_s: None,
+            reference_heading_deg: 0.0,
         }
     }
 }
@@ -218,7 +223,7 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
             s.field_ned_ut,
             &s.effects,
             &forward,
-            pose,
+            &against_true_north(pose, s.reference_heading_deg),
             temp_c,
             &currents_a,
         );
@@ -252,6 +257,18 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
             .map_err(|e| SimError::Layout(e.to_string()))?;
     }
     Ok(SimRun { recording, truth })
+}
+
+/// `pose`, whose attitude is against a reference with its north `heading_deg` east of true north, against true
+/// north.
+pub(crate) fn against_true_north(pose: &Pose, heading_deg: f64) -> Pose {
+    if heading_deg == 0.0 {
+        return *pose;
+    }
+    Pose {
+        quat: reference_heading::true_attitude(pose.quat, heading_deg),
+        ..*pose
+    }
 }
 
 /// The attitude as the reference records it: the truth turned by a small random rotation.
@@ -315,6 +332,23 @@ mod tests {
             let expected = frames::expected_sensor_field(q[i], s.field_ned_ut);
             assert!((0..3).all(|k| (m[k] - expected[k]).abs() < 1e-9));
         }
+    }
+
+    #[test]
+    fn a_reference_turned_from_true_north_records_the_attitude_against_it() {
+        let mut s = Scenario::new(&CHIPS[4], tumble(), 2);
+        s.noise_ut = [0.0; 3];
+        s.lsb_ut = None;
+        s.reference_heading_deg = 30.0;
+        let run = simulate(&s).unwrap();
+        let q = run.recording.quat.as_ref().unwrap();
+        // The readings are the field in the reference's axes (its declination 30° less) seen at the attitude recorded.
+        let field = reference_heading::turned(s.field_ned_ut, 30.0);
+        for (i, m) in run.recording.mag_ut.iter().enumerate() {
+            let expected = frames::expected_sensor_field(q[i], field);
+            assert!((0..3).all(|k| (m[k] - expected[k]).abs() < 1e-9));
+        }
+        assert_eq!(run.recording.meta.field_ned_ut, Some(s.field_ned_ut));
     }
 
     #[test]

@@ -45,11 +45,13 @@ pub fn bench_config(chip: ChipKind, seed: u64) -> BenchConfig {
         }),
         noise_ut: model.noise_ut,
         seed,
+        reference_heading_deg: 0.0,
     }
 }
 
 /// Opens `sim:CHIP`: the chip's twin on its bench, with `faults`, driven by the real driver. `paced` keeps the
-/// virtual time to the wall clock; otherwise it runs as fast as it can.
+/// virtual time to the wall clock; otherwise it runs as fast as it can. The jig's edge points `jig_heading_deg` east
+/// of true north (the cube poses are against it).
 pub fn open(
     chip: ChipKind,
     seed: u64,
@@ -57,9 +59,14 @@ pub fn open(
     paced: bool,
     rate_hz: f64,
     range_ut: Option<f64>,
+    jig_heading_deg: f64,
 ) -> Result<ChipSource<AnyMagnetometer<SimChip>, SimClock>, SourceError> {
     let device = format!("sim:{chip}");
-    let bench = Bench::new(bench_config(chip, seed)).map_err(|e| SourceError::Chip {
+    let config = BenchConfig {
+        reference_heading_deg: jig_heading_deg,
+        ..bench_config(chip, seed)
+    };
+    let bench = Bench::new(config).map_err(|e| SourceError::Chip {
         device: device.clone(),
         error: e.to_string(),
     })?;
