@@ -311,11 +311,13 @@ fn model_lines(cal: &Calibration) -> String {
     let centre = magcal_calib::scalar::centre(&model.a, model.b_ut);
     let _ = writeln!(
         out,
-        "  b = [{}] µT   (offset −A⁻¹b = [{:.2}, {:.2}, {:.2}] µT)",
+        "  b = [{}] {}   (offset −A⁻¹b = [{:.2}, {:.2}, {:.2}] {})",
         b.join(", "),
+        cal.units.calibrated_label(),
         centre[0],
         centre[1],
-        centre[2]
+        centre[2],
+        cal.units.raw_label()
     );
     out
 }
@@ -331,26 +333,28 @@ fn residual_lines(cal: &Calibration) -> String {
         Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
         None => (cal.residual_rms_ut, cal.noise_floor_ut),
     };
+    let unit = cal.units.calibrated_label();
     if cal.noise_measured {
         let _ = writeln!(
             out,
-            "  residual RMS {rms:.3} µT {what}, the sensor's noise {floor:.3} µT (×{:.2})",
+            "  residual RMS {rms:.3} {unit} {what}, the sensor's noise {floor:.3} {unit} (×{:.2})",
             rms / floor
         );
     } else {
         let _ = writeln!(
             out,
-            "  residual RMS {rms:.3} µT {what}, the sensor's noise not measured (the note below says why)"
+            "  residual RMS {rms:.3} {unit} {what}, the sensor's noise not measured (the note below says why)"
         );
     }
     let cov = cal.fit.face().coverage();
     let _ = writeln!(
         out,
-        "  coverage: {:.0}% of the sphere of directions; spread {:.1} / {:.1} / {:.1} µT",
+        "  coverage: {:.0}% of the sphere of directions; spread {:.1} / {:.1} / {:.1} {}",
         100.0 * cal.sphere_coverage,
         cov.spread_ut[0],
         cov.spread_ut[1],
-        cov.spread_ut[2]
+        cov.spread_ut[2],
+        cal.units.raw_label()
     );
     out
 }
