@@ -14,7 +14,7 @@ use magcal_app::fit::Method;
 use magcal_app::howto::{Target, how_to_apply};
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
-use magcal_app::plots::{PLOT_FILES, write_plots, write_readings_plot};
+use magcal_app::plots::{PLOT_FILES, not_written, write_plots, write_readings_plot};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
 use magcal_app::units::ChipOption;
@@ -169,6 +169,9 @@ fn run(args: Args) -> anyhow::Result<()> {
     if let Some(dir) = &args.plots {
         for path in write_plots(dir, &cal, &rec, &assessment)? {
             tellln!("wrote {}", path.display());
+        }
+        for why in not_written(&cal, &rec, &assessment) {
+            tellln!("{why}");
         }
     }
     let grade = assessment.verdict.grade;

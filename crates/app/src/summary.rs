@@ -494,7 +494,8 @@ fn located_line(d: &Diagnosis) -> String {
     }
     if let Some(c) = channel {
         parts.push(format!(
-            "follows {c} ({:.0} % of the residual's variance)",
+            "follows {} ({:.0} % of the residual's variance)",
+            crate::plots::channel_label(c),
             100.0 * l.channel_share
         ));
     }
