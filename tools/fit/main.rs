@@ -185,9 +185,13 @@ fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(path) = &args.out {
-        ParamsFile::of(&cal, &rec, &name)
+        let params = ParamsFile::of(&cal, &rec, &name);
+        params
             .write(path)
             .with_context(|| format!("writing the parameters {}", path.display()))?;
+        for c in &params.comments {
+            tellln!("note: {}: {c}", path.display());
+        }
     }
     // Exports and devices hold A and b only: the base fit when the final model has corrections.
     let target = target_model(&cal);
