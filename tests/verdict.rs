@@ -404,6 +404,55 @@ fn magcal_apply_checks_parameters_on_a_second_recording() {
     assert!(text.contains("they are not this sensor's"), "{text}");
 }
 
+/// Issue 34, row 4: a check whose residual is the sensor's noise printed "GOOD — 0.000° of heading error left" beside
+/// one reading's ±0.5°. A finite recording resolves the residual beyond the noise only to a standard error (batch
+/// means over blocks of time): the figure left is then what the check can resolve, said as "at most", with the
+/// check's own standard error; no figure below it is printed.
+#[test]
+fn magcal_apply_prints_no_figure_below_what_the_check_resolves() {
+    let dir = tempfile::tempdir().unwrap();
+    let fitted = simulate(
+        dir.path(),
+        "r2.csv",
+        &["--chip", "qmc5883l", "--seed", "3", "--duration", "100"],
+    );
+    let checked = simulate(
+        dir.path(),
+        "r1.csv",
+        &["--chip", "qmc5883l", "--seed", "3", "--duration", "120"],
+    );
+    let params = dir.path().join("r2.toml");
+    stdout(&magcal_fit(&[
+        fitted.to_str().unwrap(),
+        "--out",
+        params.to_str().unwrap(),
+    ]));
+    let text = stdout(&magcal_apply(&params, &checked, &[]));
+    let line = |start: &str| {
+        text.lines()
+            .find(|l| l.trim_start().starts_with(start))
+            .unwrap_or_else(|| panic!("{start} in\n{text}"))
+            .to_owned()
+    };
+    let left = line("left after it (at most: what the check resolves):");
+    let se = degrees_after(&line("this check's own standard error:"), "±");
+    let bound = degrees_after(&left, "worst ");
+    let noise = degrees_after(&line("a single reading's noise adds"), "±");
+    assert!(!text.contains("0.000°"), "{text}");
+    // The bound is two standard errors of the residual beyond the noise (at most √2 of the check's own), nothing
+    // smaller; and far below one reading's noise, which averaging removes.
+    assert!(
+        bound >= se && bound <= 1.5 * se && bound < noise / 2.0,
+        "bound {bound}, se {se}, noise {noise}\n{text}"
+    );
+    let verdict = line("verdict:");
+    assert!(
+        verdict.starts_with("verdict: GOOD — at most ")
+            && verdict.contains("this check resolves no less"),
+        "{verdict}"
+    );
+}
+
 /// Parameters no calibration can have are refused naming the key (NaN and inf were graded GOOD, with 0 samples),
 /// and parameters whose gain makes the field hundreds of µT are graded REDO even with no field to check against.
 #[test]

@@ -31,8 +31,9 @@ pub fn fmt_se(value: f64, se: f64) -> String {
     format!("{value:.decimals$} ±{se:.decimals$}")
 }
 
-/// The heading figures in three lines (the last without a figure when the sensor's noise could not be measured).
-fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool) -> String {
+/// The heading figures in three lines (the last without a figure when the sensor's noise could not be measured);
+/// `bound`: the figures left are an upper bound, what a check can resolve ([`crate::apply::Resolution`]).
+fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool, bound: bool) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -47,9 +48,17 @@ fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool) -> Strin
         fmt_deg(h.before.worst_deg),
         fmt_deg(h.before.rms_deg)
     );
+    let left = format!(
+        "  left after it ({}):",
+        if bound {
+            "at most: what the check resolves"
+        } else {
+            "one standard deviation"
+        }
+    );
     let _ = writeln!(
         out,
-        "  left after it (one standard deviation):                 worst {}, RMS {}{}",
+        "{left:<57}worst {}, RMS {}{}",
         fmt_deg(h.left.worst_deg),
         fmt_deg(h.left.rms_deg),
         if scalar {
@@ -148,7 +157,27 @@ pub fn check_summary(
         );
     }
     match &c.heading {
-        Some(h) => out += &heading_lines(h, c.against != Against::Vector, c.noise_floor_ut > 0.0),
+        Some(h) => {
+            out += &heading_lines(
+                h,
+                c.against != Against::Vector,
+                c.noise_floor_ut > 0.0,
+                c.resolution.bound,
+            );
+            let _ = writeln!(
+                out,
+                "  this check's own standard error: ±{} on what is left (the residual's mean square over {} blocks of \
+                 time{})",
+                fmt_deg(c.resolution.se_deg),
+                crate::apply::CHECK_BLOCKS,
+                if c.resolution.bound {
+                    ": within two of the sensor's noise, so the figures left are what the check resolves, not an \
+                     estimate"
+                } else {
+                    ""
+                }
+            );
+        }
         None => {
             let _ = writeln!(
                 out,
@@ -244,7 +273,9 @@ fn samples_line(cal: &Calibration, recording: &str) -> String {
 fn heading_block(cal: &Calibration, assessment: &Assessment) -> String {
     let mut out = String::new();
     match &assessment.heading {
-        Some(h) => out += &heading_lines(h, cal.method() == Method::Scalar, cal.noise_measured),
+        Some(h) => {
+            out += &heading_lines(h, cal.method() == Method::Scalar, cal.noise_measured, false)
+        }
         None => {
             let _ = writeln!(
                 out,
