@@ -126,6 +126,7 @@ fn refusal(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> Calibrate
         e,
         FitError::Coverage(CoverageError::Planar { .. } | CoverageError::OneDirection { .. })
             | FitError::Undetermined { .. }
+            | FitError::NoiseDominates { .. }
     );
     if let (true, Some(field_ut)) = (wants_directions, field_ut) {
         let spreads: [f64; 3] = std::array::from_fn(|k| {
