@@ -368,26 +368,43 @@ fn raw_counts_get_a_units_warning_with_the_scale() {
         String::from_utf8_lossy(&out.stderr)
     );
     let summary = String::from_utf8_lossy(&out.stdout);
+    // No field: the scale is said plainly (the calibrated field stays in counts); the metadata names the chip, whose
+    // counts per gauss the autopilot files take (issue 34; tests/raw_counts.rs checks the numbers).
     assert!(
-        summary.contains("not in µT") && summary.contains("HMC5883L"),
+        summary.contains("WARNING: the raw readings are not in µT: they lie 523.2 counts")
+            && summary.contains("No field magnitude was given")
+            && summary.contains(
+                "1090 of them make a gauss (the recording's sensor, HMC5883L: ±1.3 G, 1090 LSB/G)"
+            ),
         "{summary}"
     );
-    // An export of it is refused (readings_in_another_unit_are_not_exported).
-    let out = magcal_fit(&[rec.to_str().unwrap(), "--export", "ardupilot"]);
-    assert!(!out.status.success());
     // With the field's magnitude known, the scale is the one that gives it: about 1/10.9 (the sensor's own gains
-    // differ by a few per cent).
+    // differ by a few per cent); the chip's counts fit it, which is a note, and ArduPilot's matrix is near 1.
     let out = magcal_fit(&[
         rec.to_str().unwrap(),
         "--no-diagnose",
         "--field-ut",
         "49.45",
+        "--export",
+        "ardupilot",
     ]);
-    let summary = String::from_utf8_lossy(&out.stdout);
+    let (param, summary) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
     assert!(
-        summary.contains("by 0.09") && summary.contains("HMC5883L"),
+        summary.contains("by 0.09")
+            && summary.contains("HMC5883L")
+            && summary.contains("note: the raw readings are not in µT"),
         "{summary}"
     );
+    let dia: f64 = param
+        .lines()
+        .find_map(|l| l.strip_prefix("COMPASS_DIA_X,"))
+        .expect("COMPASS_DIA_X")
+        .parse()
+        .unwrap();
+    assert!((dia - 1.0).abs() < 0.1, "{param}");
     for file in ["qmc5883l_filtered_raw.csv", "qmc5883l_noisy_raw.csv"] {
         let out = magcal_fit(&[
             common::real(&format!("qmc5883l/{file}")).to_str().unwrap(),
@@ -747,7 +764,8 @@ fn an_axis_clipped_by_the_sensors_range_is_left_out_saying_so() {
 }
 
 /// Readings in another unit than µT (here counts of 0.1 µT) exported to an autopilot (found 2026-11-27: the warning
-/// said the export would be wrong, and the export was written, exit 0). Now the export is refused, saying why.
+/// said the export would be wrong, and the export was written, exit 0). Now the export is refused, saying why: they
+/// are no setting of the chip the metadata names either (issue 34 exports counts whose scale is known).
 #[test]
 fn readings_in_another_unit_are_not_exported() {
     let dir = tempfile::tempdir().unwrap();

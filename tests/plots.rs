@@ -111,10 +111,15 @@ fn check_folder(folder: &str) {
             "{name}: {} points",
             readings.circles
         );
+        // The readings in their unit: µT, or raw units (the QMC5883L recordings: issue 34), said in the legend.
+        let raw_units =
+            String::from_utf8_lossy(&out.stdout).contains("the raw readings are not in µT");
+        let unit = if raw_units { "raw units" } else { "µT" };
         assert!(
-            readings.in_legend_strip("readings (µT, sensor axes)"),
+            readings.in_legend_strip(&format!("readings ({unit}, sensor axes)")),
             "{name}"
         );
+        assert_eq!(readings.has("x (raw units)"), raw_units, "{name}");
         if !out.status.success() {
             // A refused fit: its raw readings are shown, and nothing else.
             assert_eq!(names, ["readings.svg"], "{name}");
@@ -150,6 +155,14 @@ fn check_folder(folder: &str) {
             names.iter().any(|n| n == "heading.svg"),
             knows_heading,
             "{name}: {names:?}"
+        );
+        // Not written is said, with what would make it (issue 34): never silently.
+        assert_eq!(
+            String::from_utf8_lossy(&out.stderr).contains(
+                "heading.svg not written: the heading error needs the local field's direction"
+            ),
+            !knows_heading,
+            "{name}"
         );
         if knows_heading {
             let h = Svg::read(&dir.join("heading.svg"));
@@ -187,13 +200,18 @@ fn check_folder(folder: &str) {
         }
         let o = Svg::read(&dir.join("residual_orientation.svg"));
         for text in [
-            "azimuth in sensor x–y (°)",
-            "elevation towards +z (°)",
+            "around the sensor's z axis, from +x towards +y (°)",
+            "up from the x–y plane towards +z (°)",
             "RMS (µT)",
             "(the noise)",
         ] {
             assert!(o.has(text), "{name}: no {text}");
         }
+        // Cells the field never pointed through have a legend of their own (issue 34).
+        assert!(
+            o.in_legend_strip("the field never pointed this way: no readings"),
+            "{name}"
+        );
         // The map's cells and the colour bar's 40 steps.
         assert!(o.rects > 60, "{name}: {} rects", o.rects);
         if names.iter().any(|n| n == "residual_channel.svg") {
@@ -205,6 +223,16 @@ fn check_folder(folder: &str) {
                 "{name}"
             );
             assert!(c.in_legend_strip("the base fit (binned means)"), "{name}");
+            // Every axis its right name and unit: the expected field's rate of change is µT/s, no gyro's rad/s.
+            assert!(
+                !c.has("rotation_rate (rad/s)")
+                    && c.texts.iter().any(|(t, _)| t == "time (s)"
+                        || t == "temperature (°C)"
+                        || t == "the field's rate of change in sensor axes, |dB/dt| (µT/s)"
+                        || t.starts_with("i_")),
+                "{name}: {:?}",
+                c.texts
+            );
         }
     }
 }

@@ -14,9 +14,10 @@ use magcal_app::fit::Method;
 use magcal_app::howto::{Target, how_to_apply};
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
-use magcal_app::plots::{PLOT_FILES, write_plots, write_readings_plot};
+use magcal_app::plots::{PLOT_FILES, not_written, write_plots, write_readings_plot};
 use magcal_app::report::Report;
 use magcal_app::summary::summary;
+use magcal_app::units::ChipOption;
 use magcal_app::verdict::{Grade, target_model};
 use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
 use magcal_app::writeback::write_back_calibration;
@@ -83,6 +84,12 @@ struct Args {
     /// write-back are then skipped.
     #[arg(long, value_enum, value_name = "GRADE")]
     require: Option<Grade>,
+    /// The chip whose raw counts the readings are, for a board that prints counts instead of µT: CHIP[:SETTING],
+    /// e.g. qmc5883l (±8 G, 3000 LSB/G, or qmc5883l:2g, 12000), hmc5883l (±1.3 G, 1090 LSB/G, or hmc5883l:0.88g …
+    /// 8.1g), lis3mdl (4g … 16g), lis2mdl, mmc5983ma (18bit or 16bit). The autopilot exports need it to convert
+    /// counts to gauss as their drivers do; with the field known, the setting that fits it is taken unless stated.
+    #[arg(long, value_name = "CHIP[:SETTING]")]
+    chip: Option<ChipOption>,
 }
 
 fn main() -> ExitCode {
@@ -124,6 +131,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         diagnose: !args.no_diagnose,
         field: &field_args,
         linear_only: args.export.is_some() || args.write_to.is_some(),
+        chip: args.chip.clone(),
     };
     let Fitted {
         rec,
@@ -162,6 +170,9 @@ fn run(args: Args) -> anyhow::Result<()> {
         for path in write_plots(dir, &cal, &rec, &assessment)? {
             tellln!("wrote {}", path.display());
         }
+        for why in not_written(&cal, &rec, &assessment) {
+            tellln!("{why}");
+        }
     }
     let grade = assessment.verdict.grade;
     if let Some(required) = args.require
@@ -174,16 +185,23 @@ fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(path) = &args.out {
-        ParamsFile::of(&cal, &rec, &name)
+        let params = ParamsFile::of(&cal, &rec, &name);
+        params
             .write(path)
             .with_context(|| format!("writing the parameters {}", path.display()))?;
+        for c in &params.comments {
+            tellln!("note: {}: {c}", path.display());
+        }
     }
     // Exports and devices hold A and b only: the base fit when the final model has corrections.
     let target = target_model(&cal);
-    if cal.raw_not_ut && (args.export.is_some() || args.write_to.is_some()) {
+    if cal.raw_not_ut
+        && let Some(device) = &args.write_to
+    {
         bail!(
-            "{name}: not exported or written: the raw readings are not µT (the WARNING above), so the offset is in \
-             their units and the target would read it wrong; convert the recording to µT and fit again"
+            "{name}: not written to {device}: the raw readings are not µT (said above), and a device takes its offset \
+             in µT; record through the device's own unit (a serial board's :unit= or :scale=, or an I2C chip, which \
+             magcal reads in µT) and fit that"
         );
     }
     if cal.reference_doubtful() && (args.export.is_some() || args.write_to.is_some()) {
@@ -194,13 +212,13 @@ fn run(args: Args) -> anyhow::Result<()> {
     }
     let found = cal.diagnosis.as_ref().map_or(&[][..], |d| &d.effects[..]);
     if let Some(format) = args.export {
-        if let Some(why) = refusal(&target, format) {
+        if let Some(why) = refusal(&target, format, &cal.units) {
             bail!("{name}: not exported: {why}");
         }
-        for warning in warnings(&target, format) {
+        for warning in warnings(&target, format, &cal.units) {
             say(&format!("  WARNING: {warning}\n"))?;
         }
-        let text = export(&target, format, found);
+        let text = export(&target, format, found, &cal.units);
         match &args.export_out {
             Some(path) => write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?,
@@ -227,7 +245,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     if !cal.reference_doubtful() {
         say(&format!(
             "\n{}",
-            how_to_apply(where_to, args.out.as_deref(), found)
+            how_to_apply(where_to, args.out.as_deref(), found, &cal.units)
         ))?;
     }
     Ok(())

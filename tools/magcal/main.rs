@@ -139,6 +139,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         diagnose: true,
         field: &args.field.field_args(None),
         linear_only: false,
+        chip: None,
     };
     let Fitted {
         rec,
@@ -158,9 +159,13 @@ fn run(args: Args) -> anyhow::Result<()> {
         .with_assessment(&assessment)
         .write(&report_path)?;
     let params_path = args.out_dir.join(PARAMS);
-    ParamsFile::of(&cal, &rec, &name)
+    let params = ParamsFile::of(&cal, &rec, &name);
+    params
         .write(&params_path)
         .with_context(|| format!("writing {}", params_path.display()))?;
+    for c in &params.comments {
+        tellln!("note: {}: {c}", params_path.display());
+    }
     if let DeviceSpec::Sim { chip } = args.device {
         sayln!("{}", truth_check(&cal, &TruthFile::of(chip, args.sim_seed)))?;
     }

@@ -19,7 +19,7 @@ use crate::field::ReferenceField;
 use crate::heading::{HeadingErrors, HeadingInput, LocalField, heading_errors};
 use crate::params::ParamsFile;
 use crate::readings::{calibrate_rows, expected_field, noise_measurable};
-use crate::verdict::{Grade, Hints, Verdict, judge, judge_without_direction};
+use crate::verdict::{Grade, Hints, Verdict, fmt_deg, judge, judge_without_direction};
 
 /// What the residual is measured against.
 #[derive(Clone, Debug, PartialEq)]
@@ -65,6 +65,8 @@ pub struct Check {
     pub measured: Option<MeasuredHeading>,
     /// Over 360 level headings, when the field's direction is known.
     pub heading: Option<HeadingErrors>,
+    /// What the check can resolve of the heading error left.
+    pub resolution: Resolution,
     /// The verdict.
     pub verdict: Verdict,
     /// What the user must not miss: the parameters may not hold here for a reason the figures do not show.
@@ -73,6 +75,18 @@ pub struct Check {
     pub disturbed: Vec<GrossSpan>,
     /// Rows in them.
     pub samples_left_out: usize,
+}
+
+/// What a check can resolve of the heading error left: a finite recording measures its residual's mean square only to
+/// a standard error (batch means over blocks of time, [`Misfit::mean_square_se_ut2`]; and the noise floor's own, from
+/// its differences), so the residual beyond the noise is known only to that.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Resolution {
+    /// The standard error of the heading error left (any heading: the check has no parameter uncertainty), degrees.
+    pub se_deg: f64,
+    /// The residual beyond the noise is within two standard errors of none: the figures left are then an upper
+    /// bound (what the check can resolve), not an estimate.
+    pub bound: bool,
 }
 
 /// Why a parameters file cannot be applied to a recording.
@@ -124,6 +138,31 @@ pub struct Misfit {
     pub raw_residual_rms_ut: f64,
     /// Rows measured.
     pub samples_used: usize,
+    /// The standard error of the calibrated residual's mean square, µT², by batch means over [`CHECK_BLOCKS`] blocks
+    /// of time (so that residuals correlated over seconds, as a reference's errors are, count for what they are).
+    pub mean_square_se_ut2: f64,
+}
+
+/// Blocks of time the standard error of a check's mean square residual is taken over (batch means).
+pub const CHECK_BLOCKS: usize = 20;
+
+/// The standard error of the mean of `v` (in order) by batch means: the spread of the means of up to
+/// [`CHECK_BLOCKS`] consecutive blocks of at least 10 values, over the square root of their number; infinite for
+/// fewer than two blocks.
+pub fn batch_mean_se(v: &[f64]) -> f64 {
+    let blocks = (v.len() / 10).min(CHECK_BLOCKS);
+    if blocks < 2 {
+        return f64::INFINITY;
+    }
+    let means: Vec<f64> = (0..blocks)
+        .map(|b| {
+            let block = &v[b * v.len() / blocks..(b + 1) * v.len() / blocks];
+            block.iter().sum::<f64>() / block.len() as f64
+        })
+        .collect();
+    let mean = means.iter().sum::<f64>() / blocks as f64;
+    let var = means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (blocks - 1) as f64;
+    (var / blocks as f64).sqrt()
 }
 
 /// The misfit of `calibrated_ut` (one per row of `rec`; non-finite rows and those `left_out` are left out) against
@@ -151,11 +190,20 @@ pub fn misfit(
                     })
                     .sum::<f64>()
             };
+            // Per row, the mean square over the axes, in time order.
+            let squares: Vec<f64> = rows
+                .iter()
+                .map(|&i| {
+                    let d = frames::sub(calibrated_ut[i], e[i]);
+                    frames::dot(d, d) / 3.0
+                })
+                .collect();
             Misfit {
                 against: Against::Vector,
                 residual_rms_ut: rms(ss(&|i| calibrated_ut[i]), 3 * rows.len()),
                 raw_residual_rms_ut: rms(ss(&|i| rec.mag_ut[i]), 3 * rows.len()),
                 samples_used: rows.len(),
+                mean_square_se_ut2: batch_mean_se(&squares),
             }
         }
         None => {
@@ -172,14 +220,13 @@ pub fn misfit(
                 .iter()
                 .map(|&i| (frames::norm(rec.mag_ut[i]) - field_ut).powi(2))
                 .sum();
+            let squares: Vec<f64> = norms.iter().map(|n| (n - field_ut).powi(2)).collect();
             Misfit {
                 against: Against::Magnitude { field_ut, known },
-                residual_rms_ut: rms(
-                    norms.iter().map(|n| (n - field_ut).powi(2)).sum(),
-                    rows.len(),
-                ),
+                residual_rms_ut: rms(squares.iter().sum(), rows.len()),
                 raw_residual_rms_ut: rms(raw_ss, rows.len()),
                 samples_used: rows.len(),
+                mean_square_se_ut2: batch_mean_se(&squares),
             }
         }
     }
@@ -226,7 +273,7 @@ pub fn check(
             .magnitude()
             .unwrap_or_else(|| mean_magnitude(expected.as_deref().unwrap_or_default())),
     };
-    let (heading, verdict) = graded(
+    let (heading, verdict, resolution) = graded(
         &model,
         &misfit,
         field,
@@ -249,6 +296,7 @@ pub fn check(
         noise_floor_ut,
         measured,
         heading,
+        resolution,
         verdict,
         warnings,
         disturbed: spans,
@@ -310,21 +358,61 @@ fn mean_magnitude(v: &[[f64; 3]]) -> f64 {
     n.iter().sum::<f64>() / n.len().max(1) as f64
 }
 
-/// The heading figures of `model` on the recording (when the field's direction is known) and the verdict they give,
-/// with the misfit measured and the noise floor (`noise_floor_ut`, zero when not measured, and whether it was not).
+/// The residual the heading figures are made with, and what the check resolves: `r` as measured when the part beyond
+/// the noise (`u² = r² − f²`) stands two standard errors clear of none, else the residual of the upper bound
+/// `u² + 2·se` ([`Resolution`]). The standard error of `u²` combines the batch means' of `r²` and the noise floor's
+/// (`f²·√(2/N)`, its differences being nearly independent); `horizontal_ut` turns it into degrees.
+fn resolved_residual(
+    misfit: &Misfit,
+    noise_floor_ut: f64,
+    horizontal_ut: f64,
+) -> (f64, Resolution) {
+    let (r, f) = (misfit.residual_rms_ut, noise_floor_ut);
+    let u2 = r * r - f * f;
+    let se_f2 = f * f * (2.0 / misfit.samples_used.max(1) as f64).sqrt();
+    let se_u2 = misfit.mean_square_se_ut2.hypot(se_f2);
+    let deg = |ut: f64| (ut / horizontal_ut).to_degrees();
+    if u2 > 2.0 * se_u2 {
+        let u = u2.sqrt();
+        (
+            r,
+            Resolution {
+                se_deg: deg(se_u2 / (2.0 * u)),
+                bound: false,
+            },
+        )
+    } else {
+        let bound2 = u2.max(0.0) + 2.0 * se_u2;
+        (
+            (f * f + bound2).sqrt(),
+            Resolution {
+                se_deg: deg(se_u2.sqrt()),
+                bound: true,
+            },
+        )
+    }
+}
+
+/// The heading figures of `model` on the recording (when the field's direction is known), the verdict they give and
+/// what the check resolves, with the misfit measured and the noise floor (`noise_floor_ut`, zero when not measured,
+/// and whether it was not). Figures the check cannot resolve are upper bounds, said in the verdict.
 fn graded(
     model: &Model,
     misfit: &Misfit,
     field: &ReferenceField,
     magnitude_ut: f64,
     (noise_floor_ut, noise_unmeasured): (f64, bool),
-) -> (Option<HeadingErrors>, Verdict) {
-    let input = |field| HeadingInput {
+) -> (Option<HeadingErrors>, Verdict, Resolution) {
+    let inclination_deg = field.vector().map_or(0.0, |f| frames::field_angles(f).1);
+    let local = LocalField::new(inclination_deg, magnitude_ut);
+    let (residual_rms_ut, resolution) =
+        resolved_residual(misfit, noise_floor_ut, local.horizontal_ut);
+    let input = HeadingInput {
         a: model.a,
         b_ut: model.b_ut,
-        field,
+        field: local,
         uncertainty: None,
-        residual_rms_ut: misfit.residual_rms_ut,
+        residual_rms_ut,
         noise_floor_ut,
     };
     let hints = Hints {
@@ -336,17 +424,24 @@ fn graded(
         declination_off_deg: None,
         excluded_share: 0.0,
     };
+    let h = heading_errors(&input);
     match field.vector() {
-        Some(f) => {
-            let (_, inclination_deg, _) = frames::field_angles(f);
-            let h = heading_errors(&input(LocalField::new(inclination_deg, magnitude_ut)));
-            let v = judge(&h, &hints);
-            (Some(h), v)
+        Some(_) => {
+            let mut v = judge(&h, &hints);
+            if resolution.bound {
+                v.reason = format!(
+                    "at most {}; this check resolves no less (its standard error is ±{})",
+                    v.reason,
+                    fmt_deg(resolution.se_deg)
+                );
+            }
+            (Some(h), v, resolution)
         }
-        None => {
-            let lower = heading_errors(&input(LocalField::new(0.0, magnitude_ut)));
-            (None, judge_without_direction(lower.left.worst_deg, &hints))
-        }
+        None => (
+            None,
+            judge_without_direction(h.left.worst_deg, &hints),
+            resolution,
+        ),
     }
 }
 

@@ -26,6 +26,7 @@ use crate::readings::{
     radial_floor_ut,
 };
 use crate::reference_heading::{self, Search};
+use crate::units::{ChipOption, Units};
 
 /// The attitude in the conventions loggers also use (the inverse turn, the scalar last, ENU or NWU worlds), then,
 /// if the fit `looks_off`, the reference `expected_ut` shifted in time; each fitted from the samples the robust fit
@@ -128,6 +129,7 @@ fn refusal(e: FitError, raw_ut: &[[f64; 3]], field_ut: Option<f64>) -> Calibrate
         e,
         FitError::Coverage(CoverageError::Planar { .. } | CoverageError::OneDirection { .. })
             | FitError::Undetermined { .. }
+            | FitError::NoiseDominates { .. }
     );
     if let (true, Some(field_ut)) = (wants_directions, field_ut) {
         let spreads: [f64; 3] = std::array::from_fn(|k| {
@@ -328,6 +330,18 @@ pub fn calibrate(
     field: ReferenceField,
     diagnose: bool,
 ) -> Result<Calibration, CalibrateError> {
+    calibrate_with(rec, method, field, diagnose, None)
+}
+
+/// [`calibrate`], with the chip whose raw counts the readings are, when the user says (`--chip`): it gives the
+/// readings' units per gauss when they are not µT ([`Units`]).
+pub fn calibrate_with(
+    rec: &Recording,
+    method: Method,
+    field: ReferenceField,
+    diagnose: bool,
+    chip: Option<&ChipOption>,
+) -> Result<Calibration, CalibrateError> {
     let mut warnings = Vec::new();
     let method = chosen_method(rec, method, &field, &mut warnings);
     warnings.extend(units_unread(&rec.meta));
@@ -337,7 +351,7 @@ pub fn calibrate(
         Method::Vector => vector_base(rec, &field, &mut notes)?,
         _ => scalar_base(rec, &field, &mut notes, &mut warnings)?,
     };
-    let mut cal = measured(rec, base, field, notes, warnings)?;
+    let mut cal = measured(rec, base, field, notes, warnings, chip)?;
     if diagnose {
         diagnose_into(rec, &mut cal)?;
     }
@@ -587,6 +601,7 @@ fn measured(
     field: ReferenceField,
     mut notes: Vec<String>,
     mut warnings: Vec<String>,
+    chip: Option<&ChipOption>,
 ) -> Result<Calibration, CalibrateError> {
     let Base {
         fit,
@@ -624,6 +639,28 @@ fn measured(
     }
     let checked = checks::check(&model, &fit, &field, &rec.mag_ut, &robust.kept, &reference)?;
     warnings.extend(checked.warnings);
+    let field_ut = match &fit {
+        Fit::Scalar(s) => s.field_given.then_some(s.field_ut),
+        // A vector fit's calibrated field is in the reference's units, µT.
+        Fit::Vector(_) => Some(field.magnitude().unwrap_or_else(|| {
+            let a = nalgebra::Matrix3::from_fn(|j, k| model.a[j][k]);
+            checked.raw_radius * a.determinant().abs().cbrt()
+        })),
+    };
+    let units = Units::resolve(
+        checked.raw_not_ut,
+        checked.raw_radius,
+        field_ut,
+        &rec.meta,
+        chip,
+    );
+    if let Some(said) = units.statement() {
+        if units.is_warning() {
+            warnings.push(said);
+        } else {
+            notes.push(said);
+        }
+    }
     let noise_floor_ut = floor_of(&noise);
     Ok(Calibration {
         fit,
@@ -642,6 +679,7 @@ fn measured(
         notes,
         warnings,
         raw_not_ut: checked.raw_not_ut,
+        units,
         robust,
         diagnosis: None,
         diagnosis_failed: None,

@@ -10,8 +10,7 @@ use nalgebra::Matrix3;
 use crate::field::ReferenceField;
 use crate::fit::{Fit, ReferenceDoubt};
 
-/// The range of the Earth's field at its surface, µT (the World Magnetic Model's extremes, rounded out).
-pub const EARTH_FIELD_UT: (f64, f64) = (22.0, 67.0);
+pub use crate::units::EARTH_FIELD_UT;
 /// `A`'s singular values may differ by this factor before the gains are called implausible.
 const GAIN_SPREAD_WARN: f64 = 1.5;
 /// Below this ratio of the smallest to the largest singular value, `A` is as good as singular: refused.
@@ -20,26 +19,16 @@ const GAIN_SPREAD_REFUSE: f64 = 1e-3;
 /// sensitivity is within 10–20 % of its datasheet's, so the field given is more likely wrong.
 const MEAN_GAIN_WARN: f64 = 1.3;
 
-/// Raw-count scales of common chips and units, µT per unit, for the units warning.
-const SCALES: [(&str, f64); 9] = [
-    ("HMC5883L counts at ±1.3 G (1090 LSB/G)", 100.0 / 1090.0),
-    ("QMC5883L counts at ±2 G (12000 LSB/G)", 100.0 / 12000.0),
-    ("QMC5883L counts at ±8 G (3000 LSB/G)", 100.0 / 3000.0),
-    ("LIS3MDL counts at ±4 G (6842 LSB/G)", 100.0 / 6842.0),
-    ("LIS2MDL counts (1.5 mG/LSB)", 0.15),
-    ("MMC5983MA 18-bit counts (16384 counts/G)", 100.0 / 16384.0),
-    ("gauss", 100.0),
-    ("milligauss", 0.1),
-    ("nanotesla", 0.001),
-];
-
 /// What [`check`] found of a calibration it did not refuse.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Checked {
     /// What the user must not miss.
     pub warnings: Vec<String>,
-    /// The raw readings are not µT (their radius is far from any Earth's field): the offset is in their units.
+    /// The raw readings are not µT (their radius is far from any Earth's field): the offset is in their units
+    /// ([`crate::units`] says what they may be).
     pub raw_not_ut: bool,
+    /// The median radius of the raw readings the fit kept about the fitted centre, in their units.
+    pub raw_radius: f64,
 }
 
 /// Checks a fitted model (of the readings `raw_ut` it `kept`); refuses what cannot be a calibration and returns the
@@ -115,9 +104,7 @@ pub fn check(
     };
     // Against a doubtful reference the centre is no hard iron, and the radius about it no unit.
     let raw_not_ut = !reference_doubtful && !raw_in_range && raw_radius > 0.0;
-    if raw_not_ut {
-        warnings.push(units_warning(raw_radius, model, c, known));
-    } else if !(low..=high).contains(&calibrated) {
+    if !raw_not_ut && !(low..=high).contains(&calibrated) {
         warnings.push(format!(
             "the calibrated field is {calibrated:.1} µT, outside the Earth's {low:.0}–{high:.0} µT: if the readings \
              are µT, the field given (or fitted) is wrong or the sensor sits in a strongly disturbed place; if the \
@@ -157,6 +144,7 @@ pub fn check(
     Ok(Checked {
         warnings,
         raw_not_ut,
+        raw_radius,
     })
 }
 
@@ -191,48 +179,6 @@ pub fn offset_warning(o: &OutOfStep) -> String {
         100.0 * o.given.explained,
         o.given.median_ut,
         1000.0 * o.offset_s
-    )
-}
-
-/// What raw readings of this radius look like, and the scale that would make them µT (exact when the field's
-/// magnitude is known, a range over the Earth's fields otherwise).
-fn units_warning(raw_radius: f64, model: &Model, c: [f64; 3], field_ut: Option<f64>) -> String {
-    let (low, high) = EARTH_FIELD_UT;
-    let (scale, span) = match field_ut {
-        Some(f) => (f / raw_radius, format!("{:.4}", f / raw_radius)),
-        None => (
-            (low * high).sqrt() / raw_radius,
-            format!("{:.4}–{:.4}", low / raw_radius, high / raw_radius),
-        ),
-    };
-    let near: Vec<&str> = SCALES
-        .iter()
-        .filter(|(_, s)| (s / scale).ln().abs() < 1.5f64.ln())
-        .map(|(name, _)| *name)
-        .collect();
-    let like = if near.is_empty() {
-        String::new()
-    } else {
-        format!(" (close to {})", near.join(", or "))
-    };
-    format!(
-        "the raw readings are not in µT: they lie {raw_radius:.1} units from their centre, where the Earth's field \
-         is {low:.0}–{high:.0} µT. They look like raw counts or another unit: multiplying them by {span}{like} would \
-         make them µT. {} The offset [{:.1}, {:.1}, {:.1}] is in the raw units, and exports to autopilots (which \
-         expect gauss or mGauss) are wrong: convert the recording to µT and fit again",
-        if field_ut.is_some() {
-            format!(
-                "A (mean gain {:.4}) absorbs the scale, so the calibrated field is in µT.",
-                (model.a[0][0] + model.a[1][1] + model.a[2][2]) / 3.0
-            )
-        } else {
-            "No field magnitude was given, so the calibrated field is in the same units (give --field-ut, \
-             --field-ned or --location/--date)."
-                .to_owned()
-        },
-        c[0],
-        c[1],
-        c[2]
     )
 }
 

@@ -11,12 +11,19 @@
 //! as `A = R·S` (polar decomposition), `S` is exported and the rotation `R` is reported in a comment — set it as the
 //! board orientation if it matters. The offsets are exact either way, since `A⁻¹·b = S⁻¹·R⁻¹·b` is what both apply.
 //!
+//! Readings that are not µT ([`Units`]) are converted with how many of their units make a gauss: ArduPilot's driver
+//! gives milligauss and PX4's gauss, each from the chip's counts by its datasheet's sensitivity. With `k` raw units
+//! and `c` calibrated units a gauss (both 100 for µT), ArduPilot's `M = (k/c)·S` and `OFS = (1000/k)·A⁻¹·b`, PX4's
+//! `S·k/c` and `OFF = −A⁻¹·b/k`. The C header and the JSON carry `A` and `b` as they are, labelled.
+//!
 //! Every effect the diagnosis found is named in the output with its size and parameters, and why the target does not
 //! carry it ([`left_out_lines`]): the same lines go to the terminal ([`crate::howto`]).
 
 use magcal_calib::diagnosis::FoundEffect;
 use magcal_calib::{EffectId, Frame, Model};
 use nalgebra::{Matrix3, Vector3};
+
+use crate::units::Units;
 
 /// An export format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -130,8 +137,14 @@ fn symmetric_only(format: ExportFormat) -> bool {
     matches!(format, ExportFormat::Ardupilot | ExportFormat::Px4)
 }
 
-/// Why `model` cannot go to `format` at all: see [`mirror_refusal`].
-pub fn refusal(model: &Model, format: ExportFormat) -> Option<String> {
+/// Why `model` cannot go to `format` at all: see [`mirror_refusal`]; and for the autopilots, readings whose scale
+/// to gauss is not known ([`Units::autopilot_refusal`]).
+pub fn refusal(model: &Model, format: ExportFormat, units: &Units) -> Option<String> {
+    if symmetric_only(format)
+        && let Some(why) = units.autopilot_refusal()
+    {
+        return Some(why);
+    }
     mirror_refusal(model).filter(|_| symmetric_only(format))
 }
 
@@ -152,7 +165,7 @@ const ARDUPILOT_OFFS_MAX_MGAUSS: f64 = 1800.0;
 
 /// What the user must know before loading `model` into `format`: the rotation a symmetric target leaves out, when
 /// above [`ROTATION_WARN_DEG`]; ArduPilot's offset limit, when the offsets exceed it.
-pub fn warnings(model: &Model, format: ExportFormat) -> Vec<String> {
+pub fn warnings(model: &Model, format: ExportFormat, units: &Units) -> Vec<String> {
     let mut out = Vec::new();
     let angle = Polar::of(&model.a).angle_deg();
     if symmetric_only(format) && angle > ROTATION_WARN_DEG {
@@ -164,14 +177,20 @@ pub fn warnings(model: &Model, format: ExportFormat) -> Vec<String> {
         ));
     }
     if format == ExportFormat::Ardupilot {
-        out.extend(ardupilot_offset_limit(model));
+        out.extend(ardupilot_offset_limit(model, units));
     }
     out
 }
 
+/// Milligauss per unit of the readings (10 for µT), when known.
+fn mgauss_per_raw(units: &Units) -> Option<f64> {
+    units.per_gauss().map(|(raw, _)| 1000.0 / raw)
+}
+
 /// When an offset exceeds ArduPilot's default `COMPASS_OFFS_MAX`, what to do about it.
-fn ardupilot_offset_limit(model: &Model) -> Option<String> {
-    let largest_mgauss = 10.0 * offset_ut(model).iter().fold(0.0f64, |m, v| m.max(v.abs()));
+fn ardupilot_offset_limit(model: &Model, units: &Units) -> Option<String> {
+    let per_raw = mgauss_per_raw(units)?;
+    let largest_mgauss = per_raw * offset_ut(model).iter().fold(0.0f64, |m, v| m.max(v.abs()));
     (largest_mgauss >= ARDUPILOT_OFFS_MAX_MGAUSS).then(|| {
         format!(
             "an offset of {largest_mgauss:.0} mGauss is beyond ArduPilot's default COMPASS_OFFS_MAX of \
@@ -181,7 +200,7 @@ fn ardupilot_offset_limit(model: &Model) -> Option<String> {
     })
 }
 
-/// The hard-iron offset `−A⁻¹·b` of `model`, µT (zeros if `A` has no inverse).
+/// The hard-iron offset `−A⁻¹·b` of `model`, in the readings' units (zeros if `A` has no inverse).
 fn offset_ut(model: &Model) -> [f64; 3] {
     let a = Matrix3::from_fn(|j, k| model.a[j][k]);
     let c = -(a.try_inverse().unwrap_or_else(Matrix3::zeros) * Vector3::from(model.b_ut));
@@ -222,8 +241,10 @@ impl Polar {
 /// The model in another tool's format. Only the linear part can be exported; body-fixed corrections are counted in a
 /// comment (the JSON's `notes`). `found` are the effects the diagnosis found: each is named in comments (the JSON's
 /// `left_out`, in full) with why the format does not carry it ([`left_out_lines`]); when `model` has no corrections,
-/// its `A` and `b` are taken to be fitted without those of `found` (see [`crate::verdict::target_model`]).
-pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> String {
+/// its `A` and `b` are taken to be fitted without those of `found` (see [`crate::verdict::target_model`]). `units`
+/// are the readings' ([`Units`]): an autopilot's format needs their scale to gauss (see [`refusal`]; without it the
+/// µT one is taken).
+pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect], units: &Units) -> String {
     let fitted_without = if model.corrections().count() > 0 {
         0
     } else {
@@ -233,9 +254,7 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
             .count()
     };
     let named = left_out_lines(found, Holder::Format(format));
-    let centre = Vector3::from(offset_ut(model));
     let polar = Polar::of(&model.a);
-    let s = polar.symmetric;
     let dropped = model.corrections().count();
     let mut notes = vec![format!(
         "misalignment rotation of {:.3} deg left out (the target's matrix is symmetric)",
@@ -251,7 +270,8 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
              target has no place for them)"
         ));
     }
-    let dropped = dropped + fitted_without;
+    let corrections_note = (dropped + fitted_without > 0).then(|| notes[1].clone());
+    let (raw_pg, cal_pg) = units.per_gauss().unwrap_or((100.0, 100.0));
     match format {
         ExportFormat::Ardupilot => {
             let mut out = String::from(
@@ -259,89 +279,199 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect]) -> Str
             );
             for n in notes
                 .iter()
+                .chain(units_comment(units).iter())
                 .chain(&named)
-                .chain(&ardupilot_offset_limit(model))
+                .chain(&ardupilot_offset_limit(model, units))
             {
                 out += &format!("# {n}\n");
             }
-            let ofs = -centre * 10.0;
-            for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-                out += &format!("COMPASS_OFS_{axis},{:.3}\n", ofs[k]);
-            }
-            for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-                out += &format!("COMPASS_DIA_{axis},{:.6}\n", s[(k, k)]);
-            }
-            for (name, (r, c)) in [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))] {
-                out += &format!("COMPASS_ODI_{name},{:.6}\n", s[(r, c)]);
-            }
-            out
+            out + &ardupilot_values(model, raw_pg, cal_pg)
         }
         ExportFormat::Px4 => {
             let mut out = String::from(
                 "# magcal calibration for PX4 (QGroundControl .params): corrected = S·(raw − OFF), OFF in gauss\n",
             );
-            for n in notes.iter().chain(&named) {
+            for n in notes
+                .iter()
+                .chain(units_comment(units).iter())
+                .chain(&named)
+            {
                 out += &format!("# {n}\n");
             }
-            out += "# Vehicle-Id\tComponent-Id\tName\tValue\tType\n";
-            let mut param =
-                |name: &str, v: f64| out += &format!("1\t1\tCAL_MAG0_{name}\t{v:.9}\t9\n");
-            for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-                param(&format!("{axis}OFF"), centre[k] / 100.0);
-            }
-            for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-                param(&format!("{axis}SCALE"), s[(k, k)]);
-            }
-            for (name, (r, c)) in [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))] {
-                param(&format!("{name}ODIAG"), s[(r, c)]);
-            }
-            out
+            out + &px4_values(model, raw_pg, cal_pg)
         }
-        ExportFormat::CHeader => {
-            let mut out = String::from(
-                "/* magcal calibration: B = A * raw + b (microtesla, sensor axes). */\n#ifndef MAGCAL_CALIBRATION_H\n#define MAGCAL_CALIBRATION_H\n\n",
-            );
-            if dropped > 0 {
-                out += &format!("/* {} */\n", notes[1]);
-            }
-            for n in &named {
-                out += &format!("/* {} */\n", n.replace("*/", "* /"));
-            }
-            out += "static const float MAGCAL_A[3][3] = {\n";
-            for row in &model.a {
-                out += &format!(
-                    "    {{ {:.9}f, {:.9}f, {:.9}f }},\n",
-                    row[0], row[1], row[2]
-                );
-            }
-            let b = model.b_ut;
-            out += &format!(
-                "}};\nstatic const float MAGCAL_B_UT[3] = {{ {:.6}f, {:.6}f, {:.6}f }};\n\n",
-                b[0], b[1], b[2]
-            );
-            out += "#endif /* MAGCAL_CALIBRATION_H */\n";
-            out
+        ExportFormat::CHeader => c_header(model, units, corrections_note.as_deref(), &named),
+        ExportFormat::Json => json(model, format, found, units, corrections_note),
+    }
+}
+
+/// How the readings were taken to be scaled, for an autopilot's file, when they are not µT.
+fn units_comment(units: &Units) -> Option<String> {
+    let r = units.raw()?;
+    let s = r.scale.as_ref()?;
+    Some(format!(
+        "the readings were {}, {} a gauss ({}): OFS and the matrix are for the autopilot's driver reading that chip \
+         at that setting",
+        units.raw_label(),
+        s.per_gauss,
+        s.source
+    ))
+}
+
+/// ArduPilot's COMPASS_OFS, DIA and ODI lines for readings of `raw_pg` units and a calibrated field of `cal_pg` a
+/// gauss.
+fn ardupilot_values(model: &Model, raw_pg: f64, cal_pg: f64) -> String {
+    let mut out = String::new();
+    let s = Polar::of(&model.a).symmetric * (raw_pg / cal_pg);
+    let ofs = -Vector3::from(offset_ut(model)) * (1000.0 / raw_pg);
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        out += &format!("COMPASS_OFS_{axis},{:.3}\n", ofs[k]);
+    }
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        out += &format!("COMPASS_DIA_{axis},{:.6}\n", s[(k, k)]);
+    }
+    for (name, (r, c)) in [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))] {
+        out += &format!("COMPASS_ODI_{name},{:.6}\n", s[(r, c)]);
+    }
+    out
+}
+
+/// PX4's CAL_MAG0 lines (QGroundControl's format) for readings of `raw_pg` units and a calibrated field of `cal_pg`
+/// a gauss.
+fn px4_values(model: &Model, raw_pg: f64, cal_pg: f64) -> String {
+    let mut out = String::from("# Vehicle-Id\tComponent-Id\tName\tValue\tType\n");
+    let s = Polar::of(&model.a).symmetric * (raw_pg / cal_pg);
+    let centre = Vector3::from(offset_ut(model)) / raw_pg;
+    let mut param = |name: &str, v: f64| out += &format!("1\t1\tCAL_MAG0_{name}\t{v:.9}\t9\n");
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        param(&format!("{axis}OFF"), centre[k]);
+    }
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        param(&format!("{axis}SCALE"), s[(k, k)]);
+    }
+    for (name, (r, c)) in [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))] {
+        param(&format!("{name}ODIAG"), s[(r, c)]);
+    }
+    out
+}
+
+/// The name of `b` in the C header: `MAGCAL_B_UT`, or `MAGCAL_B` when the calibrated field is in the readings' own
+/// units (no field magnitude was known).
+pub fn c_b_name(units: &Units) -> &'static str {
+    if units.calibrated_ut() {
+        "MAGCAL_B_UT"
+    } else {
+        "MAGCAL_B"
+    }
+}
+
+/// The C header: `A` and `b`, with what `raw` and `B` are in.
+fn c_header(model: &Model, units: &Units, corrections: Option<&str>, named: &[String]) -> String {
+    let what = match units.raw() {
+        None => "microtesla".to_owned(),
+        Some(_) if units.calibrated_ut() => format!(
+            "B in microtesla; raw: the readings as recorded, in {}",
+            units.raw_label()
+        ),
+        Some(_) => format!(
+            "B and raw in the readings' own units, {}: no field magnitude was given, so the scale is theirs (a \
+             heading needs only the direction)",
+            units.raw_label()
+        ),
+    };
+    let mut out = format!(
+        "/* magcal calibration: B = A * raw + b ({what}, sensor axes). */\n#ifndef MAGCAL_CALIBRATION_H\n#define \
+         MAGCAL_CALIBRATION_H\n\n"
+    );
+    if let Some(n) = corrections {
+        out += &format!("/* {n} */\n");
+    }
+    for n in named {
+        out += &format!("/* {} */\n", n.replace("*/", "* /"));
+    }
+    out += "static const float MAGCAL_A[3][3] = {\n";
+    for row in &model.a {
+        out += &format!(
+            "    {{ {:.9}f, {:.9}f, {:.9}f }},\n",
+            row[0], row[1], row[2]
+        );
+    }
+    let b = model.b_ut;
+    out += &format!(
+        "}};\nstatic const float {}[3] = {{ {:.6}f, {:.6}f, {:.6}f }};\n\n",
+        c_b_name(units),
+        b[0],
+        b[1],
+        b[2]
+    );
+    out += "#endif /* MAGCAL_CALIBRATION_H */\n";
+    out
+}
+
+/// The JSON export: `A`, `b_ut` and `offset_ut` in µT readings; for readings in other units, `b_ut` when the
+/// calibrated field is µT (else `b_raw`), `offset_raw` in the readings' units and `raw_units` saying what they are.
+fn json(
+    model: &Model,
+    format: ExportFormat,
+    found: &[FoundEffect],
+    units: &Units,
+    corrections: Option<String>,
+) -> String {
+    let centre = offset_ut(model);
+    let mut value = serde_json::json!({
+        "model": "B = A*raw + b (uT, sensor axes)",
+        "A": model.a,
+        "notes": corrections.into_iter().collect::<Vec<_>>(),
+        "target_holds": Holder::Format(format).holds(),
+        "left_out": found.iter().map(|e| serde_json::json!({
+            "id": e.effect.id().as_str(),
+            "correction": e.effect.id().is_correction(),
+            "size_ut": e.size_ut,
+            "params": crate::report::params_json(e),
+            "what": e.what,
+            "why": why_not(e, Holder::Format(format)),
+        })).collect::<Vec<_>>(),
+    });
+    let map = value.as_object_mut().expect("an object");
+    let b = serde_json::json!(model.b_ut);
+    match units.raw() {
+        None => {
+            map.insert("b_ut".into(), b);
+            map.insert("offset_ut".into(), serde_json::json!(centre));
         }
-        ExportFormat::Json => {
-            let value = serde_json::json!({
-                "model": "B = A*raw + b (uT, sensor axes)",
-                "A": model.a,
-                "b_ut": model.b_ut,
-                "offset_ut": [centre.x, centre.y, centre.z],
-                "notes": if dropped > 0 { vec![notes[1].clone()] } else { vec![] },
-                "target_holds": Holder::Format(format).holds(),
-                "left_out": found.iter().map(|e| serde_json::json!({
-                    "id": e.effect.id().as_str(),
-                    "correction": e.effect.id().is_correction(),
-                    "size_ut": e.size_ut,
-                    "params": crate::report::params_json(e),
-                    "what": e.what,
-                    "why": why_not(e, Holder::Format(format)),
-                })).collect::<Vec<_>>(),
-            });
-            serde_json::to_string_pretty(&value).expect("plain data") + "\n"
+        Some(r) => {
+            let calibrated = units.calibrated_label();
+            map.insert(
+                "model".into(),
+                format!(
+                    "B = A*raw + b (B in {calibrated}, raw in {}, sensor axes)",
+                    units.raw_label()
+                )
+                .into(),
+            );
+            map.insert(
+                if units.calibrated_ut() {
+                    "b_ut"
+                } else {
+                    "b_raw"
+                }
+                .into(),
+                b,
+            );
+            map.insert("offset_raw".into(), serde_json::json!(centre));
+            map.insert(
+                "raw_units".into(),
+                serde_json::json!({
+                    "unit": units.raw_label(),
+                    "radius": r.radius,
+                    "per_gauss": r.scale.as_ref().map(|s| s.per_gauss),
+                    "source": r.scale.as_ref().map(|s| s.source.clone()),
+                    "calibrated": calibrated,
+                }),
+            );
         }
     }
+    serde_json::to_string_pretty(&value).expect("plain data") + "\n"
 }
 
 #[cfg(test)]
@@ -381,7 +511,7 @@ pub(crate) mod tests {
             let b = model.apply([raw.x, raw.y, raw.z], &magcal_calib::Inputs::NONE);
             Polar::of(&model.a).rotation.transpose() * Vector3::from(b)
         };
-        let ap = export(&model, ExportFormat::Ardupilot, &[]);
+        let ap = export(&model, ExportFormat::Ardupilot, &[], &Units::Microtesla);
         let ofs = Vector3::new(
             value(&ap, "COMPASS_OFS_X"),
             value(&ap, "COMPASS_OFS_Y"),
@@ -402,7 +532,7 @@ pub(crate) mod tests {
         assert!((ap_mg / 10.0 - ours).norm() < 1e-3, "{ap_mg} vs {ours}");
         assert!((m - s).norm() < 1e-5);
 
-        let px = export(&model, ExportFormat::Px4, &[]);
+        let px = export(&model, ExportFormat::Px4, &[], &Units::Microtesla);
         let off = Vector3::new(
             value(&px, "CAL_MAG0_XOFF"),
             value(&px, "CAL_MAG0_YOFF"),
@@ -481,7 +611,12 @@ pub(crate) mod tests {
     #[test]
     fn the_c_header_and_json_carry_a_and_b() {
         let (model, _) = skewed_model();
-        let h = export(&model, ExportFormat::CHeader, &three_found());
+        let h = export(
+            &model,
+            ExportFormat::CHeader,
+            &three_found(),
+            &Units::Microtesla,
+        );
         assert!(h.contains("MAGCAL_A[3][3]") && h.contains("12.000000f"));
         assert!(
             h.contains("fitted without the 2 body-fixed correction(s)"),
@@ -494,7 +629,8 @@ pub(crate) mod tests {
             "{h}"
         );
         let j: serde_json::Value =
-            serde_json::from_str(&export(&model, ExportFormat::Json, &[])).unwrap();
+            serde_json::from_str(&export(&model, ExportFormat::Json, &[], &Units::Microtesla))
+                .unwrap();
         assert_eq!(j["b_ut"][2].as_f64(), Some(30.0));
         assert_eq!(j["left_out"].as_array().map(Vec::len), Some(0));
     }
@@ -510,7 +646,7 @@ pub(crate) mod tests {
             ExportFormat::CHeader,
             ExportFormat::Json,
         ] {
-            let text = export(&model, format, &found);
+            let text = export(&model, format, &found, &Units::Microtesla);
             for line in [
                 "left out: temperature_bias, 0.163 µT RMS per axis on this recording: what temperature_bias",
                 "left out: current_bias, 0.171 µT RMS per axis on this recording: what current_bias",
@@ -524,14 +660,19 @@ pub(crate) mod tests {
             }
             assert!(!text.contains("COMPASS_MOT_X,") && !text.contains("\tCAL_MAG0_XCOMP\t"));
         }
-        let ap = export(&model, ExportFormat::Ardupilot, &found);
+        let ap = export(&model, ExportFormat::Ardupilot, &found, &Units::Microtesla);
         assert!(
             ap.contains("# what the target holds: ArduPilot's COMPASS_*"),
             "{ap}"
         );
         assert!(ap.contains("not written: COMPASS_MOT_X/Y/Z"), "{ap}");
-        let j: serde_json::Value =
-            serde_json::from_str(&export(&model, ExportFormat::Json, &found)).unwrap();
+        let j: serde_json::Value = serde_json::from_str(&export(
+            &model,
+            ExportFormat::Json,
+            &found,
+            &Units::Microtesla,
+        ))
+        .unwrap();
         let left = j["left_out"].as_array().unwrap();
         assert_eq!(left.len(), 3);
         assert_eq!(left[1]["id"], "current_bias");

@@ -14,6 +14,7 @@ use magcal_calib::vector::VectorFit;
 use magcal_recording::Recording;
 
 use crate::field::ReferenceField;
+use crate::units::Units;
 
 /// Which calibration method to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -89,9 +90,11 @@ pub struct Calibration {
     pub notes: Vec<String>,
     /// Things the user must not miss: the calibration may be wrong or unusable as it stands, and what to do.
     pub warnings: Vec<String>,
-    /// The raw readings are not µT (a warning says so): the offset is in their units, so exports and write-back,
-    /// which autopilots and devices read in their own units, would be wrong.
+    /// The raw readings are not µT (a note or a warning says so): the offset is in their units; `units` says what
+    /// they may be, and the exports convert with it.
     pub raw_not_ut: bool,
+    /// The readings' unit: µT, or raw units with what makes them gauss ([`Units`]).
+    pub units: Units,
     /// What the robust base fit left out.
     pub robust: RobustSummary,
     /// What the base model leaves out, when diagnosed.

@@ -7,7 +7,8 @@ use std::path::Path;
 use magcal_calib::diagnosis::FoundEffect;
 
 use crate::device::DeviceSpec;
-use crate::export::{ExportFormat, Holder, left_out_lines};
+use crate::export::{ExportFormat, Holder, c_b_name, left_out_lines};
+use crate::units::Units;
 
 /// Where the calibration goes.
 #[derive(Clone, Copy, Debug)]
@@ -34,8 +35,13 @@ fn check_line(params: Option<&Path>) -> String {
 }
 
 /// The lines for a target; `params` is the parameters file written (`--out`), `found` the effects the diagnosis found,
-/// each named with why the target does not carry it ([`left_out_lines`]).
-pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, found: &[FoundEffect]) -> String {
+/// each named with why the target does not carry it ([`left_out_lines`]), `units` the readings' ([`Units`]).
+pub fn how_to_apply(
+    target: Target<'_>,
+    params: Option<&Path>,
+    found: &[FoundEffect],
+    units: &Units,
+) -> String {
     let mut out = String::new();
     let axes = "the values are in the sensor's axes as recorded: they fit where the magnetometer reports those same \
                 axes (record through the autopilot, or with the sensor aligned with the vehicle)";
@@ -59,11 +65,20 @@ pub fn how_to_apply(target: Target<'_>, params: Option<&Path>, found: &[FoundEff
                         file("the header (stdout) in magcal_calibration.h")
                     );
                     let _ = writeln!(out, "  #include \"{name}\"");
-                    out += "  /* raw: the reading in µT, in the sensor's axes, scaled as in the recording */\n";
+                    let _ = writeln!(
+                        out,
+                        "  /* raw: the reading in {}, in the sensor's axes, scaled as in the recording; cal: in {} */",
+                        units.raw_label(),
+                        units.calibrated_label()
+                    );
                     out += "  void magcal_apply(const float raw[3], float cal[3]) {\n";
                     out += "    for (int j = 0; j < 3; j++)\n";
-                    out += "      cal[j] = MAGCAL_A[j][0] * raw[0] + MAGCAL_A[j][1] * raw[1] + MAGCAL_A[j][2] * raw[2] \
-                            + MAGCAL_B_UT[j];\n";
+                    let _ = writeln!(
+                        out,
+                        "      cal[j] = MAGCAL_A[j][0] * raw[0] + MAGCAL_A[j][1] * raw[1] + MAGCAL_A[j][2] * raw[2] \
+                         + {}[j];",
+                        c_b_name(units)
+                    );
                     out += "  }\n";
                     out += "  /* level, x forward: heading = atan2(-cal[1], cal[0]) with z down, atan2(cal[1], cal[0]) \
                             with z up (radians from magnetic north) */\n";
@@ -150,6 +165,7 @@ mod tests {
             },
             Some(params),
             &[],
+            &Units::Microtesla,
         );
         assert!(
             c.contains("cal.h") && c.contains("MAGCAL_A[j][0] * raw[0]"),
@@ -163,6 +179,7 @@ mod tests {
             },
             None,
             &crate::export::tests::three_found(),
+            &Units::Microtesla,
         );
         assert!(
             ap.contains("param load") && ap.contains("COMPASS_ORIENT"),
@@ -180,11 +197,12 @@ mod tests {
             },
             None,
             &[],
+            &Units::Microtesla,
         );
         assert!(
             px.contains("QGroundControl") && px.contains("CAL_MAG0_ID"),
             "{px}"
         );
-        assert!(how_to_apply(Target::None, None, &[]).contains("--export"));
+        assert!(how_to_apply(Target::None, None, &[], &Units::Microtesla).contains("--export"));
     }
 }

@@ -31,6 +31,7 @@ pub mod summary;
 pub mod truth;
 pub mod tty;
 pub mod uncertainty;
+pub mod units;
 pub mod verdict;
 pub mod workflow;
 pub mod writeback;

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use magcal_calib::effects::{Shape, Value};
+use magcal_calib::effects::{Need, Shape, Value};
 use magcal_calib::{Effect, EffectId, Model};
 use serde::{Deserialize, Serialize};
 
@@ -26,9 +26,28 @@ pub struct ParamsFile {
     pub recording: Option<String>,
     /// `B = A·B̂ + b`.
     pub calibration: LinearParams,
-    /// Body-fixed corrections `apply` removes, in order.
+    /// The readings' unit, when they were not µT ([`crate::units`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units: Option<UnitsParams>,
+    /// Body-fixed corrections `apply` removes, in order: the sensor's (temperature, currents, non-linearity), never
+    /// one recording's own (a drift or a step of the offset, tied to its clock: those stay in its report).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub corrections: Vec<Correction>,
+    /// Comment lines written at the top of the file (what was left to the report, and why).
+    #[serde(skip)]
+    pub comments: Vec<String>,
+}
+
+/// What the readings were in, when not µT: `raw` in `B = A·raw + b` is in `readings`, and `b_ut` in `calibrated`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UnitsParams {
+    /// What one unit of the readings is: `counts` or `raw units`.
+    pub readings: String,
+    /// How many of them make a gauss, when a chip or unit said.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_gauss: Option<f64>,
+    /// What the calibrated field (and so `b_ut`) is in: `uT`, or the readings' unit when no field magnitude was known.
+    pub calibrated: String,
 }
 
 /// `A` and `b`.
@@ -241,23 +260,37 @@ impl ParamsFile {
                 a: model.a,
                 b_ut: model.b_ut,
             },
+            units: None,
             corrections: model
                 .corrections()
                 .filter_map(|e| Correction::from_effect(e, channels))
                 .collect(),
+            comments: Vec::new(),
         }
     }
 
-    /// The parameters file of a calibration of `rec` (named `recording` in the file): its final model.
+    /// The parameters file of a calibration of `rec` (named `recording` in the file): the sensor's model — the final
+    /// model less what belongs to this recording alone ([`sensor_model`]), said in a comment.
     pub fn of(
         cal: &crate::fit::Calibration,
         rec: &magcal_recording::Recording,
         recording: &str,
     ) -> ParamsFile {
         let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
-        let mut params = ParamsFile::new(cal.method().as_str(), &cal.model(), &channels);
+        let (model, comments) = sensor_model(&cal.model());
+        let mut params = ParamsFile::new(cal.method().as_str(), &model, &channels);
         params.sensor = rec.meta.sensor.clone();
         params.recording = Some(recording.to_owned());
+        params.comments = comments;
+        params.units = cal.units.raw().map(|r| UnitsParams {
+            readings: cal.units.raw_label(),
+            per_gauss: r.scale.as_ref().map(|s| s.per_gauss),
+            calibrated: if cal.units.calibrated_ut() {
+                "uT".to_owned()
+            } else {
+                cal.units.raw_label()
+            },
+        });
         params
     }
 
@@ -272,14 +305,34 @@ impl ParamsFile {
         Ok(model)
     }
 
+    /// The file's text: a comment, then TOML with `A` a row a line.
+    pub fn text(&self) -> Result<String, toml::ser::Error> {
+        let mut out = "# magcal calibration parameters: B = A·raw + b − Σ corrections\n".to_owned();
+        for c in &self.comments {
+            out += &format!("# {c}\n");
+        }
+        for line in toml::to_string(self)?.lines() {
+            match line.strip_prefix("A = [[") {
+                Some(rows) => {
+                    out += "A = [\n";
+                    for row in rows.trim_end_matches("]]").split("], [") {
+                        out += &format!("    [{row}],\n");
+                    }
+                    out += "]\n";
+                }
+                None => {
+                    out += line;
+                    out.push('\n');
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// Writes the file atomically.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        let text = toml::to_string_pretty(self).map_err(std::io::Error::other)?;
-        write_atomic(
-            path,
-            format!("# magcal calibration parameters: B = A·raw + b − Σ corrections\n{text}")
-                .as_bytes(),
-        )
+        let text = self.text().map_err(std::io::Error::other)?;
+        write_atomic(path, text.as_bytes())
     }
 
     /// Reads a file.
@@ -339,6 +392,39 @@ impl ParamsFile {
         }
         Ok(())
     }
+}
+
+/// The sensor's model of a final `model`: without the corrections that belong to the recording it was fitted on
+/// (those its descriptor needs the recording's clock for: a drift of the offset, a step), which another recording's
+/// clock would apply wrongly. A step's offset after it is kept (the state the sensor was left in); a drift's `b` is
+/// already the offset at the recording's mean time. Returns the model and a comment line per correction left out.
+pub fn sensor_model(model: &Model) -> (Model, Vec<String>) {
+    let mut kept = Model::linear(model.a, model.b_ut);
+    let mut comments = Vec::new();
+    for e in model.corrections() {
+        let of_this_recording = e.id().descriptor().needs.contains(&Need::Time);
+        if !of_this_recording {
+            // A correction the model held is one it can hold again.
+            let _ = kept.add_correction(*e);
+            continue;
+        }
+        let state = match *e {
+            Effect::BiasStep { t_s, step_ut } => {
+                kept.b_ut = std::array::from_fn(|k| kept.b_ut[k] - step_ut[k]);
+                format!("b is the offset after its step at {t_s:.1} s")
+            }
+            Effect::BiasDrift { t_ref_s, .. } => {
+                format!("b is the offset at its middle, {t_ref_s:.1} s")
+            }
+            _ => "b is as fitted with it".to_owned(),
+        };
+        comments.push(format!(
+            "{} of the recording it was fitted on is not here (tied to that recording's clock, see its report): \
+             {state}",
+            e.id()
+        ));
+    }
+    (kept, comments)
 }
 
 #[cfg(test)]

@@ -58,6 +58,8 @@ const OUTLINE: RGBColor = RGBColor(214, 39, 40);
 const SPAN: RGBColor = RGBColor(255, 187, 120);
 const EVENT: RGBColor = RGBColor(148, 103, 189);
 const GREY: RGBColor = RGBColor(90, 90, 90);
+/// A map's cell the field never pointed through.
+const UNVISITED: RGBColor = RGBColor(228, 228, 228);
 
 /// The files `--plots` may write, in the folder it names (each through [`crate::outputs`] first).
 pub const PLOT_FILES: [&str; 5] = [
@@ -95,6 +97,36 @@ pub fn write_plots(
         })?;
     }
     Ok(plots.written)
+}
+
+/// The plots [`write_plots`] leaves out for this calibration, each with why (`heading.svg` without the local field's
+/// direction, the time plot without time, the channel plot without a channel the residual is blamed on).
+pub fn not_written(cal: &Calibration, rec: &Recording, assessment: &Assessment) -> Vec<String> {
+    let mut out = Vec::new();
+    if assessment.heading.is_none() {
+        out.push(
+            "heading.svg not written: the heading error needs the local field's direction (give --location \
+             LAT,LON,ALT --date YYYY-MM-DD, or --field-ned N,E,D)"
+                .to_owned(),
+        );
+    }
+    if rec
+        .t_s
+        .as_ref()
+        .is_none_or(|t| t.iter().all(|v| *v == t[0]))
+    {
+        out.push("residual_time.svg not written: the recording has no time column".to_owned());
+    }
+    if let Some(d) = &cal.diagnosis
+        && blamed_channel(d).is_none()
+    {
+        out.push(
+            "residual_channel.svg not written: the residual follows no channel (temperature, a current, time, \
+             the field's rate of change) and no effect found depends on one"
+                .to_owned(),
+        );
+    }
+    out
 }
 
 /// Writes `readings.svg` with the raw readings only (for a recording the fit refused).
@@ -143,6 +175,8 @@ enum Mark {
     Dashed(RGBColor),
     Dot(RGBColor),
     Patch(RGBColor),
+    /// A map's cell: a solid patch with a thin border.
+    Cell(RGBColor),
     /// No mark: a note beside the entries.
     Note,
 }
@@ -199,6 +233,13 @@ fn legend(area: &Area<'_>, entries: &[(Mark, String)]) -> PlotResult<()> {
                     c.mix(0.5).filled(),
                 ))?;
             }
+            Mark::Cell(c) => {
+                area.draw(&Rectangle::new([(x, y - 6), (x + 24, y + 6)], c.filled()))?;
+                area.draw(&Rectangle::new(
+                    [(x, y - 6), (x + 24, y + 6)],
+                    GREY.stroke_width(1),
+                ))?;
+            }
             Mark::Note => {}
         }
         area.draw_text(label, &style, (x + 30, y - 7))?;
@@ -238,13 +279,14 @@ fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
 const PLANES: [(usize, usize, &str, &str); 3] =
     [(0, 1, "x", "y"), (0, 2, "x", "z"), (1, 2, "y", "z")];
 
-/// One projection panel: points, an outline, equal scales.
+/// One projection panel: points, an outline, equal scales; the axes named and in `unit`.
 fn projection(
     area: &Area<'_>,
     title: &str,
     points: &[(f64, f64)],
     outline: &[(f64, f64)],
     axes: (&str, &str),
+    unit: &str,
 ) -> PlotResult<()> {
     let area = area.titled(title, ("sans-serif", 15))?;
     let all = points.iter().chain(outline);
@@ -271,8 +313,8 @@ fn projection(
     chart
         .configure_mesh()
         .light_line_style(TRANSPARENT)
-        .x_desc(format!("{} (µT)", axes.0))
-        .y_desc(format!("{} (µT)", axes.1))
+        .x_desc(format!("{} ({unit})", axes.0))
+        .y_desc(format!("{} ({unit})", axes.1))
         .x_labels(5)
         .y_labels(5)
         .draw()?;
@@ -337,12 +379,19 @@ fn readings(svg: &mut String, rec: &Recording, cal: Option<&Calibration>) -> Plo
             .or(c.field.magnitude())
             .unwrap_or(f64::NAN)
     });
-    let mut entries = vec![(Mark::Dot(POINTS), "readings (µT, sensor axes)".to_owned())];
+    // The readings' unit and the calibrated field's: µT, or raw units (crate::units).
+    let (raw_unit, cal_unit) = cal.map_or(("µT".to_owned(), "µT".to_owned()), |c| {
+        (c.units.raw_label(), c.units.calibrated_label())
+    });
+    let mut entries = vec![(
+        Mark::Dot(POINTS),
+        format!("readings ({raw_unit}, sensor axes)"),
+    )];
     if let Some(f) = field_ut {
         entries.push((
             Mark::Line(OUTLINE, 2),
             format!(
-                "top: the fitted ellipsoid's outline (A and b); bottom: the sphere |B| = {f:.1} µT"
+                "top: the fitted ellipsoid's outline (A and b); bottom: the sphere |B| = {f:.1} {cal_unit}"
             ),
         ));
     } else {
@@ -368,6 +417,7 @@ fn readings(svg: &mut String, rec: &Recording, cal: Option<&Calibration>) -> Plo
             &points,
             &outline,
             (xi, xj),
+            &raw_unit,
         )?;
     }
     if let (Some(c), Some(f)) = (cal, field_ut) {
@@ -394,6 +444,7 @@ fn readings(svg: &mut String, rec: &Recording, cal: Option<&Calibration>) -> Plo
                 &points,
                 &circle,
                 (xi, xj),
+                &cal_unit,
             )?;
         }
     }
@@ -561,6 +612,8 @@ struct Series {
     floor_ut: f64,
     spans: Vec<(f64, f64)>,
     events: Vec<Event>,
+    /// What the residuals are in: µT, or the readings' own units when no field magnitude was known.
+    unit: String,
 }
 
 /// Per-sample residual magnitude (RMS over the components).
@@ -572,10 +625,12 @@ fn magnitude(res: &Components) -> Vec<f64> {
 
 impl Series {
     fn of(cal: &Calibration, rec: &Recording) -> Series {
-        match &cal.diagnosis {
+        let mut series = match &cal.diagnosis {
             Some(d) => Series::diagnosed(d),
             None => Series::fitted(cal, rec),
-        }
+        };
+        series.unit = cal.units.calibrated_label();
+        series
     }
 
     fn diagnosed(d: &Diagnosis) -> Series {
@@ -613,6 +668,7 @@ impl Series {
                 Vec::new()
             },
             events,
+            unit: "µT".to_owned(),
         }
     }
 
@@ -657,6 +713,7 @@ impl Series {
             floor_ut: cal.noise_floor_ut,
             spans: Vec::new(),
             events: Vec::new(),
+            unit: "µT".to_owned(),
         }
     }
 }
@@ -726,7 +783,7 @@ fn residual_time(svg: &mut String, s: &Series) -> PlotResult<()> {
         .configure_mesh()
         .light_line_style(TRANSPARENT)
         .x_desc("t (s)")
-        .y_desc("residual RMS (µT)")
+        .y_desc(format!("residual RMS ({})", s.unit))
         .draw()?;
     chart.draw_series(
         s.spans
@@ -814,14 +871,24 @@ fn residual_orientation(svg: &mut String, s: &Series) -> PlotResult<()> {
         .unwrap_or(0.0);
     let (lo, hi) = (s.floor_ut, p95.max(2.0 * s.floor_ut));
     let width = 60 + 520 * maps.len() as u32 + 120;
-    let root = SVGBackend::with_string(svg, (width, 400)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (maps_area, bar_area) = root.split_horizontally(width - 120);
+    let entries = [
+        (
+            Mark::Cell(UNVISITED),
+            "the field never pointed this way: no readings".to_owned(),
+        ),
+        (
+            Mark::Note,
+            "colour: the residual where it did, from the sensor's noise (blue) up (red)".to_owned(),
+        ),
+    ];
+    let root = SVGBackend::with_string(svg, (width, 400 + LEGEND_PX)).into_drawing_area();
+    let body = with_legend(&root, &entries)?;
+    let (maps_area, bar_area) = body.split_horizontally(width - 120);
     let panels = maps_area.split_evenly((1, maps.len()));
     for (area, (cells, title)) in panels.iter().zip(&maps) {
         let mut chart = ChartBuilder::on(area)
             .caption(
-                format!("residual RMS by field direction: {title}"),
+                format!("residual RMS by the field's direction: {title}"),
                 ("sans-serif", 15),
             )
             .margin(10)
@@ -831,30 +898,27 @@ fn residual_orientation(svg: &mut String, s: &Series) -> PlotResult<()> {
         chart
             .configure_mesh()
             .light_line_style(TRANSPARENT)
-            .x_desc("azimuth in sensor x–y (°)")
-            .y_desc("elevation towards +z (°)")
+            .x_desc("around the sensor's z axis, from +x towards +y (°)")
+            .y_desc("up from the x–y plane towards +z (°)")
             .x_labels(9)
             .y_labels(7)
             .draw()?;
-        chart.draw_series(cells.iter().enumerate().filter_map(|(c, v)| {
-            let v = (*v)?;
+        chart.draw_series(cells.iter().enumerate().map(|(c, v)| {
             let (az, el) = (
                 (c % AZ) as f64 * 10.0 - 180.0,
                 (c / AZ) as f64 * 10.0 - 90.0,
             );
-            Some(Rectangle::new(
-                [(az, el), (az + 10.0, el + 10.0)],
-                shade(v, lo, hi).filled(),
-            ))
+            let colour = v.map_or(UNVISITED, |v| shade(v, lo, hi));
+            Rectangle::new([(az, el), (az + 10.0, el + 10.0)], colour.filled())
         }))?;
     }
-    colour_bar(&bar_area, lo, hi)?;
+    colour_bar(&bar_area, lo, hi, &s.unit)?;
     root.present()?;
     Ok(())
 }
 
-/// A vertical colour bar from the noise floor `lo` (blue) to `hi` (red), labelled in µT.
-fn colour_bar(area: &Area<'_>, lo: f64, hi: f64) -> PlotResult<()> {
+/// A vertical colour bar from the noise floor `lo` (blue) to `hi` (red), labelled in `unit`.
+fn colour_bar(area: &Area<'_>, lo: f64, hi: f64, unit: &str) -> PlotResult<()> {
     let (x0, x1, y_top, y_bottom) = (12i32, 34i32, 70i32, 330i32);
     let steps = 40;
     for k in 0..steps {
@@ -872,7 +936,7 @@ fn colour_bar(area: &Area<'_>, lo: f64, hi: f64) -> PlotResult<()> {
     ))?;
     let style = ("sans-serif", 13).into_font().color(&BLACK);
     area.draw_text("residual", &style, (4, y_top - 42))?;
-    area.draw_text("RMS (µT)", &style, (4, y_top - 26))?;
+    area.draw_text(&format!("RMS ({unit})"), &style, (4, y_top - 26))?;
     for (frac, label) in [
         (0.0, format!("≤ {lo:.3}")),
         (0.5, format!("{:.3}", (lo + hi) / 2.0)),
@@ -912,14 +976,16 @@ fn blamed_channel(d: &Diagnosis) -> Option<(&str, &[f64])> {
     }
 }
 
-/// The unit of a channel the diagnosis compares the residual with.
-fn channel_unit(name: &str) -> &'static str {
+/// A channel the diagnosis compares the residual with, as an axis names it: what it is, with its unit.
+/// `rotation_rate` is the expected field's rate of change, |dB/dt| in µT/s (the field turning in sensor axes), not a
+/// gyro's rad/s.
+pub fn channel_label(name: &str) -> String {
     match name {
-        "temp" => "°C",
-        "t" => "s",
-        "rotation_rate" => "rad/s",
-        n if n.starts_with("i_") => "A",
-        _ => "as recorded",
+        "temp" => "temperature (°C)".to_owned(),
+        "t" => "time (s)".to_owned(),
+        "rotation_rate" => "the field's rate of change in sensor axes, |dB/dt| (µT/s)".to_owned(),
+        n if n.starts_with("i_") => format!("{n} (A)"),
+        n => format!("{n} (as recorded)"),
     }
 }
 
@@ -996,7 +1062,7 @@ fn residual_channel(svg: &mut String, d: &Diagnosis, name: &str, values: &[f64])
     )?;
     let mut chart = ChartBuilder::on(&body)
         .caption(
-            format!("residual ({axis}) against {name}: samples and binned means"),
+            format!("residual ({axis}) against what it follows: samples and binned means"),
             ("sans-serif", 16),
         )
         .margin(12)
@@ -1006,7 +1072,7 @@ fn residual_channel(svg: &mut String, d: &Diagnosis, name: &str, values: &[f64])
     chart
         .configure_mesh()
         .light_line_style(TRANSPARENT)
-        .x_desc(format!("{name} ({})", channel_unit(name)))
+        .x_desc(channel_label(name))
         .y_desc(format!("residual {axis} (µT)"))
         .draw()?;
     chart.draw_series(

@@ -1,7 +1,9 @@
 //! The JSON report (`--report report.json`). Its field names are a contract other tools read: `method`,
 //! `calibration.A`, `calibration.b_ut`, `residual.rms_ut`, `residual.noise_floor_ut`, `base.{A,b_ut,rms_ut}`.
-//! `calibration` and `residual` describe the final model (the one written to the parameters file), `base` the
-//! 12-parameter fit. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
+//! `calibration` and `residual` describe the final model (the one written to the parameters file, less a drift or a
+//! step of the offset, which belong to this recording alone: `crate::params::sensor_model`), `base` the 12-parameter
+//! fit. `units`, present when the readings are not µT, says what they are: `calibration.b_ut` and the residuals are
+//! then µT when a field magnitude was known (`units.calibrated`), and `calibration.offset_ut` is in the readings' units. `heading` and `verdict` hold the heading error and the verdict the summary opens with.
 
 use magcal_calib::diagnosis::{Components, Diagnosis, FoundEffect, ParamValue, SpanKind, Verdict};
 use serde::{Deserialize, Serialize};
@@ -58,6 +60,26 @@ pub struct Report {
     /// Good, usable or redo, with the reason and what to do.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verdict: Option<VerdictReport>,
+    /// What the readings are, when they are not µT (absent when they are).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units: Option<UnitsReport>,
+}
+
+/// Readings that are not µT (`magcal_app::units`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UnitsReport {
+    /// What one of their units is called: `counts` or `raw units`.
+    pub readings: String,
+    /// Their median radius about the fitted centre, in their units.
+    pub radius: f64,
+    /// How many make a gauss, when a chip or a unit says.
+    pub per_gauss: Option<f64>,
+    /// Where that comes from.
+    pub source: Option<String>,
+    /// The field's magnitude over what the readings read in that unit (1 at the datasheet's sensitivity).
+    pub gain: Option<f64>,
+    /// What the calibrated field, `b_ut` and the residuals are in: `uT`, or the readings' unit without a field.
+    pub calibrated: String,
 }
 
 /// The heading figures (see `magcal_app::heading`): the sensor level over 360 headings, the worse side up.
@@ -676,6 +698,18 @@ impl Report {
             reference_heading: ReferenceHeadingReport::of(cal),
             heading: None,
             verdict: None,
+            units: cal.units.raw().map(|r| UnitsReport {
+                readings: cal.units.raw_label(),
+                radius: r.radius,
+                per_gauss: r.scale.as_ref().map(|s| s.per_gauss),
+                source: r.scale.as_ref().map(|s| s.source.clone()),
+                gain: r.gain,
+                calibrated: if cal.units.calibrated_ut() {
+                    "uT".to_owned()
+                } else {
+                    cal.units.raw_label()
+                },
+            }),
         }
     }
 

@@ -31,8 +31,9 @@ pub fn fmt_se(value: f64, se: f64) -> String {
     format!("{value:.decimals$} ±{se:.decimals$}")
 }
 
-/// The heading figures in three lines (the last without a figure when the sensor's noise could not be measured).
-fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool) -> String {
+/// The heading figures in three lines (the last without a figure when the sensor's noise could not be measured);
+/// `bound`: the figures left are an upper bound, what a check can resolve ([`crate::apply::Resolution`]).
+fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool, bound: bool) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -47,9 +48,17 @@ fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool) -> Strin
         fmt_deg(h.before.worst_deg),
         fmt_deg(h.before.rms_deg)
     );
+    let left = format!(
+        "  left after it ({}):",
+        if bound {
+            "at most: what the check resolves"
+        } else {
+            "one standard deviation"
+        }
+    );
     let _ = writeln!(
         out,
-        "  left after it (one standard deviation):                 worst {}, RMS {}{}",
+        "{left:<57}worst {}, RMS {}{}",
         fmt_deg(h.left.worst_deg),
         fmt_deg(h.left.rms_deg),
         if scalar {
@@ -148,7 +157,27 @@ pub fn check_summary(
         );
     }
     match &c.heading {
-        Some(h) => out += &heading_lines(h, c.against != Against::Vector, c.noise_floor_ut > 0.0),
+        Some(h) => {
+            out += &heading_lines(
+                h,
+                c.against != Against::Vector,
+                c.noise_floor_ut > 0.0,
+                c.resolution.bound,
+            );
+            let _ = writeln!(
+                out,
+                "  this check's own standard error: ±{} on what is left (the residual's mean square over {} blocks of \
+                 time{})",
+                fmt_deg(c.resolution.se_deg),
+                crate::apply::CHECK_BLOCKS,
+                if c.resolution.bound {
+                    ": within two of the sensor's noise, so the figures left are what the check resolves, not an \
+                     estimate"
+                } else {
+                    ""
+                }
+            );
+        }
         None => {
             let _ = writeln!(
                 out,
@@ -247,7 +276,9 @@ fn samples_line(cal: &Calibration, recording: &str) -> String {
 fn heading_block(cal: &Calibration, assessment: &Assessment) -> String {
     let mut out = String::new();
     match &assessment.heading {
-        Some(h) => out += &heading_lines(h, cal.method() == Method::Scalar, cal.noise_measured),
+        Some(h) => {
+            out += &heading_lines(h, cal.method() == Method::Scalar, cal.noise_measured, false)
+        }
         None => {
             let _ = writeln!(
                 out,
@@ -314,11 +345,13 @@ fn model_lines(cal: &Calibration) -> String {
     let centre = magcal_calib::scalar::centre(&model.a, model.b_ut);
     let _ = writeln!(
         out,
-        "  b = [{}] µT   (offset −A⁻¹b = [{:.2}, {:.2}, {:.2}] µT)",
+        "  b = [{}] {}   (offset −A⁻¹b = [{:.2}, {:.2}, {:.2}] {})",
         b.join(", "),
+        cal.units.calibrated_label(),
         centre[0],
         centre[1],
-        centre[2]
+        centre[2],
+        cal.units.raw_label()
     );
     out
 }
@@ -334,26 +367,28 @@ fn residual_lines(cal: &Calibration) -> String {
         Some(d) => (d.extended.rms_ut, d.noise_floor_ut),
         None => (cal.residual_rms_ut, cal.noise_floor_ut),
     };
+    let unit = cal.units.calibrated_label();
     if cal.noise_measured {
         let _ = writeln!(
             out,
-            "  residual RMS {rms:.3} µT {what}, the sensor's noise {floor:.3} µT (×{:.2})",
+            "  residual RMS {rms:.3} {unit} {what}, the sensor's noise {floor:.3} {unit} (×{:.2})",
             rms / floor
         );
     } else {
         let _ = writeln!(
             out,
-            "  residual RMS {rms:.3} µT {what}, the sensor's noise not measured (the note below says why)"
+            "  residual RMS {rms:.3} {unit} {what}, the sensor's noise not measured (the note below says why)"
         );
     }
     let cov = cal.fit.face().coverage();
     let _ = writeln!(
         out,
-        "  coverage: {:.0}% of the sphere of directions; spread {:.1} / {:.1} / {:.1} µT",
+        "  coverage: {:.0}% of the sphere of directions; spread {:.1} / {:.1} / {:.1} {}",
         100.0 * cal.sphere_coverage,
         cov.spread_ut[0],
         cov.spread_ut[1],
-        cov.spread_ut[2]
+        cov.spread_ut[2],
+        cal.units.raw_label()
     );
     out
 }
@@ -493,7 +528,8 @@ fn located_line(d: &Diagnosis) -> String {
     }
     if let Some(c) = channel {
         parts.push(format!(
-            "follows {c} ({:.0} % of the residual's variance)",
+            "follows {} ({:.0} % of the residual's variance)",
+            crate::plots::channel_label(c),
             100.0 * l.channel_share
         ));
     }

@@ -10,12 +10,13 @@ use magcal_recording::Recording;
 
 use crate::apply::{Check, check};
 use crate::calibrate::{
-    CalibrateError, attitude_worth_checking, calibrate, drop_faulty, read_to_calibrate,
+    CalibrateError, attitude_worth_checking, calibrate_with, drop_faulty, read_to_calibrate,
 };
 use crate::field::ReferenceField;
 use crate::field::{FieldArgs, resolve};
 use crate::fit::{Calibration, Method};
 use crate::params::{ParamsError, ParamsFile};
+use crate::units::ChipOption;
 use crate::verdict::{Assessment, assess};
 
 /// What a fit is asked for.
@@ -30,6 +31,8 @@ pub struct FitRequest<'a> {
     /// Whether the result goes to a target that holds `A` and `b` only (an export or a device): the verdict is then
     /// of the base fit ([`crate::verdict::target_model`]).
     pub linear_only: bool,
+    /// The chip whose raw counts the readings are, when the user says (`--chip`): see [`crate::units`].
+    pub chip: Option<ChipOption>,
 }
 
 /// A recording fitted and graded.
@@ -70,7 +73,8 @@ pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitt
     })
     .map_err(NotFitted::Unread)?;
     let mut faulty = drop_faulty(&mut rec);
-    let mut cal = match calibrate(&rec, request.method, field, request.diagnose) {
+    let chip = request.chip.as_ref();
+    let mut cal = match calibrate_with(&rec, request.method, field, request.diagnose, chip) {
         Ok(cal) => cal,
         Err(error) => {
             return Err(NotFitted::Refused {
@@ -85,7 +89,7 @@ pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitt
         })
         .map_err(NotFitted::Unread)?;
         let full_faulty = drop_faulty(&mut full);
-        if let Ok(again) = calibrate(&full, request.method, field, false)
+        if let Ok(again) = calibrate_with(&full, request.method, field, false, chip)
             && (again.reference.convention.is_some() || again.reference_heading.is_some())
         {
             (rec, cal, faulty) = (full, again, full_faulty);

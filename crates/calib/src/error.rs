@@ -38,6 +38,38 @@ pub enum FitError {
         /// What to do.
         advice: String,
     },
+    /// The fit's correction for the sensor's noise moved it more than a second-order correction may, or did not
+    /// settle: on so few directions the noise biases the fit by about as much, and neither fit can be trusted.
+    #[error(
+        "the directions the sensor turned through do not pin the fit down against its own noise: correcting the \
+         fit for the noise ({noise_ut:.2} µT per axis) {}; the fit is refused when that correction moves the \
+         offset by more than {centre_limit_ut:.1} µT ({:.0} % of the {field_ut:.1} µT field) or the gains by more \
+         than {:.0} %, or does not settle, since the uncorrected fit is then off by about as much and the correction \
+         itself is not reliable. To do: {advice}, or lower the noise (average readings, a slower rate)",
+        crate::error::noise_correction_said(*converged, *centre_moved_ut, *gain_moved),
+        100.0 * centre_limit_ut / field_ut,
+        100.0 * gain_limit
+    )]
+    NoiseDominates {
+        /// The least determined direction, sensor axes.
+        direction: [f64; 3],
+        /// The raw noise the correction was for, RMS per axis, µT.
+        noise_ut: f64,
+        /// How far the correction moved the offset, µT.
+        centre_moved_ut: f64,
+        /// How far it may, µT.
+        centre_limit_ut: f64,
+        /// How far it moved `A`, relative to its mean gain (largest entry).
+        gain_moved: f64,
+        /// How far it may.
+        gain_limit: f64,
+        /// Whether it settled.
+        converged: bool,
+        /// The field magnitude, µT.
+        field_ut: f64,
+        /// What to do.
+        advice: String,
+    },
     /// The reference field hardly varies while the readings do: it cannot be the field in sensor axes.
     #[error(
         "the reference field hardly varies (spread {reference_ut:.2} µT) while the readings do ({readings_ut:.1} \
@@ -54,4 +86,21 @@ pub enum FitError {
     /// The normal equations were singular.
     #[error("the least-squares problem is singular: {0}")]
     Singular(&'static str),
+}
+
+/// What the noise correction of [`FitError::NoiseDominates`] did, as a clause.
+pub(crate) fn noise_correction_said(
+    converged: bool,
+    centre_moved_ut: f64,
+    gain_moved: f64,
+) -> String {
+    let moved = format!(
+        "moves the offset by {centre_moved_ut:.1} µT and the gains by {:.1} %",
+        100.0 * gain_moved
+    );
+    if converged {
+        moved
+    } else {
+        format!("did not settle (its last step {moved})")
+    }
 }

@@ -983,10 +983,15 @@ impl Problem<'_> {
         let small = moved.fixed_rows::<3>(0).norm() <= MAX_CORRECTION * target / gain
             && moved.fixed_rows::<6>(3).amax() <= MAX_CORRECTION * gain;
         if !converged || !small {
-            let (direction, se_raw) = weakest(&plain_cov);
-            return Err(FitError::Undetermined {
+            let (direction, _) = weakest(&plain_cov);
+            return Err(FitError::NoiseDominates {
                 direction,
-                se_ut: se_raw * gain,
+                noise_ut: (s2.sum() / 3.0).sqrt() * gain,
+                centre_moved_ut: moved.fixed_rows::<3>(0).norm() * gain,
+                centre_limit_ut: MAX_CORRECTION * target,
+                gain_moved: moved.fixed_rows::<6>(3).amax() / gain,
+                gain_limit: MAX_CORRECTION,
+                converged,
                 field_ut: target,
                 advice: rotate_advice(direction),
             });
