@@ -139,6 +139,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         diagnose: true,
         field: &args.field.field_args(None),
         linear_only: false,
+        log: Default::default(),
     };
     let Fitted {
         rec,

@@ -13,6 +13,7 @@ use crate::calibrate::{
 };
 use crate::field::{FieldArgs, resolve};
 use crate::fit::{Calibration, Method};
+use crate::flight::{LogOptions, is_flight_log, read_flight};
 use crate::verdict::{Assessment, assess};
 
 /// What a fit is asked for.
@@ -27,6 +28,8 @@ pub struct FitRequest<'a> {
     /// Whether the result goes to a target that holds `A` and `b` only (an export or a device): the verdict is then
     /// of the base fit ([`crate::verdict::target_model`]).
     pub linear_only: bool,
+    /// For a flight log: which magnetometer.
+    pub log: LogOptions,
 }
 
 /// A recording fitted and graded.
@@ -54,17 +57,23 @@ pub enum NotFitted {
     },
 }
 
-/// Reads, calibrates and grades the recording at `path`.
+/// Reads, calibrates and grades the recording at `path`: a magcal recording, or a flight log (`.ulg`, read by
+/// [`read_flight`]).
 ///
 /// Without the diagnosis the quaternions are turned into the expected field as the rows are read
 /// ([`read_to_calibrate`]); a fit that looks off is then made again with them kept, and replaces the first if their
 /// convention is not magcal's ([`attitude_worth_checking`]).
 pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitted> {
     let field_args = request.field;
-    let (mut rec, field) = read_to_calibrate(path, request.method, request.diagnose, |meta| {
-        Ok(resolve(field_args, meta)?)
-    })
-    .map_err(NotFitted::Unread)?;
+    let (mut rec, field) = if is_flight_log(path) {
+        let input = read_flight(path, &request.log, field_args).map_err(NotFitted::Unread)?;
+        (input.rec, input.field)
+    } else {
+        read_to_calibrate(path, request.method, request.diagnose, |meta| {
+            Ok(resolve(field_args, meta)?)
+        })
+        .map_err(NotFitted::Unread)?
+    };
     let mut faulty = drop_faulty(&mut rec);
     let mut cal = match calibrate(&rec, request.method, field, request.diagnose) {
         Ok(cal) => cal,

@@ -39,6 +39,9 @@ pub struct MagStream {
     pub temp_c: Option<Vec<f64>>,
     /// The calibration the autopilot applied to it, found by device id (or the only one enabled).
     pub calibration: Option<LoggedCalibration>,
+    /// For a calibrated stream: the bias PX4's magnetometer bias estimator had subtracted (body axes, gauss, held
+    /// from each valid `magnetometer_bias_estimate` until the next; PX4 1.12 and later, `SENS_MAG_AUTOCAL`).
+    pub estimator_bias_g: Option<Series<[f64; 3]>>,
 }
 
 /// A GPS fix.

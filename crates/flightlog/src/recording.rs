@@ -3,7 +3,7 @@
 //! attitude from sensor axes into NED (the estimator's body attitude turned by the sensor's rotation), the battery
 //! current as `i_battery`, the chip's temperature where logged, the place and date of the first GPS fix.
 
-use magcal_calib::frames::{IDENTITY, Mat3};
+use magcal_calib::frames::{IDENTITY, Mat3, add, mat_t_vec, sub};
 use magcal_recording::{Date, Layout, Location, Metadata, Recording, Sample};
 
 use crate::{FlightLog, LogError, MagStream};
@@ -24,7 +24,8 @@ pub struct FlightRecording {
     pub rec: Recording,
     /// Which magnetometer, in words.
     pub mag: String,
-    /// The field with the logged calibration applied, sensor axes, µT, one per row (`None` without a slot).
+    /// The field as the autopilot used it (the logged calibration and the estimator's bias applied), sensor axes, µT,
+    /// one per row (`None` without a slot).
     pub logged_ut: Option<Vec<[f64; 3]>>,
 }
 
@@ -149,8 +150,13 @@ impl FlightLog {
                 .and_then(|c| c.at(t, CURRENT_GAP_US))
                 .unwrap_or(f64::NAN);
             let power = cal.map_or(0.0, |c| c.power(current));
+            let bias = mag
+                .estimator_bias_g
+                .as_ref()
+                .and_then(|b| b.held_at(t))
+                .unwrap_or([0.0; 3]);
             let raw_g = match cal {
-                Some(c) if mag.calibrated => c.undo(v, power).ok_or_else(|| LogError::Calibration {
+                Some(c) if mag.calibrated => c.undo(add(v, bias), power).ok_or_else(|| LogError::Calibration {
                     file: self.file.clone(),
                     mag: mag.name(),
                     why: "its logged scale matrix (CAL_MAGn_SCALE, ODIAG) is singular: the calibration cannot be \
@@ -171,7 +177,8 @@ impl FlightLog {
                 continue;
             }
             if let (Some(out), Some(c)) = (&mut logged_ut, cal) {
-                out.push(c.apply_in_sensor_axes(raw_g, power).map(|g| g * 100.0));
+                let applied = sub(c.apply_in_sensor_axes(raw_g, power), mat_t_vec(&c.rotation, bias));
+                out.push(applied.map(|g| g * 100.0));
             }
         }
         if rec.is_empty() {
@@ -201,10 +208,12 @@ impl FlightLog {
             ..Metadata::default()
         };
         if let Some(fix) = self.first_fix() {
+            // To 0.1 m: more digits than the receiver has would only clutter the output.
+            let round = |v: f64, digits: usize| format!("{v:.digits$}").parse().unwrap_or(v);
             meta.location = Some(Location {
-                lat_deg: fix.lat_deg,
-                lon_deg: fix.lon_deg,
-                alt_m: if fix.alt_m.is_finite() { fix.alt_m } else { 0.0 },
+                lat_deg: round(fix.lat_deg, 6),
+                lon_deg: round(fix.lon_deg, 6),
+                alt_m: if fix.alt_m.is_finite() { round(fix.alt_m, 1) } else { 0.0 },
             });
             meta.date = utc_date(fix.utc_us).filter(|d| d.year >= 2000);
         }

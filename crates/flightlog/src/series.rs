@@ -61,6 +61,12 @@ impl<T: Blend> Series<T> {
         self.t_us.is_empty()
     }
 
+    /// The last value at or before `t_us` (a value held until the next one), `None` before the first.
+    pub fn held_at(&self, t_us: u64) -> Option<T> {
+        let i = self.t_us.partition_point(|t| *t <= t_us);
+        (i > 0).then(|| self.values[i - 1])
+    }
+
     /// The value at `t_us`, blended between the samples around it; `None` outside the series or where the samples
     /// around it are more than `max_gap_us` apart.
     pub fn at(&self, t_us: u64, max_gap_us: u64) -> Option<T> {
@@ -96,6 +102,8 @@ mod tests {
         assert_eq!(s.at(10, 100), Some(1.0));
         assert_eq!(s.at(500, 100), None);
         assert_eq!(s.at(2000, 100_000), None);
+        assert_eq!(s.held_at(999), Some(1.0));
+        assert_eq!(s.held_at(5000), Some(2.0));
     }
 
     #[test]

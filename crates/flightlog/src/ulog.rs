@@ -16,7 +16,7 @@ use crate::series::Series;
 use crate::{FlightLog, GpsFix, LogError, MagStream};
 
 /// The fields read of each topic; the others are skipped.
-const WANTED: [(&str, &[&str]); 6] = [
+const WANTED: [(&str, &[&str]); 7] = [
     (
         "sensor_mag",
         &["timestamp", "timestamp_sample", "device_id", "x", "y", "z", "temperature"],
@@ -37,6 +37,16 @@ const WANTED: [(&str, &[&str]); 6] = [
         &["timestamp", "timestamp_sample", "q[0]", "q[1]", "q[2]", "q[3]"],
     ),
     ("battery_status", &["timestamp", "current_a"]),
+    (
+        "magnetometer_bias_estimate",
+        &[
+            "timestamp",
+            "bias_x[0]", "bias_x[1]", "bias_x[2]", "bias_x[3]",
+            "bias_y[0]", "bias_y[1]", "bias_y[2]", "bias_y[3]",
+            "bias_z[0]", "bias_z[1]", "bias_z[2]", "bias_z[3]",
+            "valid[0]", "valid[1]", "valid[2]", "valid[3]",
+        ],
+    ),
     ("vehicle_gps_position", GPS_FIELDS),
     ("sensor_gps", GPS_FIELDS),
 ];
@@ -299,10 +309,35 @@ fn magnetometers(raw: &Raw) -> Vec<MagStream> {
                 field_g,
                 temp_c: temp.is_some().then_some(temps),
                 calibration,
+                estimator_bias_g: None,
             });
         }
     }
+    for i in 0..mags.len() {
+        if mags[i].calibrated {
+            // The estimator's bias is indexed as the raw streams are (the uORB instance of sensor_mag).
+            let index = mags
+                .iter()
+                .find(|m| !m.calibrated && m.device_id.is_some() && m.device_id == mags[i].device_id)
+                .map(|m| m.instance);
+            mags[i].estimator_bias_g = index.and_then(|k| estimator_bias(raw, k));
+        }
+    }
     mags
+}
+
+/// The bias PX4's magnetometer bias estimator published for raw stream `k`, valid values only.
+fn estimator_bias(raw: &Raw, k: u8) -> Option<Series<[f64; 3]>> {
+    let c = raw.topics.get(&("magnetometer_bias_estimate".to_owned(), 0))?;
+    let axis = |a: &str| column(c, &format!("bias_{a}[{k}]"));
+    let (x, y, z, valid) = (axis("x")?, axis("y")?, axis("z")?, column(c, &format!("valid[{k}]"))?);
+    let mut s = Series::default();
+    for (i, t) in times(c).into_iter().enumerate() {
+        if valid[i] != 0.0 && [x[i], y[i], z[i]].iter().all(|v| v.is_finite()) {
+            s.push(t, [x[i], y[i], z[i]]);
+        }
+    }
+    (!s.is_empty()).then_some(s)
 }
 
 /// The attitude (body into NED), the valid unit quaternions only.

@@ -249,6 +249,7 @@ fn fit_all(
         diagnose: opts.fit.diagnose,
         field: &opts.fit.field,
         linear_only: false,
+        log: Default::default(),
     };
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
