@@ -113,12 +113,14 @@ struct Raw {
     params: BTreeMap<String, f64>,
     changed: Vec<String>,
     hardware: Option<String>,
+    data_messages: usize,
 }
 
 impl Raw {
     fn message(&mut self, m: &Message, cache: &mut HashMap<u16, Vec<(String, usize, FlattenedFieldType)>>) {
         match m {
             Message::Data(d) => {
+                self.data_messages += 1;
                 let chosen = cache
                     .entry(d.msg_id)
                     .or_insert_with(|| selection(d.flattened_format));
@@ -162,11 +164,7 @@ pub fn read(path: &Path) -> Result<FlightLog, LogError> {
             source: std::io::Error::other("the path is not UTF-8; rename the file"),
         });
     };
-    // The parser reports an unreadable file only when it opens it; a folder reads as empty.
-    std::fs::File::open(path).map_err(|source| LogError::Io {
-        file: file.clone(),
-        source,
-    })?;
+    check_magic(path, &file)?;
     let mut raw = Raw::default();
     let mut cache = HashMap::new();
     let completeness = read_file_with_simple_callback(path_str, &mut |m: &Message| {
@@ -185,6 +183,17 @@ pub fn read(path: &Path) -> Result<FlightLog, LogError> {
             source: e,
         },
     })?;
+    if raw.data_messages == 0 {
+        let detail = if completeness.is_incomplete() {
+            "it ends before its data section: it was cut off while being written or copied"
+        } else {
+            "it holds no logged data"
+        };
+        return Err(LogError::Corrupt {
+            file,
+            detail: detail.to_owned(),
+        });
+    }
     let mut notes = Vec::new();
     match completeness {
         Completeness::Complete => {}
@@ -206,6 +215,37 @@ pub fn read(path: &Path) -> Result<FlightLog, LogError> {
         ));
     }
     assemble(file, raw, notes)
+}
+
+/// ULog's first bytes: `ULog`, then 0x01 0x12 0x35.
+const MAGIC: [u8; 7] = *b"ULog\x01\x12\x35";
+
+/// Refuses a file that cannot be opened, is empty or does not start with ULog's magic bytes.
+fn check_magic(path: &Path, file: &str) -> Result<(), LogError> {
+    use std::io::Read;
+    let io = |source| LogError::Io {
+        file: file.to_owned(),
+        source,
+    };
+    let mut head = Vec::with_capacity(16);
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(16)
+        .read_to_end(&mut head)
+        .map_err(io)?;
+    let detail = if head.is_empty() {
+        "the file is empty"
+    } else if !head.starts_with(&MAGIC) {
+        "it does not start with ULog's magic bytes"
+    } else if head.len() < 16 {
+        "it ends inside its 16-byte header"
+    } else {
+        return Ok(());
+    };
+    Err(LogError::Corrupt {
+        file: file.to_owned(),
+        detail: detail.to_owned(),
+    })
 }
 
 /// A column by name, if the topic has it.
