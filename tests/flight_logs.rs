@@ -69,7 +69,17 @@ fn cross_validate(input: &FlightInput) -> (Errors, Errors) {
         give_heading(&mut train, field, input.logged.as_ref()).unwrap();
         let cal = calibrate(&train, Method::Vector, input.field.clone(), true).unwrap();
         let model = cal.model();
-        eprintln!("fold {fold}: A {:?} b {:?} effects {:?} heading fit {:?}", cal.base_model().a, cal.base_model().b_ut, cal.diagnosis.as_ref().map(|d| d.effects.iter().map(|e| format!("{:?}", e)).collect::<Vec<_>>()), give_heading(&mut train.clone(), field, input.logged.as_ref()));
+        eprintln!(
+            "fold {fold}: A {:?} b {:?} effects {:?} heading fit {:?}",
+            cal.base_model().a,
+            cal.base_model().b_ut,
+            cal.diagnosis.as_ref().map(|d| d
+                .effects
+                .iter()
+                .map(|e| format!("{:?}", e))
+                .collect::<Vec<_>>()),
+            give_heading(&mut train.clone(), field, input.logged.as_ref())
+        );
         let mut currents = vec![0.0; input.rec.currents.len()];
         for i in (0..n).filter(|i| held(*i)) {
             let q = input.estimator_quat[i];
@@ -106,7 +116,8 @@ fn esc_status_log_fits_the_world_field_better_than_its_logged_calibration_on_row
     );
     assert!(ours.n >= 110.0, "{ours:?}");
     assert!(
-        ours.heading_free_rms() < theirs.heading_free_rms() && ours.vector_rms() < theirs.vector_rms(),
+        ours.heading_free_rms() < theirs.heading_free_rms()
+            && ours.vector_rms() < theirs.vector_rms(),
         "{ours:?} {theirs:?}"
     );
 }
@@ -117,12 +128,21 @@ fn quadrotor_local_says_what_it_cannot_determine_instead_of_fitting() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("cannot calibrate from this log"), "{err}");
-    assert!(err.contains("no GPS fix") && err.contains("magnitude and dip"), "{err}");
+    assert!(
+        err.contains("no GPS fix") && err.contains("magnitude and dip"),
+        "{err}"
+    );
     assert!(err.contains("the heading spans only 36°"), "{err}");
     // Every magnetometer is listed with its logged calibration, and the one fitted is named.
-    assert!(err.contains("magnetometer 1: sensor_mag[1], device 396321 (raw)"), "{err}");
+    assert!(
+        err.contains("magnetometer 1: sensor_mag[1], device 396321 (raw)"),
+        "{err}"
+    );
     assert!(err.contains("CAL_MAG1 (device 396321, disabled)"), "{err}");
-    assert!(err.contains("fitting sensor_mag[0], device 396809"), "{err}");
+    assert!(
+        err.contains("fitting sensor_mag[0], device 396809"),
+        "{err}"
+    );
     assert!(String::from_utf8_lossy(&out.stdout).is_empty());
     // Given the place, the rotation is still too little.
     let out = magcal_fit(&[
@@ -136,18 +156,34 @@ fn quadrotor_local_says_what_it_cannot_determine_instead_of_fitting() {
     ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(err.contains("fitting sensor_mag[1], device 396321 (as asked)"), "{err}");
-    assert!(!err.contains("no GPS fix") && err.contains("the heading spans only"), "{err}");
+    assert!(
+        err.contains("fitting sensor_mag[1], device 396321 (as asked)"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("no GPS fix") && err.contains("the heading spans only"),
+        "{err}"
+    );
 }
 
 #[test]
 fn esc_status_log_is_fitted_with_a_verdict_and_exports_to_px4() {
-    let out = magcal_fit(&[flight("esc_status_log.ulg").to_str().unwrap(), "--export", "px4"]);
-    let (stdout, err) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let out = magcal_fit(&[
+        flight("esc_status_log.ulg").to_str().unwrap(),
+        "--export",
+        "px4",
+    ]);
+    let (stdout, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
     assert!(out.status.success(), "{err}");
     assert!(err.contains("its heading is fitted"), "{err}");
     assert!(err.contains("verdict:"), "{err}");
-    assert!(stdout.contains("CAL_MAG0_XOFF") || stdout.contains("CAL_MAG"), "{stdout}");
+    assert!(
+        stdout.contains("CAL_MAG0_XOFF") || stdout.contains("CAL_MAG"),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -156,8 +192,9 @@ fn a_wrong_magnetometer_number_lists_those_there_are() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        err.contains("there is no magnetometer 3: the log holds 0: vehicle_magnetometer[0], device 396809"),
+        err.contains(
+            "there is no magnetometer 3: the log holds 0: vehicle_magnetometer[0], device 396809"
+        ),
         "{err}"
     );
 }
-

@@ -55,12 +55,20 @@ pub fn describe(log: &FlightLog) -> Vec<String> {
         .map(|(i, m)| {
             let t = &m.field_g.t_us;
             let span_s = (t[t.len() - 1] - t[0]) as f64 * 1e-6;
-            let rate = if span_s > 0.0 { (t.len() - 1) as f64 / span_s } else { 0.0 };
+            let rate = if span_s > 0.0 {
+                (t.len() - 1) as f64 / span_s
+            } else {
+                0.0
+            };
             let cal = m
                 .calibration
                 .as_ref()
                 .map_or("no CAL_MAGn slot for it".to_owned(), |c| c.describe());
-            let kind = if m.calibrated { "calibrated, body axes" } else { "raw" };
+            let kind = if m.calibrated {
+                "calibrated, body axes"
+            } else {
+                "raw"
+            };
             format!(
                 "magnetometer {i}: {} ({kind}), {} samples at {rate:.1} Hz; logged {cal}",
                 m.name(),
@@ -78,7 +86,12 @@ fn field_for(args: &FieldArgs, meta: &Metadata) -> anyhow::Result<ReferenceField
             let (Some(loc), Some(date)) = (&meta.location, &meta.date) else {
                 bail!("no field");
             };
-            let nearest: Date = if date.year < 2025 { "2025-01-01" } else { "2029-12-31" }.parse()?;
+            let nearest: Date = if date.year < 2025 {
+                "2025-01-01"
+            } else {
+                "2029-12-31"
+            }
+            .parse()?;
             let via = format!(
                 "the log's first GPS fix; the log's date {date} is outside the model's years, so its field on \
                  {nearest} is used (the field drifts by about 0.1 µT a year)"
@@ -90,7 +103,12 @@ fn field_for(args: &FieldArgs, meta: &Metadata) -> anyhow::Result<ReferenceField
 }
 
 /// What the flight cannot determine, in words: the field without a GPS fix, the offsets without enough turning.
-fn undeterminable(file: &str, log: &FlightLog, fr: &FlightRecording, field: &ReferenceField) -> Option<String> {
+fn undeterminable(
+    file: &str,
+    log: &FlightLog,
+    fr: &FlightRecording,
+    field: &ReferenceField,
+) -> Option<String> {
     let mut why = Vec::new();
     if field.vector().is_none() {
         let fixes = log.gps.len();
@@ -111,12 +129,21 @@ fn undeterminable(file: &str, log: &FlightLog, fr: &FlightRecording, field: &Ref
             fr.rec.len()
         ));
     }
-    (!why.is_empty()).then(|| format!("{file}: cannot calibrate from this log: {}", why.join("; and ")))
+    (!why.is_empty()).then(|| {
+        format!(
+            "{file}: cannot calibrate from this log: {}",
+            why.join("; and ")
+        )
+    })
 }
 
 /// Reads a flight log for the fit: the magnetometer `options` pick (telling the user which, and the others), the
 /// field, the checks of what the log can determine, the reference re-headed by a fit to magnitude and dip.
-pub fn read_flight(path: &Path, options: &LogOptions, args: &FieldArgs) -> anyhow::Result<FlightInput> {
+pub fn read_flight(
+    path: &Path,
+    options: &LogOptions,
+    args: &FieldArgs,
+) -> anyhow::Result<FlightInput> {
     let file = path.display().to_string();
     let log = magcal_flightlog::ulog::read(path)?;
     for line in describe(&log) {
@@ -126,18 +153,25 @@ pub fn read_flight(path: &Path, options: &LogOptions, args: &FieldArgs) -> anyho
         tellln!("{file}: NOTE: {note}");
     }
     let fr = log.recording(options.mag.map(Instance))?;
-    let which = if options.mag.is_some() { "as asked" } else { "the one the autopilot used; --mag N picks another" };
+    let which = if options.mag.is_some() {
+        "as asked"
+    } else {
+        "the one the autopilot used; --mag N picks another"
+    };
     tellln!("{file}: fitting {} ({which})", fr.mag);
     let field = field_for(args, &fr.rec.meta)?;
     if let Some(why) = undeterminable(&file, &log, &fr, &field) {
         bail!(why);
     }
     let field_ned = field.vector().expect("checked by undeterminable");
-    let FlightRecording { mut rec, logged_ut, .. } = fr;
+    let FlightRecording {
+        mut rec, logged_ut, ..
+    } = fr;
     let estimator_quat = rec.quat.clone().unwrap_or_default();
     let logged = log.mags[log_index(&log, options)].calibration.clone();
-    let heading_fit = give_heading(&mut rec, field_ned, logged.as_ref())
-        .ok_or_else(|| anyhow::anyhow!("{file}: the fit to the field's magnitude and dip failed: too few samples"))?;
+    let heading_fit = give_heading(&mut rec, field_ned, logged.as_ref()).ok_or_else(|| {
+        anyhow::anyhow!("{file}: the fit to the field's magnitude and dip failed: too few samples")
+    })?;
     tellln!(
         "{file}: reference: the attitude's tilt and the World Magnetic Model's magnitude and dip; its heading is \
          fitted (the estimator's is partly this compass's own): |B| RMS {:.2} µT, down component RMS {:.2} µT",

@@ -62,7 +62,10 @@ impl LoggedCalibration {
                 let board = get(params, "SENS_BOARD_ROT").unwrap_or(0.0) as i64;
                 match sensor_to_body(board) {
                     Some(r) => (r, format!("SENS_BOARD_ROT = {board} (internal)")),
-                    None => (IDENTITY, format!("SENS_BOARD_ROT = {board} unknown: taken as none")),
+                    None => (
+                        IDENTITY,
+                        format!("SENS_BOARD_ROT = {board} unknown: taken as none"),
+                    ),
                 }
             }
         };

@@ -41,7 +41,9 @@ pub enum LogError {
         file: String,
     },
     /// The instance asked for is not in the log.
-    #[error("{file}: there is no magnetometer {asked}: the log holds {available}; pick one of those with --mag")]
+    #[error(
+        "{file}: there is no magnetometer {asked}: the log holds {available}; pick one of those with --mag"
+    )]
     NoSuchInstance {
         /// The file.
         file: String,

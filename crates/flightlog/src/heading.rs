@@ -152,7 +152,10 @@ pub fn fit_magnitude_dip(
             let nb = norm(b);
             let u = [b[0] / nb, b[1] / nb, b[2] / nb];
             let d = jacobian(rows.raw_ut[i], &rows.currents_a[i]);
-            for (w, r) in [(u, nb - f_mag), (rows.down[i], dot(b, rows.down[i]) - f_down)] {
+            for (w, r) in [
+                (u, nb - f_mag),
+                (rows.down[i], dot(b, rows.down[i]) - f_down),
+            ] {
                 let row = DVector::from_iterator(np, d.iter().map(|g| dot(w, *g)));
                 jtj += &row * row.transpose();
                 jtr += &row * r;
@@ -213,7 +216,11 @@ pub fn turned(quat: &[[f64; 4]]) -> (f64, f64) {
         .map(|q| {
             let m = quat_to_matrix(*q);
             let (n, e) = (m[0][0], m[1][0]);
-            let (n, e) = if n.hypot(e) < 0.2 { (m[0][1], m[1][1]) } else { (n, e) };
+            let (n, e) = if n.hypot(e) < 0.2 {
+                (m[0][1], m[1][1])
+            } else {
+                (n, e)
+            };
             e.atan2(n).to_degrees().rem_euclid(360.0)
         })
         .collect();
@@ -266,7 +273,9 @@ mod tests {
     fn a_wrong_estimator_heading_does_not_move_the_fit() {
         let field = [21.0, 1.5, 43.0];
         let a_true = [[1.05, 0.02, -0.01], [0.02, 0.97, 0.03], [-0.01, 0.03, 1.01]];
-        let a_inv = nalgebra::Matrix3::from_fn(|r, c| a_true[r][c]).try_inverse().unwrap();
+        let a_inv = nalgebra::Matrix3::from_fn(|r, c| a_true[r][c])
+            .try_inverse()
+            .unwrap();
         let b_true = [4.0, -6.0, 2.5];
         let k_true = [0.05, -0.08, 0.12]; // µT/A
         let q_true = attitudes(600);
@@ -274,30 +283,52 @@ mod tests {
         for (i, q) in q_true.iter().enumerate() {
             let current = 20.0 + 30.0 * ((i as f64) * 0.07).sin().abs();
             let truth = mat_t_vec(&quat_to_matrix(*q), field);
-            let cal: Vec<f64> = (0..3).map(|k| truth[k] + k_true[k] * current - b_true[k]).collect();
+            let cal: Vec<f64> = (0..3)
+                .map(|k| truth[k] + k_true[k] * current - b_true[k])
+                .collect();
             let r = a_inv * nalgebra::Vector3::new(cal[0], cal[1], cal[2]);
             raw.push([r[0], r[1], r[2]]);
             down.push(down_in_sensor(*q));
             currents.push(vec![current]);
             // The estimator's heading is off by a heading-dependent error of up to 8°.
             let err = 0.14 * (2.0 * i as f64 * 0.01).sin();
-            q_est.push(quat_mul([(0.5 * err).cos(), 0.0, 0.0, (0.5 * err).sin()], *q));
+            q_est.push(quat_mul(
+                [(0.5 * err).cos(), 0.0, 0.0, (0.5 * err).sin()],
+                *q,
+            ));
         }
-        let rows = Rows { raw_ut: &raw, down: &down, currents_a: &currents };
-        let fit = fit_magnitude_dip(&rows, field, (magcal_calib::frames::IDENTITY, [0.0; 3])).unwrap();
+        let rows = Rows {
+            raw_ut: &raw,
+            down: &down,
+            currents_a: &currents,
+        };
+        let fit =
+            fit_magnitude_dip(&rows, field, (magcal_calib::frames::IDENTITY, [0.0; 3])).unwrap();
         for k in 0..3 {
             assert!((fit.b_ut[k] - b_true[k]).abs() < 0.05, "{:?}", fit.b_ut);
-            assert!((fit.k_ut_per_a[0][k] - k_true[k]).abs() < 0.002, "{:?}", fit.k_ut_per_a);
+            assert!(
+                (fit.k_ut_per_a[0][k] - k_true[k]).abs() < 0.002,
+                "{:?}",
+                fit.k_ut_per_a
+            );
             for j in 0..3 {
                 assert!((fit.a[k][j] - a_true[k][j]).abs() < 2e-3, "{:?}", fit.a);
             }
         }
-        assert!(fit.magnitude_rms_ut < 0.01 && fit.down_rms_ut < 0.01, "{fit:?}");
+        assert!(
+            fit.magnitude_rms_ut < 0.01 && fit.down_rms_ut < 0.01,
+            "{fit:?}"
+        );
         // Re-headed, the reference agrees with the true one wherever the estimator's heading was off.
-        let fields: Vec<[f64; 3]> = (0..raw.len()).map(|i| fit.field_ut(raw[i], &currents[i])).collect();
+        let fields: Vec<[f64; 3]> = (0..raw.len())
+            .map(|i| fit.field_ut(raw[i], &currents[i]))
+            .collect();
         rehead(&mut q_est, &fields, field);
         for (q, t) in q_est.iter().zip(&q_true) {
-            let (e, w) = (mat_t_vec(&quat_to_matrix(*q), field), mat_t_vec(&quat_to_matrix(*t), field));
+            let (e, w) = (
+                mat_t_vec(&quat_to_matrix(*q), field),
+                mat_t_vec(&quat_to_matrix(*t), field),
+            );
             assert!(norm(magcal_calib::frames::sub(e, w)) < 0.01, "{e:?} {w:?}");
         }
         let (span, tilt) = turned(&q_true);

@@ -34,16 +34,36 @@ pub fn matrix_to_quat(m: &Mat3) -> [f64; 4] {
     let trace = m[0][0] + m[1][1] + m[2][2];
     let q = if trace > 0.0 {
         let s = 2.0 * (trace + 1.0).sqrt();
-        [0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s]
+        [
+            0.25 * s,
+            (m[2][1] - m[1][2]) / s,
+            (m[0][2] - m[2][0]) / s,
+            (m[1][0] - m[0][1]) / s,
+        ]
     } else if m[0][0] > m[1][1] && m[0][0] > m[2][2] {
         let s = 2.0 * (1.0 + m[0][0] - m[1][1] - m[2][2]).sqrt();
-        [(m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s]
+        [
+            (m[2][1] - m[1][2]) / s,
+            0.25 * s,
+            (m[0][1] + m[1][0]) / s,
+            (m[0][2] + m[2][0]) / s,
+        ]
     } else if m[1][1] > m[2][2] {
         let s = 2.0 * (1.0 + m[1][1] - m[0][0] - m[2][2]).sqrt();
-        [(m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s]
+        [
+            (m[0][2] - m[2][0]) / s,
+            (m[0][1] + m[1][0]) / s,
+            0.25 * s,
+            (m[1][2] + m[2][1]) / s,
+        ]
     } else {
         let s = 2.0 * (1.0 + m[2][2] - m[0][0] - m[1][1]).sqrt();
-        [(m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s]
+        [
+            (m[1][0] - m[0][1]) / s,
+            (m[0][2] + m[2][0]) / s,
+            (m[1][2] + m[2][1]) / s,
+            0.25 * s,
+        ]
     };
     let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
     q.map(|v| v / n)
@@ -80,7 +100,9 @@ pub fn utc_date(utc_us: u64) -> Option<Date> {
 impl MagStream {
     /// The stream in words: topic, instance, device.
     pub fn name(&self) -> String {
-        let id = self.device_id.map_or(String::new(), |id| format!(", device {id}"));
+        let id = self
+            .device_id
+            .map_or(String::new(), |id| format!(", device {id}"));
         format!("{}[{}]{id}", self.topic, self.instance)
     }
 }
@@ -133,11 +155,12 @@ impl FlightLog {
                 .collect(),
             ..Layout::default()
         };
-        let mut rec = Recording::new(self.metadata(mag), &layout).map_err(|e| LogError::Calibration {
-            file: self.file.clone(),
-            mag: mag.name(),
-            why: format!("its metadata cannot be written: {e}"),
-        })?;
+        let mut rec =
+            Recording::new(self.metadata(mag), &layout).map_err(|e| LogError::Calibration {
+                file: self.file.clone(),
+                mag: mag.name(),
+                why: format!("its metadata cannot be written: {e}"),
+            })?;
         let mut logged_ut = cal.map(|_| Vec::new());
         let t0 = mag.field_g.t_us[0];
         for (i, (&t, &v)) in mag.field_g.t_us.iter().zip(&mag.field_g.values).enumerate() {
@@ -177,7 +200,10 @@ impl FlightLog {
                 continue;
             }
             if let (Some(out), Some(c)) = (&mut logged_ut, cal) {
-                let applied = sub(c.apply_in_sensor_axes(raw_g, power), mat_t_vec(&c.rotation, bias));
+                let applied = sub(
+                    c.apply_in_sensor_axes(raw_g, power),
+                    mat_t_vec(&c.rotation, bias),
+                );
                 out.push(applied.map(|g| g * 100.0));
             }
         }
@@ -213,13 +239,18 @@ impl FlightLog {
             meta.location = Some(Location {
                 lat_deg: round(fix.lat_deg, 6),
                 lon_deg: round(fix.lon_deg, 6),
-                alt_m: if fix.alt_m.is_finite() { round(fix.alt_m, 1) } else { 0.0 },
+                alt_m: if fix.alt_m.is_finite() {
+                    round(fix.alt_m, 1)
+                } else {
+                    0.0
+                },
             });
             meta.date = utc_date(fix.utc_us).filter(|d| d.year >= 2000);
         }
         meta.other.push(("source".to_owned(), self.file.clone()));
         if let Some(c) = &mag.calibration {
-            meta.other.push(("logged_calibration".to_owned(), c.describe()));
+            meta.other
+                .push(("logged_calibration".to_owned(), c.describe()));
         }
         meta
     }

@@ -19,7 +19,15 @@ use crate::{FlightLog, GpsFix, LogError, MagStream};
 const WANTED: [(&str, &[&str]); 7] = [
     (
         "sensor_mag",
-        &["timestamp", "timestamp_sample", "device_id", "x", "y", "z", "temperature"],
+        &[
+            "timestamp",
+            "timestamp_sample",
+            "device_id",
+            "x",
+            "y",
+            "z",
+            "temperature",
+        ],
     ),
     (
         "vehicle_magnetometer",
@@ -34,17 +42,36 @@ const WANTED: [(&str, &[&str]); 7] = [
     ),
     (
         "vehicle_attitude",
-        &["timestamp", "timestamp_sample", "q[0]", "q[1]", "q[2]", "q[3]"],
+        &[
+            "timestamp",
+            "timestamp_sample",
+            "q[0]",
+            "q[1]",
+            "q[2]",
+            "q[3]",
+        ],
     ),
     ("battery_status", &["timestamp", "current_a"]),
     (
         "magnetometer_bias_estimate",
         &[
             "timestamp",
-            "bias_x[0]", "bias_x[1]", "bias_x[2]", "bias_x[3]",
-            "bias_y[0]", "bias_y[1]", "bias_y[2]", "bias_y[3]",
-            "bias_z[0]", "bias_z[1]", "bias_z[2]", "bias_z[3]",
-            "valid[0]", "valid[1]", "valid[2]", "valid[3]",
+            "bias_x[0]",
+            "bias_x[1]",
+            "bias_x[2]",
+            "bias_x[3]",
+            "bias_y[0]",
+            "bias_y[1]",
+            "bias_y[2]",
+            "bias_y[3]",
+            "bias_z[0]",
+            "bias_z[1]",
+            "bias_z[2]",
+            "bias_z[3]",
+            "valid[0]",
+            "valid[1]",
+            "valid[2]",
+            "valid[3]",
         ],
     ),
     ("vehicle_gps_position", GPS_FIELDS),
@@ -117,7 +144,11 @@ struct Raw {
 }
 
 impl Raw {
-    fn message(&mut self, m: &Message, cache: &mut HashMap<u16, Vec<(String, usize, FlattenedFieldType)>>) {
+    fn message(
+        &mut self,
+        m: &Message,
+        cache: &mut HashMap<u16, Vec<(String, usize, FlattenedFieldType)>>,
+    ) {
         match m {
             Message::Data(d) => {
                 self.data_messages += 1;
@@ -172,12 +203,12 @@ pub fn read(path: &Path) -> Result<FlightLog, LogError> {
         SimpleCallbackResult::KeepReading
     })
     .map_err(|e| match e.kind() {
-        std::io::ErrorKind::Other | std::io::ErrorKind::InvalidData | std::io::ErrorKind::UnexpectedEof => {
-            LogError::Corrupt {
-                file: file.clone(),
-                detail: e.to_string(),
-            }
-        }
+        std::io::ErrorKind::Other
+        | std::io::ErrorKind::InvalidData
+        | std::io::ErrorKind::UnexpectedEof => LogError::Corrupt {
+            file: file.clone(),
+            detail: e.to_string(),
+        },
         _ => LogError::Io {
             file: file.clone(),
             source: e,
@@ -272,16 +303,19 @@ fn assemble(file: String, raw: Raw, notes: Vec<String>) -> Result<FlightLog, Log
     if attitude.is_empty() {
         return Err(LogError::NoAttitude { file });
     }
-    let current_a = raw.topics.get(&("battery_status".to_owned(), 0)).and_then(|c| {
-        let mut s = Series::default();
-        for (t, i) in times(c).into_iter().zip(column(c, "current_a")?) {
-            // PX4 logs −1 where no current is measured.
-            if i.is_finite() && *i >= 0.0 {
-                s.push(t, *i);
+    let current_a = raw
+        .topics
+        .get(&("battery_status".to_owned(), 0))
+        .and_then(|c| {
+            let mut s = Series::default();
+            for (t, i) in times(c).into_iter().zip(column(c, "current_a")?) {
+                // PX4 logs −1 where no current is measured.
+                if i.is_finite() && *i >= 0.0 {
+                    s.push(t, *i);
+                }
             }
-        }
-        (!s.is_empty()).then_some(s)
-    });
+            (!s.is_empty()).then_some(s)
+        });
     Ok(FlightLog {
         file,
         hardware: raw.hardware.clone(),
@@ -302,7 +336,11 @@ fn magnetometers(raw: &Raw) -> Vec<MagStream> {
         ("sensor_mag", ["x", "y", "z"], false),
         (
             "vehicle_magnetometer",
-            ["magnetometer_ga[0]", "magnetometer_ga[1]", "magnetometer_ga[2]"],
+            [
+                "magnetometer_ga[0]",
+                "magnetometer_ga[1]",
+                "magnetometer_ga[2]",
+            ],
             true,
         ),
     ] {
@@ -358,7 +396,9 @@ fn magnetometers(raw: &Raw) -> Vec<MagStream> {
             // The estimator's bias is indexed as the raw streams are (the uORB instance of sensor_mag).
             let index = mags
                 .iter()
-                .find(|m| !m.calibrated && m.device_id.is_some() && m.device_id == mags[i].device_id)
+                .find(|m| {
+                    !m.calibrated && m.device_id.is_some() && m.device_id == mags[i].device_id
+                })
                 .map(|m| m.instance);
             mags[i].estimator_bias_g = index.and_then(|k| estimator_bias(raw, k));
         }
@@ -368,9 +408,16 @@ fn magnetometers(raw: &Raw) -> Vec<MagStream> {
 
 /// The bias PX4's magnetometer bias estimator published for raw stream `k`, valid values only.
 fn estimator_bias(raw: &Raw, k: u8) -> Option<Series<[f64; 3]>> {
-    let c = raw.topics.get(&("magnetometer_bias_estimate".to_owned(), 0))?;
+    let c = raw
+        .topics
+        .get(&("magnetometer_bias_estimate".to_owned(), 0))?;
     let axis = |a: &str| column(c, &format!("bias_{a}[{k}]"));
-    let (x, y, z, valid) = (axis("x")?, axis("y")?, axis("z")?, column(c, &format!("valid[{k}]"))?);
+    let (x, y, z, valid) = (
+        axis("x")?,
+        axis("y")?,
+        axis("z")?,
+        column(c, &format!("valid[{k}]"))?,
+    );
     let mut s = Series::default();
     for (i, t) in times(c).into_iter().enumerate() {
         if valid[i] != 0.0 && [x[i], y[i], z[i]].iter().all(|v| v.is_finite()) {
@@ -386,7 +433,9 @@ fn attitude(raw: &Raw) -> Series<[f64; 4]> {
     let Some(c) = raw.topics.get(&("vehicle_attitude".to_owned(), 0)) else {
         return s;
     };
-    let q: Vec<&[f64]> = (0..4).filter_map(|k| column(c, &format!("q[{k}]"))).collect();
+    let q: Vec<&[f64]> = (0..4)
+        .filter_map(|k| column(c, &format!("q[{k}]")))
+        .collect();
     if q.len() != 4 {
         return s;
     }
@@ -413,9 +462,17 @@ fn gps(raw: &Raw) -> Vec<GpsFix> {
     (0..n)
         .map(|i| {
             let (lat, lon, alt) = if column(c, "latitude_deg").is_some() {
-                (get("latitude_deg", i), get("longitude_deg", i), get("altitude_msl_m", i))
+                (
+                    get("latitude_deg", i),
+                    get("longitude_deg", i),
+                    get("altitude_msl_m", i),
+                )
             } else {
-                (get("lat", i) * 1e-7, get("lon", i) * 1e-7, get("alt", i) * 1e-3)
+                (
+                    get("lat", i) * 1e-7,
+                    get("lon", i) * 1e-7,
+                    get("alt", i) * 1e-3,
+                )
             };
             GpsFix {
                 t_us: get("timestamp", i) as u64,

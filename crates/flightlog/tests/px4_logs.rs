@@ -19,16 +19,29 @@ fn esc_status_log_has_one_calibrated_magnetometer_with_cal_mag0() {
     let log = log("esc_status_log.ulg");
     assert_eq!(log.mags.len(), 1);
     let m = &log.mags[0];
-    assert_eq!((m.topic, m.instance, m.calibrated), ("vehicle_magnetometer", 0, true));
+    assert_eq!(
+        (m.topic, m.instance, m.calibrated),
+        ("vehicle_magnetometer", 0, true)
+    );
     assert_eq!(m.field_g.len(), 117);
-    let cal = m.calibration.as_ref().expect("CAL_MAG0 is the only slot enabled");
+    let cal = m
+        .calibration
+        .as_ref()
+        .expect("CAL_MAG0 is the only slot enabled");
     assert_eq!((cal.slot, cal.device_id), (0, 396809));
-    assert!((cal.offset_g[0] + 0.01912352).abs() < 1e-7, "{:?}", cal.offset_g);
+    assert!(
+        (cal.offset_g[0] + 0.01912352).abs() < 1e-7,
+        "{:?}",
+        cal.offset_g
+    );
     assert!((cal.scale[2][2] - 1.0387299).abs() < 1e-6);
     assert!(cal.rotation_source.contains("external"));
     assert_eq!(log.hardware.as_deref(), Some("PX4_FMU_V3"));
     let fix = log.first_fix().expect("a GPS fix");
-    assert!((fix.lat_deg - 47.357).abs() < 0.01 && (fix.lon_deg - 8.519).abs() < 0.01, "{fix:?}");
+    assert!(
+        (fix.lat_deg - 47.357).abs() < 0.01 && (fix.lon_deg - 8.519).abs() < 0.01,
+        "{fix:?}"
+    );
     let current = log.current_a.as_ref().expect("battery current");
     let max = current.values.iter().copied().fold(0.0, f64::max);
     assert!((73.0..75.0).contains(&max), "{max}");
@@ -36,7 +49,10 @@ fn esc_status_log_has_one_calibrated_magnetometer_with_cal_mag0() {
     let fr = log.recording(None).unwrap();
     assert_eq!(fr.rec.len(), 117);
     assert_eq!(fr.rec.currents[0].name, "i_battery");
-    assert_eq!(fr.rec.meta.date.map(|d| d.to_string()).as_deref(), Some("2019-05-13"));
+    assert_eq!(
+        fr.rec.meta.date.map(|d| d.to_string()).as_deref(),
+        Some("2019-05-13")
+    );
     // The raw field and the logged one differ by the logged calibration only.
     let logged = fr.logged_ut.as_ref().unwrap();
     let body = mat_vec(&cal.rotation, logged[10]);
@@ -63,14 +79,32 @@ fn quadrotor_local_has_two_raw_magnetometers_each_with_its_slot() {
         .collect();
     assert_eq!(slots, [0, 1, 0]);
     let c0 = log.mags[0].calibration.as_ref().unwrap();
-    assert!((c0.scale[1][2] + 0.25131145).abs() < 1e-7, "ZODIAG at (1,2): {:?}", c0.scale);
-    assert!(log.mags[1].calibration.as_ref().unwrap().rotation_source.contains("internal"));
+    assert!(
+        (c0.scale[1][2] + 0.25131145).abs() < 1e-7,
+        "ZODIAG at (1,2): {:?}",
+        c0.scale
+    );
+    assert!(
+        log.mags[1]
+            .calibration
+            .as_ref()
+            .unwrap()
+            .rotation_source
+            .contains("internal")
+    );
     assert!(!log.mags[1].calibration.as_ref().unwrap().enabled);
     // The magnetometer the autopilot used (the highest CAL_MAGn_PRIO), raw.
     assert_eq!(log.default_instance(), Some(0));
     assert!(log.first_fix().is_none(), "no GPS fix in this log");
     // This magnetometer's driver logs no temperature (NaN): the recording has no temp column.
-    assert!(log.mags[0].temp_c.as_ref().unwrap().iter().all(|t| t.is_nan()));
+    assert!(
+        log.mags[0]
+            .temp_c
+            .as_ref()
+            .unwrap()
+            .iter()
+            .all(|t| t.is_nan())
+    );
     assert!(log.recording(None).unwrap().rec.temp_c.is_none());
 }
 
@@ -84,7 +118,10 @@ fn the_logged_calibration_turns_sensor_mag_into_vehicle_magnetometer() {
     let log = log("quadrotor_local.ulg");
     let (raw, calibrated) = (&log.mags[0], &log.mags[2]);
     let cal = raw.calibration.as_ref().unwrap();
-    let bias = calibrated.estimator_bias_g.as_ref().expect("the estimator's bias for device 396809");
+    let bias = calibrated
+        .estimator_bias_g
+        .as_ref()
+        .expect("the estimator's bias for device 396809");
     let mean = |v: &mut dyn Iterator<Item = [f64; 3]>| {
         let (mut s, mut n) = ([0.0; 3], 0.0);
         for x in v {
@@ -106,7 +143,10 @@ fn the_logged_calibration_turns_sensor_mag_into_vehicle_magnetometer() {
         n += 1.0;
     }
     let (with, without) = ((with / n).sqrt(), (without / n).sqrt());
-    assert!(n > 80.0 && with < 1.5 && without > 3.0, "RMS {with} µT, without the bias {without} µT");
+    assert!(
+        n > 80.0 && with < 1.5 && without > 3.0,
+        "RMS {with} µT, without the bias {without} µT"
+    );
     let held = bias.held_at(u64::MAX).unwrap();
     assert!(norm(held) * 100.0 > 3.0, "{held:?}");
     // Undone (bias included), the calibrated stream gives the raw field back on average (over other samples).
@@ -144,7 +184,13 @@ fn cut_or_damaged_logs_are_read_up_to_the_damage_or_refused_clearly() {
     // Cut in the data section: the log is read, with a note that it ends early.
     std::fs::write(&damaged, &bytes[..bytes.len() * 3 / 4 + 7]).unwrap();
     let log = ulog::read(&damaged).unwrap();
-    assert!(log.notes.iter().any(|n| n.contains("ends partway") || n.contains("corrupt record")), "{:?}", log.notes);
+    assert!(
+        log.notes
+            .iter()
+            .any(|n| n.contains("ends partway") || n.contains("corrupt record")),
+        "{:?}",
+        log.notes
+    );
     assert!(log.mags[0].field_g.len() < 117 && log.mags[0].field_g.len() > 50);
     let mut state = 0x2545_f491_4f6c_dd1du64;
     for _ in 0..200 {
@@ -159,13 +205,19 @@ fn cut_or_damaged_logs_are_read_up_to_the_damage_or_refused_clearly() {
     }
     // Not a ULog file at all, and an empty one.
     for (content, want) in [
-        (&b"t,mx,my,mz\n0,1,2,3\n"[..], "does not start with ULog's magic bytes"),
+        (
+            &b"t,mx,my,mz\n0,1,2,3\n"[..],
+            "does not start with ULog's magic bytes",
+        ),
         (&b""[..], "the file is empty"),
         (&bytes[..300], "ends before its data section"),
     ] {
         std::fs::write(&damaged, content).unwrap();
         let err = ulog::read(&damaged).unwrap_err().to_string();
-        assert!(err.contains(want) && err.starts_with(&damaged.display().to_string()), "{err}");
+        assert!(
+            err.contains(want) && err.starts_with(&damaged.display().to_string()),
+            "{err}"
+        );
     }
     let missing = dir.path().join("missing.ulg");
     let err = ulog::read(&missing).unwrap_err().to_string();
