@@ -230,6 +230,6 @@ pub fn give_heading(
     let fields: Vec<[f64; 3]> = (0..rec.mag_ut.len())
         .map(|i| fit.field_ut(rec.mag_ut[i], &currents[i]))
         .collect();
-    heading::rehead(quat, &fields, field_ned);
+    heading::rehead(quat, &fields, field_ned)?;
     Some(fit)
 }
