@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use anyhow::bail;
-use magcal_flightlog::heading::{self, MagnitudeDipFit, Rows};
+use magcal_flightlog::heading::{self, Deviation, MagnitudeDipFit, Rows};
 use magcal_flightlog::{FlightLog, FlightRecording, Instance, LoggedCalibration};
 use magcal_recording::{Date, Metadata, Recording};
 
@@ -20,8 +20,12 @@ pub struct LogOptions {
     pub mag: Option<usize>,
 }
 
-/// Least span of headings a flight must cover for the offsets to be determined, degrees.
+/// Least span of headings a level flight must cover for the offsets to be determined, degrees.
 pub const MIN_HEADING_SPAN_DEG: f64 = 180.0;
+
+/// A tilt from which on the headings' span does not matter: the vehicle was turned about more than the vertical
+/// (a hand-held or tumbling log), degrees.
+pub const TUMBLE_TILT_DEG: f64 = 45.0;
 
 /// Whether `path` names a flight log magcal reads (`.ulg`, whatever the case).
 pub fn is_flight_log(path: &Path) -> bool {
@@ -45,6 +49,8 @@ pub struct FlightInput {
     pub logged: Option<LoggedCalibration>,
     /// The fit to the magnitude and the dip that gave the reference its heading.
     pub heading_fit: MagnitudeDipFit,
+    /// The estimator's heading error found against that fit, and whether it was taken out.
+    pub deviation: Deviation,
 }
 
 /// The log's magnetometers in words, one line each, with their logged calibration.
@@ -121,7 +127,7 @@ fn undeterminable(
     }
     let quat = fr.rec.quat.as_deref().unwrap_or(&[]);
     let (span, tilt) = heading::turned(quat);
-    if span < MIN_HEADING_SPAN_DEG {
+    if span < MIN_HEADING_SPAN_DEG && tilt < TUMBLE_TILT_DEG {
         why.push(format!(
             "the offsets (hard iron) and scales cannot be determined: the heading spans only {span:.0}° (tilt up to \
              {tilt:.0}°) over {} samples; a calibration needs the vehicle turned through all headings — fly a few \
@@ -169,19 +175,23 @@ pub fn read_flight(
     } = fr;
     let estimator_quat = rec.quat.clone().unwrap_or_default();
     let logged = log.mags[log_index(&log, options)].calibration.clone();
-    let heading_fit = give_heading(&mut rec, field_ned, logged.as_ref()).ok_or_else(|| {
-        anyhow::anyhow!("{file}: the fit to the field's magnitude and dip failed: too few samples")
-    })?;
+    let (heading_fit, deviation) =
+        give_heading(&mut rec, field_ned, logged.as_ref()).ok_or_else(|| {
+            anyhow::anyhow!(
+                "{file}: the fit to the field's magnitude and dip failed: too few samples"
+            )
+        })?;
+    let verdict = heading_verdict(&deviation);
     tellln!(
-        "{file}: reference: the attitude's tilt and the World Magnetic Model's magnitude and dip; its heading is \
-         fitted (the estimator's is partly this compass's own): |B| RMS {:.2} µT, down component RMS {:.2} µT",
+        "{file}: reference: the estimator's attitude checked against a fit to the World Magnetic Model's magnitude \
+         and dip (|B| RMS {:.2} µT, down component RMS {:.2} µT), its heading being partly this compass's own: \
+         {verdict}",
         heading_fit.magnitude_rms_ut,
         heading_fit.down_rms_ut
     );
-    rec.meta.other.push((
-        "reference_heading".to_owned(),
-        "fitted to the field's magnitude and dip (not the estimator's)".to_owned(),
-    ));
+    rec.meta
+        .other
+        .push(("reference_heading".to_owned(), verdict));
     Ok(FlightInput {
         rec,
         field,
@@ -189,7 +199,23 @@ pub fn read_flight(
         logged_ut,
         logged,
         heading_fit,
+        deviation,
     })
+}
+
+/// The estimator's heading in words: kept, or corrected by its deviation curve.
+fn heading_verdict(d: &Deviation) -> String {
+    if d.applied {
+        format!(
+            "its heading was off by up to {:.1}° as a compass deviation curve (χ² {:.0}), and is corrected",
+            d.max_deg, d.chi2
+        )
+    } else {
+        format!(
+            "its heading agrees (a deviation curve of up to {:.1}°, χ² {:.1}, is within chance), and is kept",
+            d.max_deg, d.chi2
+        )
+    }
 }
 
 /// The index of the magnetometer `options` pick.
@@ -198,12 +224,13 @@ fn log_index(log: &FlightLog, options: &LogOptions) -> usize {
 }
 
 /// Fits the magnitude and the dip of `field_ned` (µT), starting from the `logged` calibration (or a sphere about the
-/// readings' mean), and turns the recording's quaternions to the fitted field's heading; `None` if the fit fails.
+/// readings' mean), and takes the estimator's heading error against it out of the recording's quaternions where
+/// there is one ([`heading::rehead`]); `None` if a fit fails.
 pub fn give_heading(
     rec: &mut Recording,
     field_ned: [f64; 3],
     logged: Option<&LoggedCalibration>,
-) -> Option<MagnitudeDipFit> {
+) -> Option<(MagnitudeDipFit, Deviation)> {
     let quat = rec.quat.as_mut()?;
     let down: Vec<[f64; 3]> = quat.iter().map(|q| heading::down_in_sensor(*q)).collect();
     let currents: Vec<Vec<f64>> = (0..rec.mag_ut.len())
@@ -230,6 +257,8 @@ pub fn give_heading(
     let fields: Vec<[f64; 3]> = (0..rec.mag_ut.len())
         .map(|i| fit.field_ut(rec.mag_ut[i], &currents[i]))
         .collect();
-    heading::rehead(quat, &fields, field_ned)?;
-    Some(fit)
+    let t_s = rec.t_s.as_deref()?;
+    let rate = heading::angular_rate_ned(quat, t_s);
+    let deviation = heading::rehead(quat, &fields, field_ned, &rate)?;
+    Some((fit, deviation))
 }

@@ -216,42 +216,112 @@ fn deviation_terms(psi: f64) -> [f64; 5] {
     ]
 }
 
-/// Fits the estimator's heading error as a compass deviation curve of its own heading and takes it out: each
-/// attitude `quat` (sensor → NED) is turned about the vertical by the curve's value at its heading, the curve
-/// fitted (least squares, each row weighted by its horizontal field's share) to the turns that would make the
-/// expected field point where the fitted field `field_ut` (sensor axes) points. An estimator that fused a compass
-/// with another calibration has exactly such an error in level flight (the old calibration's hard iron in the first
-/// harmonic, its soft iron in the second); a current's field or a sample's lag does not follow the heading, and is
-/// left to the fit. Returns the curve's coefficients (radians), `None` (nothing turned) if they cannot be fitted.
+/// The estimator's heading error, fitted as a compass deviation curve of its heading ([`rehead`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Deviation {
+    /// The curve's coefficients, radians: constant, cos ψ, sin ψ, cos 2ψ, sin 2ψ.
+    pub coef: [f64; 5],
+    /// Its χ² against no error (5 degrees of freedom).
+    pub chi2: f64,
+    /// Whether it was taken out (χ² above [`DEVIATION_CHI2`]).
+    pub applied: bool,
+    /// Its largest value over the headings, degrees.
+    pub max_deg: f64,
+}
+
+/// χ² (5 degrees of freedom) above which the estimator's heading error is taken out: 0.1 % by chance.
+pub const DEVIATION_CHI2: f64 = 20.5;
+
+/// The attitude's angular rate at each row in world (NED) axes, rad/s, from its neighbours in time (`t_s`, s).
+pub fn angular_rate_ned(quat: &[[f64; 4]], t_s: &[f64]) -> Vec<[f64; 3]> {
+    let n = quat.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+            let dt = t_s[b] - t_s[a];
+            let [w, x, y, z] = quat[a];
+            let d = crate::recording::quat_mul(quat[b], [w, -x, -y, -z]);
+            let d = if d[0] < 0.0 { d.map(|v| -v) } else { d };
+            let v = [d[1], d[2], d[3]];
+            let s = norm(v);
+            if dt <= 0.0 || s < 1e-15 {
+                return [0.0; 3];
+            }
+            let angle = 2.0 * s.atan2(d[0]);
+            v.map(|c| c / s * angle / dt)
+        })
+        .collect()
+}
+
+/// Fits the estimator's heading error as a compass deviation curve of its own heading and, if it is there (χ² above
+/// [`DEVIATION_CHI2`]), takes it out: each attitude `quat` (sensor → NED) is turned about the vertical by the curve's
+/// value at its heading. The curve is fitted (least squares, each row weighted by its horizontal field's share) to
+/// the turns that would make the expected field point where the fitted field `field_ut` (sensor axes) points, with
+/// the attitude's angular rate `rate_ned` (world axes, rad/s, [`angular_rate_ned`]) as three further terms: a
+/// magnetometer sampling late turns its field by the lag times that rate, which is the fit's to find, not the
+/// curve's. An estimator that fused a compass with another
+/// calibration has exactly such a curve in level flight (the old calibration's hard iron in the first harmonic,
+/// its soft iron in the second); a current's field does not follow the heading either. `None` if the curve cannot
+/// be fitted (nothing turned).
 pub fn rehead(
     quat: &mut [[f64; 4]],
     field_ut: &[[f64; 3]],
     field_ned_ut: [f64; 3],
-) -> Option<[f64; 5]> {
+    rate_ned: &[[f64; 3]],
+) -> Option<Deviation> {
+    type V8 = nalgebra::SVector<f64, 8>;
     let declination = field_ned_ut[1].atan2(field_ned_ut[0]);
-    let mut ata = nalgebra::Matrix5::<f64>::zeros();
-    let mut atb = nalgebra::Vector5::<f64>::zeros();
-    for (q, b) in quat.iter().zip(field_ut) {
+    let terms = |q: [f64; 4], r: [f64; 3]| {
+        let [a, b, c, d, e] = deviation_terms(heading_deg(q).to_radians());
+        V8::from([a, b, c, d, e, r[0], r[1], r[2]])
+    };
+    let mut rows = Vec::with_capacity(quat.len());
+    for ((q, b), rate) in quat.iter().zip(field_ut).zip(rate_ned) {
         let ned = mat_vec(&quat_to_matrix(*q), *b);
         let horizontal = ned[0].hypot(ned[1]) / norm(*b).max(1e-12);
-        if !horizontal.is_finite() || horizontal < 0.1 {
+        if !horizontal.is_finite() || horizontal < 0.1 || !rate.iter().all(|r| r.is_finite()) {
             continue;
         }
         let turn = (declination - ned[1].atan2(ned[0]) + std::f64::consts::PI)
             .rem_euclid(2.0 * std::f64::consts::PI)
             - std::f64::consts::PI;
-        let x = nalgebra::Vector5::from(deviation_terms(heading_deg(*q).to_radians()));
-        let w = horizontal * horizontal;
-        ata += x * x.transpose() * w;
-        atb += x * (turn * w);
+        rows.push((terms(*q, *rate), turn, horizontal * horizontal));
     }
-    let c = ata.cholesky()?.solve(&atb);
-    for q in quat.iter_mut() {
-        let x = nalgebra::Vector5::from(deviation_terms(heading_deg(*q).to_radians()));
-        let (s, co) = (0.5 * x.dot(&c)).sin_cos();
-        *q = crate::recording::quat_mul([co, 0.0, 0.0, s], *q);
+    let mut ata = nalgebra::SMatrix::<f64, 8, 8>::zeros();
+    let mut atb = V8::zeros();
+    for (x, turn, w) in &rows {
+        ata += x * x.transpose() * *w;
+        atb += x * (*turn * *w);
     }
-    Some([c[0], c[1], c[2], c[3], c[4]])
+    let inverse = ata.try_inverse()?;
+    let c = inverse * atb;
+    let ss: f64 = rows
+        .iter()
+        .map(|(x, turn, w)| w * (turn - x.dot(&c)).powi(2))
+        .sum();
+    let sigma2 = (ss / (rows.len() as f64 - 8.0).max(1.0)).max(1e-18);
+    // χ² of the curve's five coefficients: their covariance is σ²·(XᵀWX)⁻¹'s first block.
+    let curve = c.fixed_rows::<5>(0).into_owned();
+    let cov = inverse.fixed_view::<5, 5>(0, 0) * sigma2;
+    let chi2 = (curve.transpose() * cov.try_inverse()? * curve)[(0, 0)];
+    let applied = chi2 > DEVIATION_CHI2;
+    let at = |psi: f64| nalgebra::Vector5::from(deviation_terms(psi)).dot(&curve);
+    let max_deg = (0..360)
+        .map(|d| at(f64::from(d).to_radians()).abs())
+        .fold(0.0, f64::max)
+        .to_degrees();
+    if applied {
+        for q in quat.iter_mut() {
+            let (s, co) = (0.5 * at(heading_deg(*q).to_radians())).sin_cos();
+            *q = crate::recording::quat_mul([co, 0.0, 0.0, s], *q);
+        }
+    }
+    Some(Deviation {
+        coef: [c[0], c[1], c[2], c[3], c[4]],
+        chi2,
+        applied,
+        max_deg,
+    })
 }
 
 /// How much a flight turned: the span of headings it covered (360° less the largest gap between the sorted
@@ -304,7 +374,8 @@ mod tests {
         (0..n)
             .map(|i| {
                 let t = i as f64 / n as f64;
-                let yaw = 2.0 * std::f64::consts::PI * t * 3.0;
+                // Three turns at a varying rate (a steady spin would make a lag and a misalignment one).
+                let yaw = 2.0 * std::f64::consts::PI * (3.0 * t + 0.3 * (9.0 * t).sin());
                 let roll = 0.4 * (7.0 * t).sin();
                 let pitch = 0.35 * (5.0 * t).cos();
                 let qz = [(0.5 * yaw).cos(), 0.0, 0.0, (0.5 * yaw).sin()];
@@ -372,11 +443,21 @@ mod tests {
         let fields: Vec<[f64; 3]> = (0..raw.len())
             .map(|i| fit.field_ut(raw[i], &currents[i]))
             .collect();
-        let curve = rehead(&mut q_est, &fields, field).unwrap();
+        let t: Vec<f64> = (0..q_est.len()).map(|i| i as f64 * 0.1).collect();
+        let rate = angular_rate_ned(&q_est, &t);
+        let curve = rehead(&mut q_est, &fields, field, &rate).unwrap();
         assert!(
-            (curve[0] + 0.03).abs() < 0.01 && (curve[1] + 0.08).abs() < 0.01,
+            curve.applied && (curve.max_deg - 8.0).abs() < 2.0,
             "{curve:?}"
         );
+        let c = curve.coef;
+        assert!(
+            (c[0] + 0.03).abs() < 0.01 && (c[1] + 0.08).abs() < 0.01,
+            "{curve:?}"
+        );
+        // Once taken out, nothing is left to take.
+        let again = rehead(&mut q_est.clone(), &fields, field, &rate).unwrap();
+        assert!(again.max_deg < 0.5, "{again:?}");
         for (q, t) in q_est.iter().zip(&q_true) {
             let (e, w) = (
                 mat_t_vec(&quat_to_matrix(*q), field),
