@@ -69,17 +69,6 @@ fn cross_validate(input: &FlightInput) -> (Errors, Errors) {
         give_heading(&mut train, field, input.logged.as_ref()).unwrap();
         let cal = calibrate(&train, Method::Vector, input.field.clone(), true).unwrap();
         let model = cal.model();
-        eprintln!(
-            "fold {fold}: A {:?} b {:?} effects {:?} heading fit {:?}",
-            cal.base_model().a,
-            cal.base_model().b_ut,
-            cal.diagnosis.as_ref().map(|d| d
-                .effects
-                .iter()
-                .map(|e| format!("{:?}", e))
-                .collect::<Vec<_>>()),
-            give_heading(&mut train.clone(), field, input.logged.as_ref())
-        );
         let mut currents = vec![0.0; input.rec.currents.len()];
         for i in (0..n).filter(|i| held(*i)) {
             let q = input.estimator_quat[i];
