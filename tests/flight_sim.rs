@@ -358,7 +358,7 @@ fn study_motor_coefficients_lags_and_no_false_current_terms() {
             }
         }
         w.3 = w.3.max((lag - lag_s).abs());
-        if !((lag - lag_s).abs() <= 0.005) {
+        if (lag - lag_s).abs().is_nan() || (lag - lag_s).abs() > 0.005 {
             failures
                 .lock()
                 .unwrap()
