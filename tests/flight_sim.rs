@@ -16,6 +16,7 @@ use magcal_calib::Effect;
 use magcal_calib::diagnosis::ParamValue;
 use magcal_flightlog::ulog;
 use magcal_recording::{Date, Location};
+use magcal_sim::dataflash::{DataflashCompass, DataflashSetup, write_dataflash};
 use magcal_sim::ulog::{UlogSetup, UlogSlot, write_ulog};
 use magcal_sim::{ChipModel, CurrentProfile, Scenario, SensorTruth, Trajectory, simulate};
 
@@ -95,7 +96,26 @@ fn flight_log(
     let mut file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
     write_ulog(&run.recording, &setup, &mut file).unwrap();
     drop(file);
+    if dir.ends_with("dataflash") {
+        return dataflash_copy(&run.recording, &path);
+    }
     path
+}
+
+/// The same flight as an ArduPilot DataFlash log beside `path`, its autopilot holding an older calibration.
+fn dataflash_copy(rec: &magcal_recording::Recording, path: &Path) -> PathBuf {
+    let setup = DataflashSetup {
+        compass: DataflashCompass {
+            ofs_mgauss: [-100.0, 150.0, -50.0],
+            dia: [0.99, 1.02, 0.98],
+            odi: [0.01, 0.0, -0.01],
+        },
+        ..DataflashSetup::default()
+    };
+    let out = path.with_extension("bin");
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&out).unwrap());
+    write_dataflash(rec, &setup, &mut file).unwrap();
+    out
 }
 
 /// What the diagnosis found: the current's coefficient with its standard error (µT/A), and the lag (s).
@@ -399,4 +419,161 @@ fn study_motor_coefficients_lags_and_no_false_current_terms() {
         "{within} of 75 within two standard errors, worst {z}"
     );
     assert!(false_terms <= 2, "{false_terms} of 200");
+}
+
+#[test]
+fn a_simulated_dataflash_log_reads_back_as_it_was_simulated() {
+    let dir = tempfile::tempdir().unwrap();
+    let chip = ChipModel::by_name("lis3mdl").unwrap();
+    let mut s = Scenario::new(
+        &chip,
+        Trajectory::Tumble {
+            duration_s: 20.0,
+            rate_rad_s: 0.8,
+        },
+        8,
+    );
+    s.currents = vec![CurrentProfile {
+        name: "i_battery".to_owned(),
+        on_a: 30.0,
+        mean_on_s: 2.0,
+        mean_off_s: 2.0,
+    }];
+    let run = simulate(&s).unwrap();
+    let path = dataflash_copy(&run.recording, &dir.path().join("sim.ulg"));
+    let log = magcal_flightlog::read(&path).unwrap();
+    assert_eq!(log.mags.len(), 1);
+    let cal = log.mags[0]
+        .calibration
+        .as_ref()
+        .expect("COMPASS_* in the parameters");
+    assert!(
+        (cal.offset_g[1] + 0.150).abs() < 1e-6 && (cal.scale[1][1] - 1.02).abs() < 1e-6,
+        "{cal:?}"
+    );
+    let back = log.recording(None).unwrap().rec;
+    assert_eq!(back.len(), run.recording.len());
+    for i in (0..back.len()).step_by(53) {
+        // The field is logged in whole mGauss: 0.05 µT of rounding, undone through the matrix.
+        for k in 0..3 {
+            assert!(
+                (back.mag_ut[i][k] - run.recording.mag_ut[i][k]).abs() < 0.06,
+                "row {i}"
+            );
+        }
+        let (q, want) = (
+            back.quat.as_ref().unwrap()[i],
+            run.recording.quat.as_ref().unwrap()[i],
+        );
+        let dot: f64 = (0..4).map(|k| q[k] * want[k]).sum();
+        // Centidegrees: a few thousandths of a degree.
+        assert!(
+            2.0 * dot.abs().min(1.0).acos().to_degrees() < 0.02,
+            "row {i}: {q:?} {want:?}"
+        );
+        assert_eq!(
+            back.currents[0].values[i] as f32,
+            run.recording.currents[0].values[i] as f32
+        );
+    }
+    assert_eq!(
+        back.meta.date.map(|d| d.to_string()).as_deref(),
+        Some("2025-06-01")
+    );
+    assert_eq!(back.meta.location.map(|l| l.lat_deg), Some(47.3566));
+}
+
+#[test]
+fn a_motor_coefficient_and_a_lag_are_recovered_from_a_simulated_dataflash_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path().join("dataflash");
+    std::fs::create_dir(&dir).unwrap();
+    let coef = [0.3, -0.2, 0.25];
+    let path = flight_log(&dir, 21, coef, 0.02, 120.0, current_for(coef));
+    assert_eq!(path.extension().and_then(|e| e.to_str()), Some("bin"));
+    let found = fit(&path);
+    assert!(recovered(&found, coef), "{coef:?}: {found:?}");
+    let lag = found.lag_s.expect("the lag found");
+    assert!((lag - 0.02).abs() <= 0.005, "lag {lag}");
+}
+
+#[test]
+fn damaged_or_partial_dataflash_logs_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let chip = ChipModel::by_name("lis3mdl").unwrap();
+    let run = simulate(&Scenario::new(
+        &chip,
+        Trajectory::Tumble {
+            duration_s: 5.0,
+            rate_rad_s: 0.8,
+        },
+        3,
+    ))
+    .unwrap();
+    let path = dir.path().join("log.bin");
+    for (setup, want) in [
+        (
+            DataflashSetup {
+                mag: false,
+                ..DataflashSetup::default()
+            },
+            "no magnetometer in the log",
+        ),
+        (
+            DataflashSetup {
+                attitude: false,
+                ..DataflashSetup::default()
+            },
+            "no attitude in the log",
+        ),
+    ] {
+        write_dataflash(
+            &run.recording,
+            &setup,
+            &mut std::fs::File::create(&path).unwrap(),
+        )
+        .unwrap();
+        let out = magcal_fit(&[path.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(&format!("{}: {want}", path.display())),
+            "{err}"
+        );
+    }
+    write_dataflash(
+        &run.recording,
+        &DataflashSetup::default(),
+        &mut std::fs::File::create(&path).unwrap(),
+    )
+    .unwrap();
+    let whole = std::fs::read(&path).unwrap();
+    // Cut, and with bytes changed: read up to the damage, with a note.
+    std::fs::write(&path, &whole[..whole.len() * 2 / 3 + 5]).unwrap();
+    let log = magcal_flightlog::read(&path).unwrap();
+    assert!(
+        log.notes.iter().any(|n| n.contains("ends partway")),
+        "{:?}",
+        log.notes
+    );
+    let mut damaged = whole.clone();
+    for k in 0..50 {
+        damaged[2_000 + k * 300] ^= 0xA5;
+    }
+    std::fs::write(&path, &damaged).unwrap();
+    let log = magcal_flightlog::read(&path).unwrap();
+    assert!(
+        log.notes.iter().any(|n| n.contains("skipped (damage)")),
+        "{:?}",
+        log.notes
+    );
+    // Empty, and not a DataFlash log.
+    for (content, want) in [
+        (&b""[..], "the file is empty"),
+        (&b"t,mx,my,mz\n1,2,3,4\n"[..], "no DataFlash message"),
+    ] {
+        std::fs::write(&path, content).unwrap();
+        let out = magcal_fit(&[path.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(want), "{err}");
+    }
 }

@@ -1,4 +1,4 @@
-//! Flight logs in the fit workflow (`magcal-fit FLIGHT.ulg`): the log read into a recording
+//! Flight logs in the fit workflow (`magcal-fit FLIGHT.ulg`, `FLIGHT.bin`): the log read into a recording
 //! ([`magcal_flightlog`]), the magnetometer picked, what the log cannot determine said plainly instead of fitted,
 //! and the reference given the heading of a fit to the field's magnitude and dip — the estimator's heading is partly
 //! the compass's own ([`magcal_flightlog::heading`]).
@@ -27,11 +27,11 @@ pub const MIN_HEADING_SPAN_DEG: f64 = 180.0;
 /// (a hand-held or tumbling log), degrees.
 pub const TUMBLE_TILT_DEG: f64 = 45.0;
 
-/// Whether `path` names a flight log magcal reads (`.ulg`, whatever the case).
+/// Whether `path` names a flight log magcal reads (`.ulg`, PX4; `.bin`, ArduPilot; whatever the case).
 pub fn is_flight_log(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("ulg"))
+        .is_some_and(|e| e.eq_ignore_ascii_case("ulg") || e.eq_ignore_ascii_case("bin"))
 }
 
 /// A flight log made ready for the fit.
@@ -151,7 +151,7 @@ pub fn read_flight(
     args: &FieldArgs,
 ) -> anyhow::Result<FlightInput> {
     let file = path.display().to_string();
-    let log = magcal_flightlog::ulog::read(path)?;
+    let log = magcal_flightlog::read(path)?;
     for line in describe(&log) {
         tellln!("{file}: {line}");
     }

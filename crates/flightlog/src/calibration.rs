@@ -16,7 +16,9 @@ use crate::rotation::sensor_to_body;
 /// One `CAL_MAGn_*` slot as logged.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LoggedCalibration {
-    /// The slot `n` of `CAL_MAGn_*`.
+    /// The parameters' name in words (`CAL_MAG0`, `COMPASS_*2`).
+    pub name: String,
+    /// The slot `n` of `CAL_MAGn_*` (PX4), the compass instance (ArduPilot).
     pub slot: u8,
     /// `CAL_MAGn_ID`: the device the slot belongs to.
     pub device_id: u32,
@@ -75,6 +77,7 @@ impl LoggedCalibration {
             (None, None) => true,
         };
         Some(LoggedCalibration {
+            name: format!("CAL_MAG{n}"),
             slot: n,
             device_id,
             offset_g: axes("OFF", 0.0),
@@ -84,6 +87,69 @@ impl LoggedCalibration {
             comp: axes("COMP", 0.0),
             comp_type: get(params, "CAL_MAG_COMP_TYP").unwrap_or(0.0) as i64,
             enabled,
+        })
+    }
+
+    /// ArduPilot's parameter suffix of compass instance `n`: none, `2`, `3`.
+    fn ardupilot_suffix(n: u8) -> String {
+        if n == 0 {
+            String::new()
+        } else {
+            (n + 1).to_string()
+        }
+    }
+
+    /// ArduPilot's device id of compass instance `n` (`COMPASS_DEV_ID`, `COMPASS_DEV_ID2`, …), where logged.
+    pub fn ardupilot_device_id(params: &BTreeMap<String, f64>, n: u8) -> Option<u32> {
+        let id = get(
+            params,
+            &format!("COMPASS_DEV_ID{}", Self::ardupilot_suffix(n)),
+        )?;
+        (id != 0.0).then_some(id as i64 as u32)
+    }
+
+    /// ArduPilot's calibration of compass instance `n`, as `AP_Compass_Backend::correct_field` applies it (current
+    /// versions): `M·(SCALE·(raw + OFS)) + MOT·I` in mGauss, after the rotation into body axes, `M` symmetric with
+    /// `COMPASS_DIA_*` on its diagonal and `COMPASS_ODI_*` off it, `MOT` in mGauss/A with `COMPASS_MOTCT` = 2. Written
+    /// in PX4's form (gauss, `R` = none: the axes are the body's), `COMP = S⁻¹·MOT` (1 mGauss/A = 1 G/kA). `None`
+    /// without `COMPASS_OFS*_X` in the parameters.
+    pub fn from_ardupilot(params: &BTreeMap<String, f64>, n: u8) -> Option<LoggedCalibration> {
+        let sfx = Self::ardupilot_suffix(n);
+        let axes = |kind: &str, default: f64| -> [f64; 3] {
+            ["X", "Y", "Z"]
+                .map(|a| get(params, &format!("COMPASS_{kind}{sfx}_{a}")).unwrap_or(default))
+        };
+        get(params, &format!("COMPASS_OFS{sfx}_X"))?;
+        let scale = get(params, &format!("COMPASS_SCALE{sfx}"))
+            .filter(|s| *s > 0.0)
+            .unwrap_or(1.0);
+        let dia = axes("DIA", 1.0);
+        let dia = if dia == [0.0; 3] { [1.0; 3] } else { dia };
+        let odi = axes("ODI", 0.0);
+        let m = [
+            [dia[0], odi[0], odi[1]],
+            [odi[0], dia[1], odi[2]],
+            [odi[1], odi[2], dia[2]],
+        ];
+        let s = m.map(|row| row.map(|v| v * scale));
+        let mot_g_per_ka = axes("MOT", 0.0).map(|v| v * 1e-3 * 1e3);
+        let comp = Matrix3::from_fn(|r, c| s[r][c])
+            .try_inverse()
+            .map_or([0.0; 3], |inv| {
+                (inv * nalgebra::Vector3::from(mot_g_per_ka)).into()
+            });
+        let motct = get(params, "COMPASS_MOTCT").unwrap_or(0.0) as i64;
+        Some(LoggedCalibration {
+            name: format!("COMPASS_*{sfx} (instance {n})"),
+            slot: n,
+            device_id: Self::ardupilot_device_id(params, n).unwrap_or(0),
+            offset_g: axes("OFS", 0.0).map(|v| -v * 1e-3),
+            scale: s,
+            rotation: IDENTITY,
+            rotation_source: "applied before the calibration (the axes are the body's)".to_owned(),
+            comp,
+            comp_type: if motct == 2 { 2 } else { motct.min(1) },
+            enabled: get(params, &format!("COMPASS_USE{sfx}")).is_none_or(|u| u != 0.0),
         })
     }
 
@@ -136,7 +202,7 @@ impl LoggedCalibration {
             )
         };
         format!(
-            "CAL_MAG{n} (device {id}{used}): offsets {off} µT, scales {:.4}, {:.4}, {:.4}, off-diagonals {:.4}, {:.4}, \
+            "{name} ({id}{used}): offsets {off} µT, scales {:.4}, {:.4}, {:.4}, off-diagonals {:.4}, {:.4}, \
              {:.4}, rotation {rot}, {comp}",
             s[0][0],
             s[1][1],
@@ -144,8 +210,12 @@ impl LoggedCalibration {
             s[0][1],
             s[0][2],
             s[1][2],
-            n = self.slot,
-            id = self.device_id,
+            name = self.name,
+            id = if self.device_id == 0 {
+                "device unknown".to_owned()
+            } else {
+                format!("device {}", self.device_id)
+            },
             used = if self.enabled { "" } else { ", disabled" },
             off = ut(self.offset_g),
             rot = self.rotation_source,

@@ -1,6 +1,6 @@
 //! Flight-controller logs as magcal recordings.
 //!
-//! A PX4 ULog ([`ulog::read`]) is read into a [`FlightLog`]: every magnetometer instance with the calibration the
+//! A PX4 ULog ([`ulog::read`]) or an ArduPilot DataFlash log ([`dataflash::read`]) is read into a [`FlightLog`]: every magnetometer instance with the calibration the
 //! autopilot applied to it ([`LoggedCalibration`], from `CAL_MAGn_*`), the attitude, the battery current, the GPS
 //! fixes. [`FlightLog::recording`] turns one instance into a [`magcal_recording::Recording`]: the chip's own field
 //! (the logged calibration undone), the attitude as quaternions from sensor axes into NED, the current as an
@@ -9,6 +9,7 @@
 //! field's magnitude and dip only, and gives the reference the heading of that fit.
 
 pub mod calibration;
+pub mod dataflash;
 pub mod error;
 pub mod heading;
 pub mod recording;
@@ -21,6 +22,19 @@ pub use error::LogError;
 pub use recording::{FlightRecording, Instance};
 
 use series::Series;
+
+/// Reads a flight log by its extension: `.bin` as ArduPilot DataFlash, anything else as PX4 ULog.
+pub fn read(path: &std::path::Path) -> Result<FlightLog, LogError> {
+    let dataflash = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("bin"));
+    if dataflash {
+        dataflash::read(path)
+    } else {
+        ulog::read(path)
+    }
+}
 
 /// One magnetometer as logged.
 #[derive(Debug, Clone)]

@@ -224,7 +224,7 @@ impl FlightLog {
     fn metadata(&self, mag: &MagStream) -> Metadata {
         let mut meta = Metadata {
             sensor: Some(format!(
-                "{} of a PX4 flight log{}",
+                "{} of a flight log{}",
                 mag.name(),
                 self.hardware
                     .as_ref()
