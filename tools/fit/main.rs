@@ -11,6 +11,7 @@ use magcal_app::device::DeviceSpec;
 use magcal_app::export::{ExportFormat, export, mirror_refusal, refusal, warnings};
 use magcal_app::files::write_atomic;
 use magcal_app::fit::Method;
+use magcal_app::flight::LogOptions;
 use magcal_app::howto::{Target, how_to_apply};
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
@@ -44,8 +45,13 @@ use magcal_app::{say, tell, tellln};
 #[derive(Parser, Debug)]
 #[command(version)]
 struct Args {
-    /// The recording (magcal-recording v1 CSV).
+    /// The recording (magcal-recording v1 CSV), or a PX4 flight log (.ulg): its magnetometer with the logged
+    /// calibration undone, the attitude, the battery current, the place and date of its GPS fix.
     recording: PathBuf,
+    /// For a flight log: the magnetometer to fit, by its number in the list printed (default: the one the autopilot
+    /// used).
+    #[arg(long, value_name = "N")]
+    mag: Option<usize>,
     /// Calibration method.
     #[arg(long, value_enum, default_value_t = Method::Auto)]
     method: Method,
@@ -132,6 +138,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         field: &field_args,
         linear_only: args.export.is_some() || args.write_to.is_some(),
         chip: args.chip.clone(),
+        log: LogOptions { mag: args.mag },
     };
     let Fitted {
         rec,

@@ -140,6 +140,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         field: &args.field.field_args(None),
         linear_only: false,
         chip: None,
+        log: Default::default(),
     };
     let Fitted {
         rec,

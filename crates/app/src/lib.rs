@@ -15,6 +15,7 @@ pub mod export;
 pub mod field;
 pub mod files;
 pub mod fit;
+pub mod flight;
 pub mod heading;
 pub mod howto;
 pub mod outputs;

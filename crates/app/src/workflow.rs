@@ -17,6 +17,7 @@ use crate::field::{FieldArgs, resolve};
 use crate::fit::{Calibration, Method};
 use crate::params::{ParamsError, ParamsFile};
 use crate::units::ChipOption;
+use crate::flight::{LogOptions, is_flight_log, read_flight};
 use crate::verdict::{Assessment, assess};
 
 /// What a fit is asked for.
@@ -33,6 +34,8 @@ pub struct FitRequest<'a> {
     pub linear_only: bool,
     /// The chip whose raw counts the readings are, when the user says (`--chip`): see [`crate::units`].
     pub chip: Option<ChipOption>,
+    /// For a flight log: which magnetometer.
+    pub log: LogOptions,
 }
 
 /// A recording fitted and graded.
@@ -60,7 +63,8 @@ pub enum NotFitted {
     },
 }
 
-/// Reads, calibrates and grades the recording at `path`.
+/// Reads, calibrates and grades the recording at `path`: a magcal recording, or a flight log (`.ulg`, read by
+/// [`read_flight`]).
 ///
 /// Without the diagnosis the quaternions are turned into the expected field as the rows are read
 /// ([`read_to_calibrate`]); a fit that looks off is then made again with them kept, and replaces the first if their
@@ -68,10 +72,15 @@ pub enum NotFitted {
 /// [`crate::reference_heading`]).
 pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitted> {
     let field_args = request.field;
-    let (mut rec, field) = read_to_calibrate(path, request.method, request.diagnose, |meta| {
-        Ok(resolve(field_args, meta)?)
-    })
-    .map_err(NotFitted::Unread)?;
+    let (mut rec, field) = if is_flight_log(path) {
+        let input = read_flight(path, &request.log, field_args).map_err(NotFitted::Unread)?;
+        (input.rec, input.field)
+    } else {
+        read_to_calibrate(path, request.method, request.diagnose, |meta| {
+            Ok(resolve(field_args, meta)?)
+        })
+        .map_err(NotFitted::Unread)?
+    };
     let mut faulty = drop_faulty(&mut rec);
     let chip = request.chip.as_ref();
     let mut cal = match calibrate_with(&rec, request.method, field, request.diagnose, chip) {

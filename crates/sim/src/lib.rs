@@ -7,18 +7,20 @@
 //! [`magcal_recording::Recording`], deterministically from the scenario's seed.
 //!
 //! [`bench`](mod@bench) is the same physics sampled at any time, for simulated chips: a virtual hand turns the sensor as a
-//! recorder asks.
+//! recorder asks. [`ulog`] and [`dataflash`] write a simulated flight as a PX4 ULog or an ArduPilot DataFlash log.
 //!
 //! The sensor model is the calibration model run backwards: with the true `A`, `b` and effects `δ`,
 //! the raw reading is `B̂ = A⁻¹·(B + Σδ − b) + noise`, quantised.
 
 pub mod bench;
 pub mod chips;
+pub mod dataflash;
 mod environment;
 mod scenario;
 mod sensor;
 pub mod study;
 mod trajectory;
+pub mod ulog;
 
 pub use chips::ChipModel;
 pub use environment::{CurrentProfile, TemperatureProfile};

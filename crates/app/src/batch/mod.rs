@@ -250,6 +250,7 @@ fn fit_all(
         field: &opts.fit.field,
         linear_only: false,
         chip: None,
+        log: Default::default(),
     };
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
