@@ -75,6 +75,6 @@ pub fn pipeline(data: &[u8]) {
         ExportFormat::Json,
     ] {
         let found = cal.diagnosis.as_ref().map_or(&[][..], |d| &d.effects[..]);
-        assert!(!export(&target_model(&cal), format, found).is_empty());
+        assert!(!export(&target_model(&cal), format, found, &cal.units).is_empty());
     }
 }
