@@ -22,7 +22,7 @@ const TOOLS: [(&str, &str); 7] = [
 ];
 
 /// Value names (as `--help` shows them) of what is no file: numbers, lists of them, choices, devices, specs.
-const NOT_PATHS: [&str; 28] = [
+const NOT_PATHS: [&str; 30] = [
     "DEV",
     "ID",
     "ROUTINE",
@@ -51,6 +51,8 @@ const NOT_PATHS: [&str; 28] = [
     "SPEC",
     "ID:SIZE_UT",
     "MOUNT_DEG",
+    "CHIP[:SETTING]",
+    "DEG",
 ];
 
 fn binary(tool: &str) -> &'static str {
