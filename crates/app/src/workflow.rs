@@ -15,9 +15,9 @@ use crate::calibrate::{
 use crate::field::ReferenceField;
 use crate::field::{FieldArgs, resolve};
 use crate::fit::{Calibration, Method};
+use crate::flight::{LogOptions, is_flight_log, read_flight};
 use crate::params::{ParamsError, ParamsFile};
 use crate::units::ChipOption;
-use crate::flight::{LogOptions, is_flight_log, read_flight};
 use crate::verdict::{Assessment, assess};
 
 /// What a fit is asked for.
