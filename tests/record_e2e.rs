@@ -309,3 +309,41 @@ fn a_recording_cut_short_says_so_instead_of_next_magcal_fit() {
         .unwrap();
     assert!(!fit.status.success());
 }
+
+/// Issue 34: the HMC5883L's nearest rate to the default 100 Hz is 75 Hz. Without `--rate` the recorder says nothing
+/// of a rate nobody asked for; with `--rate 100` it says what it got instead.
+#[test]
+fn the_rate_note_is_said_only_of_a_rate_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    for (rate, said) in [(None, false), (Some("100"), true)] {
+        let rec = dir
+            .path()
+            .join(format!("rate-{}.csv", rate.unwrap_or("none")));
+        let mut args = vec![
+            "--device",
+            "sim:hmc5883l",
+            "--routine",
+            "free",
+            "--max-duration",
+            "2",
+            "--out",
+            rec.to_str().unwrap(),
+        ];
+        if let Some(rate) = rate {
+            args.extend(["--rate", rate]);
+        }
+        let out = run(env!("CARGO_BIN_EXE_magcal-record"), &args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            stderr.contains("note: asked for"),
+            said,
+            "--rate {rate:?}: {stderr}"
+        );
+        if said {
+            assert!(
+                stderr.contains("asked for 100 Hz; the nearest the hmc5883l offers is 75 Hz"),
+                "{stderr}"
+            );
+        }
+    }
+}

@@ -129,14 +129,10 @@ struct Args {
         value_name = "UT"
     )]
     still_ut: f64,
-    /// Output data rate to ask the chip for, Hz (the nearest it supports is used).
-    #[arg(
-        allow_negative_numbers = true,
-        long,
-        default_value_t = 100.0,
-        value_name = "HZ"
-    )]
-    rate: f64,
+    /// Output data rate to ask the chip for, Hz (the nearest it supports is used) [default: 100, or the nearest
+    /// the chip offers, said only when asked for].
+    #[arg(allow_negative_numbers = true, long, value_name = "HZ")]
+    rate: Option<f64>,
     /// Full-scale range to ask the chip for, ± µT (the smallest that holds it).
     #[arg(allow_negative_numbers = true, long, value_name = "UT")]
     range_ut: Option<f64>,
@@ -199,7 +195,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     opts.dwell_s = args.dwell;
     opts.still_ut = args.still_ut;
     let open = OpenOptions {
-        rate_hz: args.rate,
+        rate_hz: args.rate.unwrap_or(OpenOptions::default().rate_hz),
         range_ut: args.range_ut,
         sim_seed: args.sim_seed,
         sim_faults: args.sim_fault.clone(),
@@ -245,12 +241,12 @@ fn run(args: Args) -> anyhow::Result<()> {
         tellln!("{note}");
     }
     let mut source = device::open(&spec, &open)?;
-    if let Some(rate_hz) = source.rate_hz()
-        && (rate_hz - args.rate).abs() > 0.01 * args.rate
+    // Said only of a rate asked for: without --rate, the chip's nearest to the default is no news.
+    if let (Some(asked), Some(rate_hz)) = (args.rate, source.rate_hz())
+        && (rate_hz - asked).abs() > 0.01 * asked
     {
         tellln!(
-            "note: asked for {} Hz; the nearest the {} offers is {rate_hz} Hz",
-            args.rate,
+            "note: asked for {asked} Hz; the nearest the {} offers is {rate_hz} Hz",
             source.sensor()
         );
     }
