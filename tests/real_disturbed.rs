@@ -127,6 +127,62 @@ fn broad_33_the_magnet_attached_to_the_board_is_a_bias_window() {
     );
 }
 
+/// Issue 34: the summary's first line and the verdict say the rows left out on the same base — BROAD 33's verdict
+/// said "38 % of the readings were left out" under "21513 of 24140 samples": 38 % of neither. Both now count the
+/// 8343 the base fit left out of the 22048 rows with a reference. And the effects the summary leaves to the JSON
+/// report are pointed to where that report is, or how to get one.
+#[test]
+fn broad_33_the_share_left_out_is_said_of_the_same_rows_as_the_first_line() {
+    let out = magcal_fit(&[real(BROAD_33).to_str().unwrap()]);
+    assert!(out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let first = stdout.lines().next().unwrap();
+    // The counts of the first line: total, without a reference, the base fit's used and left out.
+    let number_before = |text: &str, tail: &str| -> usize {
+        let head = &text[..text
+            .find(tail)
+            .unwrap_or_else(|| panic!("{tail:?} in {text}"))];
+        head.rsplit([' ', '(']).next().unwrap().parse().unwrap()
+    };
+    let total = number_before(first, " samples");
+    let missing = number_before(first, " without an attitude reference");
+    let excluded = number_before(first, " (38 %) as grossly off");
+    let usable = total - missing;
+    assert!(
+        first.contains(&format!("of the other {usable}, the base fit")),
+        "{first}"
+    );
+    let verdict = stdout.lines().find(|l| l.starts_with("verdict:")).unwrap();
+    let said = format!("{excluded} of the {usable} readings with an attitude reference (38 %)");
+    assert!(
+        verdict.contains(&format!("the base fit left out {said}")),
+        "{said:?} in {verdict}"
+    );
+    assert!(
+        !verdict.contains("38 % of the readings"),
+        "a share without its base: {verdict}"
+    );
+    assert!(
+        stdout.contains("(which and why: in the JSON report: add --report FILE)"),
+        "{stdout}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("r.json");
+    let out = magcal_fit(&[
+        real(BROAD_33).to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(&format!(
+            "(which and why: in the report {})",
+            report.display()
+        )),
+        "{stdout}"
+    );
+}
+
 /// Issue 32: BROAD 02's parameters checked on BROAD 33 with `magcal-apply` — the magnet attached for the middle
 /// third is located as a field fixed to the sensor, left out of the check, and the rest graded: the reference's own
 /// error of about 1 µT, usable, not the attitude reference blamed for the magnet's 9 µT.

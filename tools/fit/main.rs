@@ -17,7 +17,7 @@ use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
 use magcal_app::plots::{PLOT_FILES, not_written, write_plots, write_readings_plot};
 use magcal_app::report::Report;
-use magcal_app::summary::summary;
+use magcal_app::summary::summary_with_report;
 use magcal_app::units::ChipOption;
 use magcal_app::verdict::{Grade, target_model};
 use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
@@ -166,7 +166,12 @@ fn run(args: Args) -> anyhow::Result<()> {
             say!("{text}")
         }
     };
-    say(&summary(&cal, &assessment, &name))?;
+    say(&summary_with_report(
+        &cal,
+        &assessment,
+        &name,
+        args.report.as_deref(),
+    ))?;
     if let Some(path) = &args.report {
         let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
         Report::new(&cal, &name, &channels)

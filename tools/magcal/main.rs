@@ -15,7 +15,7 @@ use magcal_app::record::{
 };
 use magcal_app::report::Report;
 use magcal_app::source::sim::TruthFile;
-use magcal_app::summary::summary;
+use magcal_app::summary::summary_with_report;
 use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
 use magcal_app::{say, sayln, tellln};
 
@@ -153,9 +153,12 @@ fn run(args: Args) -> anyhow::Result<()> {
             return Err(error).with_context(|| format!("{name}: cannot calibrate"));
         }
     };
-    say!("\n{}", summary(&cal, &assessment, &name))?;
-    let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
     let report_path = args.out_dir.join(REPORT);
+    say!(
+        "\n{}",
+        summary_with_report(&cal, &assessment, &name, Some(&report_path))
+    )?;
+    let channels: Vec<String> = rec.currents.iter().map(|c| c.name.clone()).collect();
     Report::new(&cal, &name, &channels)
         .with_assessment(&assessment)
         .write(&report_path)?;

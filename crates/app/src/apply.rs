@@ -422,7 +422,7 @@ fn graded(
         diagnosis_skipped: false,
         noise_unmeasured,
         declination_off_deg: None,
-        excluded_share: 0.0,
+        excluded: (0, 0),
     };
     let h = heading_errors(&input);
     match field.vector() {

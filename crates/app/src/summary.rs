@@ -203,8 +203,20 @@ pub fn check_summary(
     out
 }
 
-/// The summary of a calibration of `recording`, with its heading figures and verdict.
+/// The summary of a calibration of `recording`, with its heading figures and verdict, for a run that writes no
+/// JSON report: where the details are only in the report, it says how to get one (`--report FILE`).
 pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> String {
+    summary_with_report(cal, assessment, recording, None)
+}
+
+/// [`summary`] for a run that writes its JSON report to `report` (if any): the details the summary leaves to the
+/// report are pointed to there.
+pub fn summary_with_report(
+    cal: &Calibration,
+    assessment: &Assessment,
+    recording: &str,
+    report: Option<&std::path::Path>,
+) -> String {
     let mut out = samples_line(cal, recording);
     out += &heading_block(cal, assessment);
     for w in &cal.warnings {
@@ -221,7 +233,11 @@ pub fn summary(cal: &Calibration, assessment: &Assessment, recording: &str) -> S
     }
     if let Some(d) = &cal.diagnosis {
         let reference_off = cal.fit.reference_off(&cal.field).is_some();
-        out += &diagnosis(d, !cal.fit.is_vector(), reference_off);
+        let details = match report {
+            Some(path) => format!("in the report {}", path.display()),
+            None => "in the JSON report: add --report FILE".to_owned(),
+        };
+        out += &diagnosis(d, !cal.fit.is_vector(), reference_off, &details);
     }
     out
 }
@@ -248,25 +264,35 @@ fn samples_line(cal: &Calibration, recording: &str) -> String {
         final_rows.unwrap_or(s.used),
         s.total
     );
+    // The rows left out as grossly off are said of the rows the fit could use, as the verdict says them.
+    let usable = s.used + s.excluded;
+    let mut clauses = Vec::new();
     if s.missing_reference > 0 {
-        let _ = write!(
-            out,
-            " ({} without an attitude reference left out)",
+        clauses.push(format!(
+            "{} without an attitude reference left out",
             s.missing_reference
-        );
+        ));
     }
+    let of_usable = if s.missing_reference > 0 {
+        format!("of the other {usable}")
+    } else {
+        format!("of the {usable}")
+    };
+    let share = 100.0 * s.excluded as f64 / usable.max(1) as f64;
     match final_rows {
-        Some(_) => {
-            let _ = write!(
-                out,
-                " (the base fit, without the effects the diagnosis found, used {} and left out {} as grossly off)",
-                s.used, s.excluded
-            );
-        }
-        None if s.excluded > 0 => {
-            let _ = write!(out, " ({} grossly off, excluded)", s.excluded);
-        }
+        Some(_) => clauses.push(format!(
+            "{of_usable}, the base fit, without the effects the diagnosis found, used {} and left out {} ({share:.0} \
+             %) as grossly off",
+            s.used, s.excluded
+        )),
+        None if s.excluded > 0 => clauses.push(format!(
+            "{of_usable}, {} ({share:.0} %) left out as grossly off",
+            s.excluded
+        )),
         None => {}
+    }
+    if !clauses.is_empty() {
+        let _ = write!(out, " ({})", clauses.join("; "));
     }
     out.push('\n');
     out
@@ -419,7 +445,7 @@ fn spans_fate(spans: &[GrossSpan]) -> String {
 /// The diagnosis in a few lines (`scalar`: the scalar method, which has no attitude reference whose error the residual
 /// could be; `reference_off`: the reference disagrees with the readings by a good part of the field, which the
 /// WARNING above says).
-fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
+fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool, details: &str) -> String {
     let mut out = String::new();
     let reference = reference_clause(d, scalar, reference_off);
     let verdict = match d.verdict {
@@ -444,7 +470,7 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
     if d.spans.len() > SPANS_SHOWN {
         let _ = writeln!(
             out,
-            "  and {} more disturbances (all in the --report JSON)",
+            "  and {} more disturbances (all {details})",
             d.spans.len() - SPANS_SHOWN
         );
     }
@@ -473,7 +499,7 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool) -> String {
     if !d.untestable.is_empty() {
         let _ = writeln!(
             out,
-            "  not tested: {} effects this recording cannot show (which and why: the --report JSON)",
+            "  not tested: {} effects this recording cannot show (which and why: {details})",
             d.untestable.len()
         );
     }

@@ -91,8 +91,32 @@ pub struct Hints {
     /// degrees, when more than [`GOOD_DEG`]: the calibration models it, but a heading computed with the declination
     /// given is off by as much.
     pub declination_off_deg: Option<f64>,
+    /// The rows the (base) fit left out as grossly off, of the rows it could use (those with a reference, for the
+    /// vector method): `(left out, could use)`.
+    pub excluded: (usize, usize),
+}
+
+impl Hints {
     /// The share of the rows the fit could use that it left out as grossly off.
-    pub excluded_share: f64,
+    pub fn excluded_share(&self) -> f64 {
+        self.excluded.0 as f64 / self.excluded.1.max(1) as f64
+    }
+
+    /// The rows left out as grossly off, said with their base: "8343 of the 22048 readings with an attitude
+    /// reference (38 %)", the summary's first line's numbers.
+    fn excluded_words(&self) -> String {
+        format!(
+            "{} of the {} readings{} ({:.0} %)",
+            self.excluded.0,
+            self.excluded.1,
+            if self.vector {
+                " with an attitude reference"
+            } else {
+                ""
+            },
+            100.0 * self.excluded_share()
+        )
+    }
 }
 
 /// From this share of the rows left out as grossly off, a fit made uncertain by what it could keep is not helped by
@@ -193,18 +217,18 @@ fn judge_heading(h: &HeadingErrors, hints: &Hints) -> Verdict {
                 .to_owned(),
         };
         (why, todo)
-    } else if hints.excluded_share >= EXCLUDED_NOT_LONGER {
-        let share = 100.0 * hints.excluded_share;
+    } else if hints.excluded_share() >= EXCLUDED_NOT_LONGER {
+        let excluded = hints.excluded_words();
         (
             format!(
-                "{} of heading error left: the fit itself is uncertain ({:.0} % of the directions covered, {share:.0} % \
-                 of the readings left out as grossly off)",
+                "{} of heading error left: the fit itself is uncertain ({:.0} % of the directions covered; the base \
+                 fit left out {excluded} as grossly off)",
                 fmt_deg(left),
                 100.0 * hints.coverage
             ),
             format!(
-                "record again with magnets, metal and cables away from the sensor rather than for longer: {share:.0} % \
-                 of the readings were left out (the notes below say when){}",
+                "record again with magnets, metal and cables away from the sensor rather than for longer: the base \
+                 fit left out {excluded} (the notes below say when){}",
                 if hints.vector {
                     "; if nothing magnetic was near, check the attitude reference there (its convention, axes and \
                      clock against the sensor's)"
@@ -389,8 +413,10 @@ fn hints(cal: &Calibration, rec: &Recording) -> Hints {
             .as_ref()
             .and_then(declination_off_deg)
             .or_else(|| heading_off_deg(cal)),
-        excluded_share: cal.samples.excluded as f64
-            / (cal.samples.used + cal.samples.excluded).max(1) as f64,
+        excluded: (
+            cal.samples.excluded,
+            cal.samples.used + cal.samples.excluded,
+        ),
     }
 }
 
