@@ -120,6 +120,26 @@ fn address(text: &str, a: &str) -> Result<u8, DeviceSpecError> {
         })
 }
 
+/// Why `text` is no device, with the device string it most likely means: a path names its kind first
+/// (`serial:/dev/ttyUSB0`, `i2c:/dev/i2c-1:CHIP`).
+fn unknown_kind(text: &str) -> String {
+    let path = text.split(':').next().unwrap_or(text);
+    let name = path.rsplit('/').next().unwrap_or(path);
+    if name.starts_with("i2c") {
+        format!(
+            "unknown kind of device: an I2C bus is named with its chip, as in i2c:{path}:lis3mdl"
+        )
+    } else if path.starts_with('/')
+        || name.starts_with("tty")
+        || name.starts_with("cu.")
+        || name.starts_with("COM")
+    {
+        format!("unknown kind of device: a serial port is named serial:{text}")
+    } else {
+        "unknown kind of device".to_owned()
+    }
+}
+
 impl FromStr for DeviceSpec {
     type Err = DeviceSpecError;
 
@@ -157,7 +177,7 @@ impl FromStr for DeviceSpec {
                 .map(DeviceSpec::Serial)
                 .map_err(|e| bad(&e.to_string())),
             ("i2c" | "serial", None) => Err(bad("missing the part after the colon")),
-            _ => Err(bad("unknown kind of device")),
+            _ => Err(bad(&unknown_kind(s))),
         }
     }
 }
@@ -292,6 +312,29 @@ impl OpenOptions {
     }
 }
 
+/// What to say when the I2C bus `path` cannot be opened (`error`, the system's words): a missing bus device is
+/// most often I2C not enabled; a refused one, a user outside the `i2c` group. Both say how to check.
+fn i2c_open_error(path: &str, error: &str) -> String {
+    let bus = path
+        .rsplit_once("i2c-")
+        .map(|(_, n)| n)
+        .filter(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+        .unwrap_or("N");
+    let check = format!("check the bus and the chip with `i2cdetect -y {bus}` (i2c-tools)");
+    if !std::path::Path::new(path).exists() {
+        format!(
+            "{path} does not exist ({error}): enable I2C (on a Raspberry Pi: sudo raspi-config, Interface Options, \
+             I2C, then reboot) or name the bus that exists (ls /dev/i2c-*); {check}"
+        )
+    } else if error.contains("ermission denied") {
+        format!(
+            "{path}: {error}: add your user to the i2c group (sudo adduser $USER i2c, then log in again); {check}"
+        )
+    } else {
+        format!("{path}: {error}; {check}")
+    }
+}
+
 /// Opens a device for recording: a simulated chip, a chip on a Linux I2C bus (initialised for continuous
 /// measurement), or a serial stream.
 pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, SourceError> {
@@ -313,7 +356,7 @@ pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, So
         } => {
             let bus = magcal_driver::linux::I2cdev::new(path).map_err(|e| SourceError::Open {
                 device: device.clone(),
-                error: e.to_string(),
+                error: i2c_open_error(path, &e.to_string()),
             })?;
             let mag = AnyMagnetometer::with_address(
                 *chip,
@@ -453,6 +496,28 @@ mod tests {
     }
 
     #[test]
+    fn a_missing_i2c_bus_says_how_to_enable_and_check_it() {
+        let spec = p("i2c:/nonexistent/i2c-1:lis3mdl").unwrap();
+        let Err(e) = open(&spec, &OpenOptions::default()) else {
+            panic!("opened a bus that does not exist");
+        };
+        let e = e.to_string();
+        for says in [
+            "/nonexistent/i2c-1 does not exist",
+            "enable I2C",
+            "raspi-config",
+            "i2cdetect -y 1",
+        ] {
+            assert!(e.contains(says), "{says:?} in {e}");
+        }
+        let denied = i2c_open_error("/", "Permission denied (os error 13)");
+        assert!(
+            denied.contains("i2c group") && denied.contains("i2cdetect -y N"),
+            "{denied}"
+        );
+    }
+
+    #[test]
     fn refusals_say_what_is_wrong_and_give_the_syntax() {
         for (text, why) in [
             ("sim:lis3", "unknown chip"),
@@ -462,6 +527,11 @@ mod tests {
             ("i2c::lis3mdl", "no I2C bus path"),
             ("serial:/dev/ttyUSB0:0", "baud"),
             ("spi:/dev/spidev0.0", "unknown kind"),
+            ("/dev/ttyUSB0", "a serial port is named serial:/dev/ttyUSB0"),
+            ("/dev/ttyACM0:115200", "named serial:/dev/ttyACM0:115200"),
+            ("COM3", "named serial:COM3"),
+            ("/dev/i2c-1", "as in i2c:/dev/i2c-1:lis3mdl"),
+            ("/dev/i2c-1:lis3mdl", "as in i2c:/dev/i2c-1:lis3mdl"),
             ("serial", "missing"),
         ] {
             let e = p(text).unwrap_err().to_string();
