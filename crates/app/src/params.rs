@@ -83,6 +83,42 @@ pub enum CorrectionValue {
     Channel(String),
 }
 
+/// Rows of numbers as TOML wrote them, each column padded so that the decimal points (or the ends of integers and
+/// mantissas) line up and the next column starts at one place: `" 0.93,   0.0026, -0.012"`.
+fn aligned(rows: &[Vec<&str>]) -> Vec<String> {
+    let columns = rows.iter().map(Vec::len).max().unwrap_or(0);
+    // Where a number's point is: before its '.' or exponent, or at its end.
+    let point = |n: &str| n.find(['.', 'e', 'E']).unwrap_or(n.len());
+    let column = |k: usize| rows.iter().filter_map(move |r| r.get(k).copied());
+    let lead: Vec<usize> = (0..columns)
+        .map(|k| column(k).map(point).max().unwrap_or(0))
+        .collect();
+    let width: Vec<usize> = (0..columns)
+        .map(|k| {
+            column(k)
+                .map(|n| lead[k] - point(n) + n.chars().count())
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    rows.iter()
+        .map(|row| {
+            let mut line = String::new();
+            for (k, n) in row.iter().enumerate() {
+                let cell = format!("{}{n}", " ".repeat(lead[k] - point(n)));
+                if k + 1 < row.len() {
+                    // Padded after the comma, so that the next column starts at one place.
+                    let pad = width[k] - cell.chars().count();
+                    line += &format!("{cell},{} ", " ".repeat(pad));
+                } else {
+                    line += &cell;
+                }
+            }
+            line
+        })
+        .collect()
+}
+
 /// The key of the first number in `v` that is not finite (`calibration.A[0][1]`), if any.
 fn first_non_finite(v: &toml::Value, at: String) -> Option<String> {
     match v {
@@ -305,7 +341,8 @@ impl ParamsFile {
         Ok(model)
     }
 
-    /// The file's text: a comment, then TOML with `A` a row a line.
+    /// The file's text: a comment, then TOML with `A` a row a line, its columns lined up on the decimal point. The
+    /// numbers are TOML's own (the shortest that reads back the same): only spaces are added.
     pub fn text(&self) -> Result<String, toml::ser::Error> {
         let mut out = "# magcal calibration parameters: B = A·raw + b − Σ corrections\n".to_owned();
         for c in &self.comments {
@@ -315,7 +352,12 @@ impl ParamsFile {
             match line.strip_prefix("A = [[") {
                 Some(rows) => {
                     out += "A = [\n";
-                    for row in rows.trim_end_matches("]]").split("], [") {
+                    let rows: Vec<Vec<&str>> = rows
+                        .trim_end_matches("]]")
+                        .split("], [")
+                        .map(|row| row.split(", ").collect())
+                        .collect();
+                    for row in aligned(&rows) {
                         out += &format!("    [{row}],\n");
                     }
                     out += "]\n";
@@ -484,6 +526,78 @@ mod tests {
             },
         );
         assert_eq!(a, b);
+    }
+
+    /// Issue 34: the file reads well — `A`'s rows line up, column by column, on the decimal point — and still reads
+    /// back as the same file, every number to the bit, under the same field names.
+    #[test]
+    fn the_file_lines_up_a_and_reads_back_the_same() {
+        let mut model = Model::linear(
+            [
+                [
+                    0.9317201600471624,
+                    0.002634932566067484,
+                    -0.012264064464047347,
+                ],
+                [-0.008597066586786176, 10.964874673557861, 3e-20],
+                [-118.804601977498933, 0.016369089304823295, 1.0],
+            ],
+            [-12.502591359646123, 3.8620966490806716, 10.855107522360353],
+        );
+        model
+            .add_correction(Effect::TemperatureBias {
+                coef_ut_per_c: [0.019957735016566, 0.0415, -0.0594717438],
+                t_ref_c: 25.73,
+            })
+            .unwrap();
+        let mut file = ParamsFile::new("vector", &model, &[]);
+        file.sensor = Some("lis3mdl".to_owned());
+        let text = file.text().unwrap();
+        let rows: Vec<&str> = text
+            .lines()
+            .skip_while(|l| *l != "A = [")
+            .skip(1)
+            .take(3)
+            .collect();
+        assert!(rows.iter().all(|r| r.starts_with("    [")), "{text}");
+        // Each column's points at one place: where each number's integer part ends, per row.
+        let points = |r: &str| -> Vec<usize> {
+            let mut at = 0;
+            let mut out = Vec::new();
+            for cell in r.split(',') {
+                let number = cell.trim_start().trim_start_matches('[');
+                if !number.trim().is_empty() {
+                    let start = at + cell.len() - number.len();
+                    out.push(start + number.find(['.', 'e', 'E', ']']).unwrap_or(number.len()));
+                }
+                at += cell.len() + 1;
+            }
+            out
+        };
+        let columns: Vec<Vec<usize>> = rows.iter().map(|r| points(r)).collect();
+        assert!(
+            columns.iter().all(|c| c.len() == 3 && *c == columns[0]),
+            "{columns:?}\n{text}"
+        );
+        // The same file back, with the field names it always had.
+        let back: ParamsFile = toml::from_str(&text).unwrap();
+        assert_eq!(back, file);
+        let value: toml::Value = toml::from_str(&text).unwrap();
+        let keys: Vec<&String> = value.as_table().unwrap().keys().collect();
+        assert_eq!(
+            keys,
+            ["calibration", "corrections", "format", "method", "sensor"]
+        );
+        let cal: Vec<&String> = value["calibration"].as_table().unwrap().keys().collect();
+        assert_eq!(cal, ["A", "b_ut"]);
+        assert_eq!(
+            value["corrections"][0]
+                .as_table()
+                .unwrap()
+                .keys()
+                .collect::<Vec<_>>(),
+            ["coef_ut_per_c", "id", "t_ref_c"]
+        );
     }
 
     #[test]
