@@ -486,3 +486,81 @@ fn numbers_read_in_the_wrong_unit_are_said_before_and_while_recording() {
         "{said}"
     );
 }
+
+/// Issue 34: `magcal --device …` with no `--routine`. A real device (here a board on a pseudo-terminal) gets the free
+/// routine — no jig, no known heading needed — and the summary says what the cube's poses would add; the simulated
+/// main job (no arguments) keeps the cube24 routine its bench has a jig for, and writes its three files.
+#[test]
+fn magcal_without_a_routine_turns_a_real_device_freely_and_keeps_the_simulated_jig() {
+    let _serial = one_at_a_time();
+    // The simulated main job, as `cargo run --release` runs it.
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_magcal"))
+        .arg("--out-dir")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("(cube24 routine, the simulated bench's jig)")
+            && stdout.contains("vector calibration")
+            && !stdout.contains("note: the free routine"),
+        "{stdout}"
+    );
+    for file in ["recording.csv", "params.toml", "report.json"] {
+        assert!(dir.path().join(file).exists(), "{file}");
+    }
+
+    // A board on a serial port, turned by the bench's hand.
+    let dir = tempfile::tempdir().unwrap();
+    let pty = pty::open();
+    let device = format!("serial:{}:115200:motioncal", pty.slave_path);
+    let field = magcal_app::source::sim::FIELD_NED_UT.map(|v| v.to_string());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_magcal"))
+        .args(["--device", &device, "--field-ned", &field.join(",")])
+        .arg("--out-dir")
+        .arg(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = stdout.next().unwrap().unwrap();
+    assert!(
+        first.starts_with(&format!(
+            "magcal: recording {device} (free routine, the default for a real device"
+        )) && first.contains("--routine cube24 with a cube jig"),
+        "{first}"
+    );
+    let drain = std::thread::spawn(move || stdout.map(Result::unwrap).collect::<Vec<String>>());
+    let mut config = FirmwareConfig::new(bench_config(ChipKind::Lis3mdl, 5));
+    // Unplugged after 5 minutes of bench time at the latest, so that a recorder that never stops fails the test.
+    config.raw_lines = Some(30_000);
+    config.lines_per_wall_s = 4000.0;
+    let stop = Arc::new(AtomicBool::new(false));
+    let board = pty::firmware(pty.master, config, stop.clone());
+    let out = child.wait_with_output().unwrap();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    board.join().unwrap();
+    let stdout = drain.join().unwrap().join("\n");
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("scalar calibration (ellipsoid fit")
+            && stdout.contains("note: the free routine gives the scalar calibration")
+            && stdout.contains("--routine cube24 gives the vector calibration, which adds that misalignment"),
+        "{stdout}"
+    );
+    let rec = Recording::read(&dir.path().join("recording.csv")).unwrap();
+    assert_eq!(rec.meta.routine.as_deref(), Some("free"));
+    let params = std::fs::read_to_string(dir.path().join("params.toml")).unwrap();
+    assert!(params.contains("method = \"scalar\""), "{params}");
+}

@@ -25,9 +25,11 @@ use magcal_app::{say, sayln, tellln};
 /// With no arguments it runs on a simulated LIS3MDL (no hardware needed): a virtual hand puts it through the 24
 /// poses of a cube jig, and the fit is compared with the simulated sensor's true errors.
 ///
-/// With a real chip:
+/// With a real chip, turned by hand (the free routine, the default for a real device: no jig needed):
+///   magcal --device i2c:/dev/i2c-1:lis3mdl --location 52.2,0.1,20 --date 2026-11-21
+///   magcal --device serial:/dev/ttyACM0
+/// With a non-magnetic cube jig against an edge on a known heading (the vector calibration):
 ///   magcal --device i2c:/dev/i2c-1:lis3mdl --routine cube24 --location 52.2,0.1,20 --date 2026-11-21
-///   magcal --device serial:/dev/ttyACM0 --routine free
 ///
 /// Devices: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT], CHIP one of lis3mdl, lis2mdl,
 /// qmc5883l, hmc5883l, mmc5983ma, FORMAT one of motioncal, csv, adafruit, xyz, pattern=REGEX (magcal-record --help
@@ -38,9 +40,11 @@ struct Args {
     /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT].
     #[arg(long, default_value = "sim", value_name = "DEV")]
     device: DeviceSpec,
-    /// The routine: cube24 (vector calibration; needs the local field for real devices) or free (scalar).
-    #[arg(long, value_enum, default_value_t = Routine::Cube24)]
-    routine: Routine,
+    /// The routine: free (turn it by hand: scalar calibration) or cube24 (a cube jig on a known heading: vector
+    /// calibration; needs the local field for real devices) [default: free for a real device, cube24 for sim, whose
+    /// bench has its jig].
+    #[arg(long, value_enum)]
+    routine: Option<Routine>,
     /// Where the recording, parameters and report go.
     #[arg(long, default_value = "magcal-out", value_name = "DIR")]
     out_dir: PathBuf,
@@ -67,7 +71,9 @@ fn main() -> ExitCode {
 
 fn run(args: Args) -> anyhow::Result<()> {
     let rec_path = args.out_dir.join("recording.csv");
-    let routine = args.routine;
+    let routine = args
+        .routine
+        .unwrap_or_else(|| Routine::default_for(&args.device));
     let mut opts = RecordOptions::new(routine, rec_path.clone());
     opts.force = args.force;
     opts.auto = args.device.is_sim();
@@ -98,9 +104,16 @@ fn run(args: Args) -> anyhow::Result<()> {
     let mut source = device::open(&args.device, &open)?;
     let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
     sayln!(
-        "magcal: recording {} ({} routine) to {}",
+        "magcal: recording {} ({} routine{}) to {}",
         args.device,
         routine.name(),
+        match (args.routine, routine) {
+            (Some(_), _) => "",
+            (None, Routine::Free) =>
+                ", the default for a real device: turn it by hand through every direction; --routine cube24 with a \
+                 cube jig",
+            (None, Routine::Cube24) => ", the simulated bench's jig",
+        },
         rec_path.display()
     )?;
     let recorded = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)
@@ -169,6 +182,9 @@ fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", params_path.display()))?;
     for c in &params.comments {
         tellln!("note: {}: {c}", params_path.display());
+    }
+    if let Some(other) = routine.what_the_other_adds() {
+        sayln!("note: {other}")?;
     }
     if let DeviceSpec::Sim { chip } = args.device {
         sayln!("{}", truth_check(&cal, &TruthFile::of(chip, args.sim_seed)))?;

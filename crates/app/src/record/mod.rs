@@ -74,6 +74,33 @@ impl Routine {
             Routine::Cube24 => "cube24",
         }
     }
+
+    /// The routine `device` gets when none is asked for: a simulated bench has its jig, on a known heading (the
+    /// virtual hand puts the chip through the cube's 24 poses: the vector calibration); a real chip or board is most
+    /// often turned by hand, without one, so it gets the free routine (the scalar calibration), which needs neither
+    /// a jig nor the local field.
+    pub fn default_for(device: &DeviceSpec) -> Routine {
+        if device.is_sim() {
+            Routine::Cube24
+        } else {
+            Routine::Free
+        }
+    }
+
+    /// What the other routine would add to a calibration made with this one, said after its summary: the cube's
+    /// poses give the vector method what the free routine's scalar one cannot see. Nothing for cube24.
+    pub fn what_the_other_adds(self) -> Option<&'static str> {
+        match self {
+            Routine::Free => Some(
+                "the free routine gives the scalar calibration (the field's magnitude only: the offset and the gains, \
+                 not how the sensor's axes are turned against the board's); with a non-magnetic cube jig against an \
+                 edge on a known heading and the local field (--location/--date), --routine cube24 gives the vector \
+                 calibration, which adds that misalignment (it goes straight into the heading) and checks the fit \
+                 against the field's direction",
+            ),
+            Routine::Cube24 => None,
+        }
+    }
 }
 
 /// How to record.
@@ -833,6 +860,27 @@ pub fn utc_rfc3339(t: SystemTime) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 34: without --routine, a real device gets the free routine (no jig needed), the simulated bench (which
+    /// has its jig) the cube's poses; the free routine says what the cube's would add.
+    #[test]
+    fn the_default_routine_needs_no_jig_on_a_real_device() {
+        for (device, routine) in [
+            ("sim", Routine::Cube24),
+            ("sim:qmc5883l", Routine::Cube24),
+            ("i2c:/dev/i2c-1:lis3mdl", Routine::Free),
+            ("serial:/dev/ttyACM0", Routine::Free),
+        ] {
+            let spec: DeviceSpec = device.parse().unwrap();
+            assert_eq!(Routine::default_for(&spec), routine, "{device}");
+        }
+        let adds = Routine::Free.what_the_other_adds().unwrap();
+        assert!(
+            adds.contains("--routine cube24") && adds.contains("misalignment"),
+            "{adds}"
+        );
+        assert_eq!(Routine::Cube24.what_the_other_adds(), None);
+    }
 
     #[test]
     fn timestamps_are_utc_civil_dates() {
