@@ -556,7 +556,9 @@ fn magcal_without_a_routine_turns_a_real_device_freely_and_keeps_the_simulated_j
     assert!(
         stdout.contains("scalar calibration (ellipsoid fit")
             && stdout.contains("note: the free routine gives the scalar calibration")
-            && stdout.contains("--routine cube24 gives the vector calibration, which adds that misalignment"),
+            && stdout.contains(
+                "--routine cube24 gives the vector calibration, which adds that misalignment"
+            ),
         "{stdout}"
     );
     let rec = Recording::read(&dir.path().join("recording.csv")).unwrap();
