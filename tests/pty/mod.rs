@@ -2,6 +2,8 @@
 //! `/dev/ttyACM0`; the simulated firmware of `magcal-mockhw` owns the master. Dropping the master is unplugging the
 //! board.
 
+#![allow(dead_code, reason = "each test binary uses a different part")]
+
 use std::fs::File;
 use std::os::fd::OwnedFd;
 use std::sync::Arc;

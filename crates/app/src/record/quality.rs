@@ -15,7 +15,7 @@
 //! - **fit error**: the RMS of the sphere's algebraic misfit `d² − R²` over `2·R²` (Freescale's fit error, which
 //!   MotionCal shows): how far the readings are from one sphere.
 
-use magcal_calib::directions::DirectionCoverage;
+use magcal_calib::directions::{DirectionCoverage, SETTLE_READINGS};
 
 /// The four figures, per cent.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,15 +38,21 @@ pub const MOTIONCAL_LIMITS: Quality = Quality {
     fit_error_pct: 5.0,
 };
 
+/// The figures are shown once the readings' distances from the sphere's centre spread by less than this fraction
+/// of their mean (a sensor's soft iron and gain errors, a magnet passing, stay well below).
+pub const MEANINGFUL_SPREAD: f64 = 0.25;
+
 /// What an empty cell, one with one reading, and one with two add to the gaps (MotionCal's weights).
 const GAP_WEIGHTS: [f64; 3] = [1.0, 0.2, 0.01];
 
 impl Quality {
-    /// The figures of the readings so far; `None` until they determine a sphere.
+    /// The figures of the readings so far; `None` until they mean something: [`SETTLE_READINGS`] readings lying on
+    /// the sphere fitted to them within [`MEANINGFUL_SPREAD`] (before, the sphere is one through a cluster of
+    /// readings at rest or a short arc, a few µT across, and the figures run to thousands of per cent).
     pub fn of(coverage: &DirectionCoverage) -> Option<Quality> {
         let sphere = coverage.sphere()?;
         let r = coverage.radial();
-        if r.n == 0 || sphere.radius_ut <= 0.0 {
+        if r.n < SETTLE_READINGS as u64 || sphere.radius_ut <= 0.0 {
             return None;
         }
         let n = r.n as f64;
@@ -68,6 +74,9 @@ impl Quality {
             visited += 1;
         }
         let wobble_ut = (offset.iter().map(|o| o * o).sum::<f64>()).sqrt() / visited.max(1) as f64;
+        if sd_ut > MEANINGFUL_SPREAD * mean_ut {
+            return None;
+        }
         Some(Quality {
             gaps_pct: 100.0 * gaps / cells.len() as f64,
             variance_pct: 100.0 * sd_ut / mean_ut,
@@ -155,5 +164,34 @@ mod tests {
         let mut c = DirectionCoverage::new();
         c.add([1.0, 2.0, 3.0]);
         assert_eq!(Quality::of(&c), None);
+    }
+
+    /// Issue 34: a sensor held still, then barely moved, gives a sphere a µT across through its noise, and figures
+    /// of "fit error 35169.6 %": none are shown until the readings lie on one sphere.
+    #[test]
+    fn no_figures_from_a_sphere_through_a_cluster_of_readings() {
+        let mut c = DirectionCoverage::new();
+        // 500 readings within 1.5 µT of one field (on the sphere to come), as at rest with noise and a tremor.
+        let mut state = 12345u64;
+        let mut noise = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..500 {
+            c.add([
+                20.0 + 3.0 * noise(),
+                -10.0 + 3.0 * noise(),
+                80.0 + 3.0 * noise(),
+            ]);
+        }
+        assert!(c.sphere().is_some(), "the cluster determines a sphere");
+        assert_eq!(Quality::of(&c), None);
+        for m in turning(1000, [20.0, -10.0, 30.0], 0.0) {
+            c.add(m);
+        }
+        c.finish();
+        assert!(Quality::of(&c).is_some());
     }
 }

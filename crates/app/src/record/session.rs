@@ -271,9 +271,9 @@ impl<'o> Session<'o> {
                 magnitude_ut,
                 usual_ut,
             }) => ui.message(&format!(
-                "t = {t_s:.1} s: the field magnitude is {magnitude_ut:.1} µT, not the {usual_ut:.1} µT of the rest: a \
-                 magnet or iron near the sensor? Move it away; these samples are recorded but do not count as \
-                 coverage"
+                "t = {t_s:.1} s: the field magnitude is {magnitude_ut:.1} µT, not the {usual_ut:.1} µT of the rest (the \
+                 sensor's offset and gains as fitted so far taken out): a magnet or iron near the sensor? Move it \
+                 away; these samples are recorded but do not count as coverage"
             )),
             Some(MagnitudeEvent::Returned { t_s, lasted_s }) => ui.message(&format!(
                 "t = {t_s:.1} s: the field magnitude is back to the rest's (disturbed for {lasted_s:.1} s)"

@@ -47,7 +47,20 @@ fn legend(cube: bool) -> &'static str {
 fn quality_lines(quality: Option<Quality>, cube: bool) -> String {
     let l = MOTIONCAL_LIMITS;
     let Some(q) = quality else {
-        return "quality: once the samples span three dimensions".to_owned();
+        // Figures that do not mean anything yet are shown as such, not as thousands of per cent.
+        let when = "— until samples lie on one sphere";
+        return if cube {
+            format!(
+                "quality: variance —, fit error —\n  (MotionCal asks below {} and {} %: {when})",
+                l.variance_pct, l.fit_error_pct
+            )
+        } else {
+            format!(
+                "quality: gaps —, variance —, wobble —, fit error —\n  (MotionCal asks below {}, {}, {} and {} %: \
+                 {when})",
+                l.gaps_pct, l.variance_pct, l.wobble_pct, l.fit_error_pct
+            )
+        };
     };
     let within = if q.within_motioncal_limits(!cube) {
         "all within"
@@ -455,11 +468,24 @@ mod tests {
             magnitude_ut: 144.6,
             usual_ut: 46.9,
         };
+        // Before the figures mean something (issue 34): a dash for each, not thousands of per cent.
+        let (cube_none, free_none) = (quality_lines(None, true), quality_lines(None, false));
+        assert!(
+            cube_none.starts_with("quality: variance —, fit error —")
+                && !cube_none.contains("gaps"),
+            "{cube_none}"
+        );
+        assert!(
+            free_none.starts_with("quality: gaps —, variance —, wobble —, fit error —"),
+            "{free_none}"
+        );
         let text = [
             legend(true),
             legend(false),
             &cube,
             &free,
+            &cube_none,
+            &free_none,
             &disturbance_lines(&d),
         ]
         .join("\n");
