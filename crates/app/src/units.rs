@@ -572,8 +572,10 @@ mod tests {
 
     #[test]
     fn the_metadata_states_the_unit_or_the_chip() {
-        let mut meta = Metadata::default();
-        meta.sensor = Some("qmc5883l (GY-63, +-2 G)".to_owned());
+        let mut meta = Metadata {
+            sensor: Some("qmc5883l (GY-63, +-2 G)".to_owned()),
+            ..Metadata::default()
+        };
         // Counts at ±2 G in a 23 µT field: radius 2760.
         let u = Units::resolve(true, 2760.0, Some(23.0), &meta, None);
         assert_eq!(u.per_gauss(), Some((12000.0, 100.0)));

@@ -58,8 +58,8 @@ pub enum NotFitted {
     Refused {
         /// The recording as read (the faulty rows left out).
         rec: Box<Recording>,
-        /// Why.
-        error: CalibrateError,
+        /// Why (boxed: the refusal is the rare path, and `fit_file`'s result stays small).
+        error: Box<CalibrateError>,
     },
 }
 
@@ -88,7 +88,7 @@ pub fn fit_file(path: &Path, request: &FitRequest<'_>) -> Result<Fitted, NotFitt
         Err(error) => {
             return Err(NotFitted::Refused {
                 rec: Box::new(rec),
-                error,
+                error: Box::new(error),
             });
         }
     };

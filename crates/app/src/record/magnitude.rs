@@ -64,7 +64,7 @@ impl Ellipsoid {
             .sum::<f64>()
             / n as f64)
             .sqrt();
-        if !(scale > 1e-9) {
+        if scale.is_nan() || scale <= 1e-9 {
             return None;
         }
         let mut xtx = Matrix6::<f64>::zeros();
@@ -77,12 +77,12 @@ impl Ellipsoid {
         }
         let p = xtx.cholesky()?.solve(&xty);
         let a = [p[0], p[1], p[2]];
-        if a.iter().any(|&v| !(v > 0.0)) {
+        if a.iter().any(|&v| v.is_nan() || v <= 0.0) {
             return None;
         }
         let c: [f64; 3] = std::array::from_fn(|k| -p[k + 3] / (2.0 * a[k]));
         let g = 1.0 + (0..3).map(|k| a[k] * c[k] * c[k]).sum::<f64>();
-        if !(g > 0.0) {
+        if g.is_nan() || g <= 0.0 {
             return None;
         }
         let e = Ellipsoid {
