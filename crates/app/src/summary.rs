@@ -234,8 +234,8 @@ pub fn summary_with_report(
     if let Some(d) = &cal.diagnosis {
         let reference_off = cal.fit.reference_off(&cal.field).is_some();
         let details = match report {
-            Some(path) => format!("in the report {}", path.display()),
-            None => "in the JSON report: add --report FILE".to_owned(),
+            Some(path) => format!("in {}", path.display()),
+            None => "add --report FILE".to_owned(),
         };
         out += &diagnosis(d, !cal.fit.is_vector(), reference_off, &details);
     }
@@ -470,7 +470,7 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool, details: &str) ->
     if d.spans.len() > SPANS_SHOWN {
         let _ = writeln!(
             out,
-            "  and {} more disturbances (all {details})",
+            "  and {} more disturbances (every one: {details})",
             d.spans.len() - SPANS_SHOWN
         );
     }
