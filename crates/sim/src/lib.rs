@@ -15,6 +15,7 @@
 pub mod bench;
 pub mod chips;
 mod environment;
+mod noise;
 mod scenario;
 mod sensor;
 pub mod study;
@@ -22,6 +23,7 @@ mod trajectory;
 
 pub use chips::ChipModel;
 pub use environment::{CurrentProfile, TemperatureProfile};
+pub use noise::NoiseKind;
 pub use scenario::{AttitudeOutput, Scenario, SimError, SimRun, Truth, simulate};
 pub use sensor::SensorTruth;
 pub use trajectory::{CubePose, Pose, Trajectory, cube24_poses};
