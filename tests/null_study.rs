@@ -35,12 +35,15 @@ fn kinds() -> Vec<(&'static str, fn(&mut Scenario))> {
         ("quantised at an LSB of twice the noise", |s| {
             s.lsb_ut = Some(2.0 * s.noise_ut[0])
         }),
-        ("Gaussian, an 8 σ one-sample spike per 10⁴ samples", |s| {
-            s.noise_kind = NoiseKind::Spikes {
-                per_sample: 1e-4,
-                size_sigma: 8.0,
-            }
-        }),
+        (
+            "Gaussian, an 8 σ one-sample spike per 10⁴ samples",
+            |s| {
+                s.noise_kind = NoiseKind::Spikes {
+                    per_sample: 1e-4,
+                    size_sigma: 8.0,
+                }
+            },
+        ),
     ]
 }
 
@@ -94,9 +97,12 @@ fn null_recordings_with_realistic_noise_raise_at_most_one_false_alarm_in_a_hundr
                 row.runs += 1;
                 row.glitches += d.glitches.len();
                 if d.verdict == Verdict::Mismatch {
-                    let effects: Vec<&str> = d.effects.iter().map(|e| e.effect.id().as_str()).collect();
-                    let spans: Vec<String> = d.spans.iter().map(|sp| sp.explanation.clone()).collect();
-                    row.alarms.push(format!("seed {seed}: {effects:?}, spans {spans:?}"));
+                    let effects: Vec<&str> =
+                        d.effects.iter().map(|e| e.effect.id().as_str()).collect();
+                    let spans: Vec<String> =
+                        d.spans.iter().map(|sp| sp.explanation.clone()).collect();
+                    row.alarms
+                        .push(format!("seed {seed}: {effects:?}, spans {spans:?}"));
                 }
             });
             let row = row.into_inner().unwrap();
@@ -113,7 +119,11 @@ fn null_recordings_with_realistic_noise_raise_at_most_one_false_alarm_in_a_hundr
                 println!("  false alarm ({name}, {}): {a}", method.as_str());
             }
             if share > FALSE_ALARMS {
-                failures.push(format!("{name}, {}: {:.1} %", method.as_str(), 100.0 * share));
+                failures.push(format!(
+                    "{name}, {}: {:.1} %",
+                    method.as_str(),
+                    100.0 * share
+                ));
             }
         }
     }

@@ -14,9 +14,8 @@ use magcal_app::truth::TruthFile;
 use magcal_calib::effects::EffectId;
 use magcal_sim::study;
 use magcal_sim::{
-    NoiseKind,
-    AttitudeOutput, ChipModel, CurrentProfile, Scenario, SensorTruth, TemperatureProfile,
-    Trajectory, simulate, stream_rng,
+    AttitudeOutput, ChipModel, CurrentProfile, NoiseKind, Scenario, SensorTruth,
+    TemperatureProfile, Trajectory, simulate, stream_rng,
 };
 
 /// Write a simulated recording (magcal-recording v1) of a magnetometer turned on the bench.

@@ -244,7 +244,8 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
         };
         match s.attitude {
             AttitudeOutput::Quaternion => {
-                sample.quat = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut || noise.gauss())
+                sample.quat =
+                    recorded_attitude(pose.quat, s.attitude_noise_deg, &mut || noise.gauss())
             }
             AttitudeOutput::ReferenceField => {
                 let q = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut || noise.gauss());

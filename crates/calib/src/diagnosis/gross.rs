@@ -28,7 +28,7 @@ use crate::frames;
 use crate::scan;
 
 use super::candidates::{self, ScanTimes};
-use super::chance::Chance;
+use super::chance;
 use super::samples::Attitudes;
 use super::setup::Setup;
 
@@ -187,7 +187,7 @@ pub(crate) fn explained_at(
 pub(crate) struct GrossStage {
     /// The gross spans that are findings, in time order.
     pub spans: Vec<Span>,
-    /// The gross spans that are not ([`Chance::is_finding`]): left out of the fits, counted, never a finding.
+    /// The gross spans that are not ([`chance::judge`]): left out of the fits, counted, never a finding.
     pub glitches: Vec<Span>,
     /// Per sample: in the fits (clean, or in a modelled span's window and explained by its constant).
     pub included: Vec<bool>,
@@ -227,13 +227,20 @@ pub(crate) fn stage(
     };
     let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
     let dims = if setup.vector { 3.0 } else { 1.0 };
-    let chance = Chance::of(&sizes, kept, scale, dims);
-    let (mut spans, glitches): (Vec<Span>, Vec<Span>) = spans(&view, kept, scale, &setup.unit)
-        .into_iter()
-        .partition(|sp| {
-            let evidence = Chance::evidence(&sizes, (sp.start, sp.end), scale, dims);
-            chance.is_finding(sp.end - sp.start, duration_s(s, sp), evidence)
-        });
+    let candidates = spans(&view, kept, scale, &setup.unit);
+    let extents: Vec<(usize, usize, Option<f64>)> = candidates
+        .iter()
+        .map(|sp| (sp.start, sp.end, duration_s(s, sp)))
+        .collect();
+    let verdicts = chance::judge(&sizes, &extents, scale, dims);
+    let (mut spans, mut glitches) = (Vec::new(), Vec::new());
+    for (span, finding) in candidates.into_iter().zip(verdicts) {
+        if finding {
+            spans.push(span)
+        } else {
+            glitches.push(span)
+        }
+    }
     drop(sizes);
     let mut included = vec![true; n];
     let mut clean = vec![true; n];
@@ -1017,15 +1024,17 @@ mod tests {
     }
 
     #[test]
-    fn a_one_sample_spike_is_a_glitch_and_two_readings_off_for_40_ms_a_span() {
+    fn one_sample_spikes_are_glitches_and_readings_off_for_a_tenth_of_a_second_a_span() {
         use super::super::testbench::{Bench, with_setup};
         let mut bench = Bench::new(1500, &[], 24);
-        // One reading 40 µT off, another 30 µT off ten seconds later: each one reading's fault. Then two readings
-        // in a row (40 ms at 50 Hz) 30 µT off: as long as a magnet passing a few centimetres away takes.
+        // One reading 40 µT off, another 30 µT off ten seconds later: each one reading's fault. Then five readings
+        // in a row (0.1 s at 50 Hz) 30 µT off: as long as a magnet passing a few centimetres away takes, and more
+        // than the noise, with two such spikes in it, makes by chance in a row.
         bench.raw_ut[300][0] += 40.0;
         bench.raw_ut[800][2] -= 30.0;
-        bench.raw_ut[1200][1] -= 30.0;
-        bench.raw_ut[1201][1] -= 30.0;
+        for i in 1200..1205 {
+            bench.raw_ut[i][1] -= 30.0;
+        }
         with_setup(&bench, |setup, residual| {
             let (_, kept, scale) = bench.base();
             let stage = stage(setup, residual, &kept, scale, &[]);
