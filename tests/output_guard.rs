@@ -22,9 +22,10 @@ const TOOLS: [(&str, &str); 7] = [
 ];
 
 /// Value names (as `--help` shows them) of what is no file: numbers, lists of them, choices, devices, specs.
-const NOT_PATHS: [&str; 30] = [
+const NOT_PATHS: [&str; 31] = [
     "DEV",
     "ID",
+    "KIND",
     "ROUTINE",
     "N,E,D",
     "LAT,LON,ALT",

@@ -9,14 +9,14 @@ use magcal_app::cli::{excerpt, exit, parse, parse_floats};
 use magcal_app::device::within;
 use magcal_app::effect_spec::{self, Defaults};
 use magcal_app::outputs::{Guard, Replace};
-use magcal_app::sim_options::{MAX_NOISE_UT, SimNumbers};
+use magcal_app::sim_options::{MAX_NOISE_UT, SimNumbers, parse_noise_kind};
 use magcal_app::tellln;
 use magcal_app::truth::TruthFile;
 use magcal_calib::effects::EffectId;
 use magcal_sim::study;
 use magcal_sim::{
-    AttitudeOutput, ChipModel, CurrentProfile, Scenario, SensorTruth, TemperatureProfile,
-    Trajectory, simulate, stream_rng,
+    AttitudeOutput, ChipModel, CurrentProfile, NoiseKind, Scenario, SensorTruth,
+    TemperatureProfile, Trajectory, simulate, stream_rng,
 };
 
 /// Write a simulated recording (magcal-recording v1) of a magnetometer turned on the bench.
@@ -51,6 +51,10 @@ struct Args {
     /// White noise per axis, µT (default: the chip's).
     #[arg(allow_negative_numbers = true, long)]
     noise: Option<f64>,
+    /// The noise's distribution, scaled to --noise: gaussian, t:DOF (Student's t, heavier tails) or
+    /// spikes:PER_SAMPLE:SIGMAS (Gaussian and a one-sample spike of SIGMAS standard deviations with that probability).
+    #[arg(long, value_name = "KIND", value_parser = parse_noise_kind, default_value = "gaussian")]
+    noise_kind: NoiseKind,
     /// Random sensor errors: soft iron (relative), hard iron (µT), misalignment (degrees).
     #[arg(long, value_name = "SOFT,HARD,MOUNT", value_parser = parse_floats::<3>, default_value = "0.1,30,3")]
     errors: [f64; 3],
@@ -190,6 +194,7 @@ fn run(args: Args) -> anyhow::Result<()> {
     if let Some(n) = args.noise {
         s.noise_ut = [n; 3];
     }
+    s.noise_kind = args.noise_kind;
     let [soft, hard, mount] = args.errors;
     s.sensor = SensorTruth::random(soft, hard, mount, &mut stream_rng(args.seed, 0));
     s.attitude = match args.reference {

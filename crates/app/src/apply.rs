@@ -9,7 +9,7 @@
 //! parameters file, so it is not included).
 
 use magcal_calib::coverage::Coverage;
-use magcal_calib::diagnosis::{self, DiagnosisInput, Disturbed, GrossSpan, Reference};
+use magcal_calib::diagnosis::{self, DiagnosisInput, Disturbed, Glitch, GrossSpan, Reference};
 use magcal_calib::effects::Need;
 use magcal_calib::noise::{self, NoiseFloor};
 use magcal_calib::{Model, frames};
@@ -73,7 +73,9 @@ pub struct Check {
     pub warnings: Vec<String>,
     /// The spans the parameters leave grossly off, left out of the figures.
     pub disturbed: Vec<GrossSpan>,
-    /// Rows in them.
+    /// The glitches also left out (spans too short to be a field, or within what the noise makes by chance).
+    pub glitches: Vec<Glitch>,
+    /// Rows in the spans and glitches.
     pub samples_left_out: usize,
 }
 
@@ -280,9 +282,9 @@ pub fn check(
         magnitude_ut,
         (noise_floor_ut, noise_unmeasured),
     );
-    let (spans, samples_left_out) = disturbed.map_or((Vec::new(), 0), |d| {
+    let (spans, glitches, samples_left_out) = disturbed.map_or((Vec::new(), Vec::new(), 0), |d| {
         let n = d.rows_left_out();
-        (d.spans, n)
+        (d.spans, d.glitches, n)
     });
     let mut warnings = apply_warnings(params, &misfit.against, fitted_on_it);
     warnings.extend(left_out_warning(samples_left_out, rec.len(), spans.len()));
@@ -300,6 +302,7 @@ pub fn check(
         verdict,
         warnings,
         disturbed: spans,
+        glitches,
         samples_left_out,
     })
 }

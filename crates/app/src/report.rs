@@ -211,6 +211,10 @@ pub struct DiagnosisReport {
     /// The spans where the residual departed grossly, what each was, and whether it was modelled or left out.
     #[serde(default)]
     pub spans: Vec<SpanReport>,
+    /// Gross spans that are no finding — at most a few samples, or within what the recording's own noise makes by
+    /// chance — left out of the calibration and counted.
+    #[serde(default)]
+    pub glitches: Vec<GlitchReport>,
     /// Effects the data suggested but the model does not hold, and why.
     #[serde(default)]
     pub rejected: Vec<RejectedReport>,
@@ -245,6 +249,19 @@ pub struct EffectReport {
     pub size_ut: f64,
     /// The finding in words.
     pub explanation: String,
+}
+
+/// A glitch: a gross span that is no finding.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GlitchReport {
+    /// First sample's time, s.
+    pub t0_s: f64,
+    /// Last sample's time, s.
+    pub t1_s: f64,
+    /// Samples in it.
+    pub samples: usize,
+    /// Largest residual in it, µT.
+    pub peak_ut: f64,
 }
 
 /// A gross span.
@@ -460,6 +477,16 @@ impl DiagnosisReport {
                         kept_samples: sp.kept_samples,
                         explanation: sp.explanation.clone(),
                     }
+                })
+                .collect(),
+            glitches: d
+                .glitches
+                .iter()
+                .map(|g| GlitchReport {
+                    t0_s: g.t0_s,
+                    t1_s: g.t1_s,
+                    samples: g.samples,
+                    peak_ut: g.peak_ut,
                 })
                 .collect(),
             rejected: d

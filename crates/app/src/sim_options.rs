@@ -2,7 +2,7 @@
 //! current switching every nanosecond (billions of switching times), NaN errors or negative noise are refused with
 //! the range that makes sense, naming the option.
 
-use magcal_sim::CurrentProfile;
+use magcal_sim::{CurrentProfile, NoiseKind};
 
 use crate::cli::number;
 use crate::device::{BadOption, MAX_RATE_HZ, within};
@@ -148,6 +148,35 @@ impl SimNumbers<'_> {
             }
         }
         Ok(())
+    }
+}
+
+/// Parses `--noise-kind`: `gaussian`, `t:DOF` (Student's t with DOF degrees of freedom, more than 2) or
+/// `spikes:PER_SAMPLE:SIGMAS` (Gaussian with, per sample with that probability, a spike of that many standard
+/// deviations on one axis).
+pub fn parse_noise_kind(text: &str) -> Result<NoiseKind, String> {
+    let number = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("{}: not a number", crate::cli::excerpt(x)))
+    };
+    let kind = match text.trim().split(':').collect::<Vec<_>>()[..] {
+        ["gaussian"] => NoiseKind::Gaussian,
+        ["t", dof] => NoiseKind::StudentT { dof: number(dof)? },
+        ["spikes", p, size] => NoiseKind::Spikes {
+            per_sample: number(p)?,
+            size_sigma: number(size)?,
+        },
+        _ => {
+            return Err(format!(
+                "{}: expected gaussian, t:DOF or spikes:PER_SAMPLE:SIGMAS",
+                crate::cli::excerpt(text)
+            ));
+        }
+    };
+    match kind.invalid() {
+        Some(why) => Err(why),
+        None => Ok(kind),
     }
 }
 

@@ -4,7 +4,7 @@
 use std::fmt::Write;
 
 use magcal_calib::diagnosis::{
-    Diagnosis, FoundEffect, GrossSpan, NOTICEABLE_GAIN, Verdict as Finding,
+    Diagnosis, FoundEffect, Glitch, GrossSpan, NOTICEABLE_GAIN, Verdict as Finding,
 };
 
 use crate::apply::{Against, Check};
@@ -114,13 +114,22 @@ pub fn check_summary(
             }
         ),
     };
-    let left_out = if c.samples_left_out > 0 {
-        format!(
+    let left_out = match (c.disturbed.len(), c.glitches.len()) {
+        (0, 0) => String::new(),
+        (_, 0) => format!(
             " ({} in disturbed spans left out of the check)",
             c.samples_left_out
-        )
-    } else {
-        String::new()
+        ),
+        (0, g) => format!(
+            " ({} in {g} glitch{} left out of the check)",
+            c.samples_left_out,
+            if g == 1 { "" } else { "es" }
+        ),
+        (_, g) => format!(
+            " ({} in disturbed spans and {g} glitch{} left out of the check)",
+            c.samples_left_out,
+            if g == 1 { "" } else { "es" }
+        ),
     };
     let _ = writeln!(
         out,
@@ -200,6 +209,7 @@ pub fn check_summary(
             c.disturbed.len() - SPANS_SHOWN
         );
     }
+    out += &glitches_line(&c.glitches);
     out
 }
 
@@ -474,6 +484,7 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool, details: &str) ->
             d.spans.len() - SPANS_SHOWN
         );
     }
+    out += &glitches_line(&d.glitches);
     out += &located_line(d);
     out += &effect_lines(d);
     if !d.effects.is_empty() {
@@ -504,6 +515,36 @@ fn diagnosis(d: &Diagnosis, scalar: bool, reference_off: bool, details: &str) ->
         );
     }
     out
+}
+
+/// The glitches in one line, when there are any: how many, where the first few were, and that they are no finding.
+fn glitches_line(glitches: &[Glitch]) -> String {
+    if glitches.is_empty() {
+        return String::new();
+    }
+    const SHOWN: usize = 4;
+    let mut at: Vec<String> = glitches
+        .iter()
+        .take(SHOWN)
+        .map(|g| {
+            if g.t1_s > g.t0_s {
+                format!("{:.2}–{:.2} s", g.t0_s, g.t1_s)
+            } else {
+                format!("{:.2} s", g.t0_s)
+            }
+        })
+        .collect();
+    if glitches.len() > SHOWN {
+        at.push("…".to_owned());
+    }
+    let samples: usize = glitches.iter().map(|g| g.samples).sum();
+    format!(
+        "  {} glitch{} left out ({samples} samples: {}): too short to be a field, or no larger than this recording's \
+         own noise makes somewhere by chance — not a finding\n",
+        glitches.len(),
+        if glitches.len() == 1 { "" } else { "es" },
+        at.join(", ")
+    )
 }
 
 /// What the residual beyond the sensor's noise is, as a clause to append (empty when it is within half the noise).

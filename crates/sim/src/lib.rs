@@ -16,6 +16,7 @@ pub mod bench;
 pub mod chips;
 pub mod dataflash;
 mod environment;
+mod noise;
 mod scenario;
 mod sensor;
 pub mod study;
@@ -24,6 +25,7 @@ pub mod ulog;
 
 pub use chips::ChipModel;
 pub use environment::{CurrentProfile, TemperatureProfile};
+pub use noise::NoiseKind;
 pub use scenario::{AttitudeOutput, Scenario, SimError, SimRun, Truth, simulate};
 pub use sensor::SensorTruth;
 pub use trajectory::{CubePose, Pose, Trajectory, cube24_poses};

@@ -5,11 +5,11 @@ use magcal_calib::frames;
 use magcal_calib::reference_heading;
 use magcal_recording::{Layout, Metadata, Recording, Sample};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
-use rand_distr::{Distribution, StandardNormal};
 
 use crate::bench::{CleanReading, check_channels, clean_reading};
 use crate::chips::ChipModel;
 use crate::environment::{CurrentProfile, TemperatureProfile};
+use crate::noise::{NoiseKind, NoiseSource};
 use crate::sensor::SensorTruth;
 use crate::stream_rng;
 use crate::trajectory::{Pose, Trajectory};
@@ -40,8 +40,10 @@ pub struct Scenario {
     pub field_ned_ut: [f64; 3],
     /// The sensor's true calibration.
     pub sensor: SensorTruth,
-    /// White noise per raw axis, µT.
+    /// White noise per raw axis (its standard deviation), µT.
     pub noise_ut: [f64; 3],
+    /// The noise's distribution.
+    pub noise_kind: NoiseKind,
     /// Quantisation step of the raw reading, µT.
     pub lsb_ut: Option<f64>,
     /// Temperature over time (recorded as `temp` when set).
@@ -76,6 +78,7 @@ impl Scenario {
             field_ned_ut: [19.8, 1.2, 45.3],
             sensor: SensorTruth::IDEAL,
             noise_ut: chip.noise_ut,
+            noise_kind: NoiseKind::Gaussian,
             lsb_ut: Some(chip.lsb_ut),
             temperature: chip.temp_lsb_c.map(|_| TemperatureProfile::constant(25.0)),
             temp_lsb_c: chip.temp_lsb_c,
@@ -125,6 +128,9 @@ pub enum SimError {
     /// The scenario's channels do not make a valid recording.
     #[error("invalid recording layout: {0}")]
     Layout(String),
+    /// The noise's distribution has parameters it cannot have.
+    #[error("noise: {0}")]
+    Noise(String),
     /// A current switches faster than the samples, or is no number of amperes.
     #[error(
         "current {name}: on {on_a} A, on for {mean_on_s} s and off for {mean_off_s} s on average: each mean must be \
@@ -177,8 +183,10 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
         .iter()
         .map(|c| c.switch_times(duration_s, &mut env_rng))
         .collect();
-    let mut noise_rng = stream_rng(s.seed, 3);
-    let mut gauss = move || -> f64 { StandardNormal.sample(&mut noise_rng) };
+    if let Some(why) = s.noise_kind.invalid() {
+        return Err(SimError::Noise(why));
+    }
+    let mut noise = NoiseSource::new(stream_rng(s.seed, 3));
 
     let layout = Layout {
         t: true,
@@ -227,8 +235,8 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
             temp_c,
             &currents_a,
         );
-        let raw: [f64; 3] =
-            std::array::from_fn(|k| quantise(clean[k] + s.noise_ut[k] * gauss(), s.lsb_ut));
+        let n = noise.reading(s.noise_kind, s.noise_ut);
+        let raw: [f64; 3] = std::array::from_fn(|k| quantise(clean[k] + n[k], s.lsb_ut));
         truth.clean_raw_ut.push(clean);
         truth.field_ut.push(field);
 
@@ -241,16 +249,17 @@ pub fn simulate(s: &Scenario) -> Result<SimRun, SimError> {
         };
         match s.attitude {
             AttitudeOutput::Quaternion => {
-                sample.quat = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut gauss)
+                sample.quat =
+                    recorded_attitude(pose.quat, s.attitude_noise_deg, &mut || noise.gauss())
             }
             AttitudeOutput::ReferenceField => {
-                let q = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut gauss);
+                let q = recorded_attitude(pose.quat, s.attitude_noise_deg, &mut || noise.gauss());
                 sample.ref_ut = frames::expected_sensor_field(q, s.field_ned_ut);
             }
             AttitudeOutput::None => {}
         }
         if let Some(sigma) = s.gyro_noise_rad_s {
-            sample.gyro_rad_s = pose.omega_rad_s.map(|w| w + sigma * gauss());
+            sample.gyro_rad_s = pose.omega_rad_s.map(|w| w + sigma * noise.gauss());
         }
         recording
             .push(&sample)

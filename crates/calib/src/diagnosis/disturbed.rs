@@ -12,8 +12,8 @@ use crate::scalar::ScalarProblem;
 use crate::vector::VectorProblem;
 
 use super::explain::Fate;
-use super::findings::GrossSpan;
-use super::report::gross_span;
+use super::findings::{Glitch, GrossSpan};
+use super::report::{glitch, gross_span};
 use super::samples::Samples;
 use super::setup::Setup;
 use super::{DiagnosisInput, MIN_SAMPLES, gross};
@@ -23,6 +23,8 @@ use super::{DiagnosisInput, MIN_SAMPLES, gross};
 pub struct Disturbed {
     /// The spans, in time order, in words.
     pub spans: Vec<GrossSpan>,
+    /// The glitches (spans too short to be a field, or within what the noise makes by chance), also left out.
+    pub glitches: Vec<Glitch>,
     /// Per recording row, whether it lies in one of them (and is left out of the check).
     pub left_out: Vec<bool>,
 }
@@ -70,6 +72,7 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
             .iter()
             .map(|sp| gross_span(&setup, sp, Fate::Check))
             .collect(),
+        glitches: stage.glitches.iter().map(|g| glitch(&setup, g)).collect(),
         left_out,
     })
 }

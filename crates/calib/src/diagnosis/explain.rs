@@ -281,14 +281,9 @@ fn span_parts(sp: &Span, vector: bool) -> (String, &'static str, String) {
         ),
         SpanKind::Unexplained => (
             format!(
-                "up to {:.1} µT, {}",
-                sp.peak_ut,
-                if sp.end - sp.start <= 3 {
-                    "a glitch of a few samples"
-                } else {
-                    "neither fixed to the sensor nor to the room while the sensor was still (something moved near \
-                     it)"
-                }
+                "up to {:.1} µT, neither fixed to the sensor nor to the room while the sensor was still (something \
+                 moved near it)",
+                sp.peak_ut
             ),
             " — ",
             LEFT_OUT.to_owned(),

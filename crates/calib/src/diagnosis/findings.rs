@@ -90,6 +90,20 @@ pub struct GrossSpan {
     pub kept_samples: usize,
 }
 
+/// A gross span that is no finding: at most a few samples long, or within what the recording's own noise makes by
+/// chance anywhere in it. Left out of the calibration and counted; it says nothing of the physics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Glitch {
+    /// First and last sample's time, s (the sample indices without a time column).
+    pub t0_s: f64,
+    /// See `t0_s`.
+    pub t1_s: f64,
+    /// Samples in it.
+    pub samples: usize,
+    /// The largest residual in it, µT.
+    pub peak_ut: f64,
+}
+
 /// An effect the data suggested but the model may not hold, and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Rejected {
@@ -179,8 +193,10 @@ pub struct Diagnosis {
     /// The reference's own error: what the final model's residual on the clean samples holds beyond the sensor's
     /// noise (attitude alignment, synchronisation, field gradients; for the scalar method, model errors), µT.
     pub reference_floor_ut: f64,
-    /// The gross spans, in time order.
+    /// The gross spans that are findings, in time order.
     pub spans: Vec<GrossSpan>,
+    /// The gross spans that are glitches, in time order: left out of the calibration, no finding.
+    pub glitches: Vec<Glitch>,
     /// Effects suggested by the data but rejected, with why.
     pub rejected: Vec<Rejected>,
     /// Samples used; rows left out for a missing channel.

@@ -28,6 +28,7 @@ use crate::frames;
 use crate::scan;
 
 use super::candidates::{self, ScanTimes};
+use super::chance;
 use super::samples::Attitudes;
 use super::setup::Setup;
 
@@ -41,8 +42,6 @@ const KEPT_SCALES: f64 = 3.0;
 const FRAME_MARGIN: f64 = 2.0;
 /// The sensor turned during a span when the field direction in sensor axes moved by more than this, degrees.
 const TURNED_DEG: f64 = 10.0;
-/// Spans this short (samples) are glitches.
-const GLITCH_SAMPLES: usize = 3;
 
 /// What a span is.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -183,11 +182,13 @@ pub(crate) fn explained_at(
     left <= KEPT_SCALES * scale_ut * residual.dims().sqrt()
 }
 
-/// Stages 2 and 3's hand-off: the classified spans, which samples the fits include and which are clean, and the
-/// modelled spans' effects.
+/// Stages 2 and 3's hand-off: the classified spans, the glitches, which samples the fits include and which are
+/// clean, and the modelled spans' effects.
 pub(crate) struct GrossStage {
-    /// The gross spans, in time order.
+    /// The gross spans that are findings, in time order.
     pub spans: Vec<Span>,
+    /// The gross spans that are not ([`chance::judge`]): left out of the fits, counted, never a finding.
+    pub glitches: Vec<Span>,
     /// Per sample: in the fits (clean, or in a modelled span's window and explained by its constant).
     pub included: Vec<bool>,
     /// Per sample: outside every gross span.
@@ -224,9 +225,29 @@ pub(crate) fn stage(
             field_ut: setup.field_ut,
         }
     };
-    let mut spans = spans(&view, kept, scale, &setup.unit);
+    let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
+    let dims = if setup.vector { 3.0 } else { 1.0 };
+    let candidates = spans(&view, kept, scale, &setup.unit);
+    let extents: Vec<(usize, usize, Option<f64>)> = candidates
+        .iter()
+        .map(|sp| (sp.start, sp.end, duration_s(s, sp)))
+        .collect();
+    let verdicts = chance::judge(&sizes, &extents, scale, dims);
+    let (mut spans, mut glitches) = (Vec::new(), Vec::new());
+    for (span, finding) in candidates.into_iter().zip(verdicts) {
+        if finding {
+            spans.push(span)
+        } else {
+            glitches.push(span)
+        }
+    }
+    drop(sizes);
     let mut included = vec![true; n];
     let mut clean = vec![true; n];
+    for g in &glitches {
+        clean[g.start..g.end].fill(false);
+        included[g.start..g.end].fill(false);
+    }
     let mut span_effects = Vec::new();
     for span in &mut spans {
         clean[span.start..span.end].fill(false);
@@ -252,10 +273,19 @@ pub(crate) fn stage(
     }
     GrossStage {
         spans,
+        glitches,
         included,
         clean,
         span_effects,
     }
+}
+
+/// How long a span lasts, from its first sample to its last and one sample interval more, s; `None` without time.
+fn duration_s(s: &super::samples::Samples<'_>, sp: &Span) -> Option<f64> {
+    s.has_time.then(|| {
+        let step = candidates::sample_interval_s(s);
+        s.t[sp.end - 1] - s.t[sp.start] + step
+    })
 }
 
 /// A modelled span's effect over samples `[a, b)` — a `disturbance` for a field fixed in the room, a `bias_window`
@@ -543,7 +573,7 @@ fn classify(
             || rss <= EXPLAINED_SHARE * energy
     };
     let turned = turned_deg(&directions[a..b]) > TURNED_DEG;
-    let unexplained = if b - a <= GLITCH_SAMPLES || !turned {
+    let unexplained = if !turned {
         SpanKind::Unexplained
     } else {
         SpanKind::Moving
@@ -990,6 +1020,29 @@ mod tests {
             );
             assert!(!declined.spans[0].modelled() && declined.span_effects.is_empty());
             assert!(inside.iter().all(|&i| !declined.included[i]));
+        });
+    }
+
+    #[test]
+    fn one_sample_spikes_are_glitches_and_readings_off_for_a_tenth_of_a_second_a_span() {
+        use super::super::testbench::{Bench, with_setup};
+        let mut bench = Bench::new(1500, &[], 24);
+        // One reading 40 µT off, another 30 µT off ten seconds later: each one reading's fault. Then five readings
+        // in a row (0.1 s at 50 Hz) 30 µT off: as long as a magnet passing a few centimetres away takes, and more
+        // than the noise, with two such spikes in it, makes by chance in a row.
+        bench.raw_ut[300][0] += 40.0;
+        bench.raw_ut[800][2] -= 30.0;
+        for i in 1200..1205 {
+            bench.raw_ut[i][1] -= 30.0;
+        }
+        with_setup(&bench, |setup, residual| {
+            let (_, kept, scale) = bench.base();
+            let stage = stage(setup, residual, &kept, scale, &[]);
+            assert_eq!(stage.glitches.len(), 2, "{:?}", stage.glitches);
+            assert_eq!(stage.spans.len(), 1, "{:?}", stage.spans);
+            assert!((stage.spans[0].start..stage.spans[0].end).contains(&1200));
+            // Glitches are left out of the fits all the same.
+            assert!(!stage.clean[300] && !stage.included[300] && !stage.included[800]);
         });
     }
 }

@@ -40,6 +40,7 @@
 //! residual linearised at the base fit, so body-fixed effects enter through `u·δ`, `u` the field direction).
 
 mod candidates;
+mod chance;
 mod disturbed;
 mod explain;
 mod findings;
@@ -60,7 +61,7 @@ mod timing;
 pub use candidates::Untestable;
 pub use disturbed::{Disturbed, disturbed};
 pub use findings::{
-    Ambiguity, Diagnosis, FitSummary, FoundEffect, GrossSpan, LinearSe, Param, ParamValue,
+    Ambiguity, Diagnosis, FitSummary, FoundEffect, Glitch, GrossSpan, LinearSe, Param, ParamValue,
     Rejected, Residuals, Verdict,
 };
 pub use gross::SpanKind;

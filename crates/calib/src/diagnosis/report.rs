@@ -12,7 +12,7 @@ use crate::scan;
 use super::candidates::{self, Candidate, Untestable};
 use super::explain::{self, Fate};
 use super::findings::{
-    Ambiguity, Diagnosis, FitSummary, FoundEffect, GrossSpan, Rejected, Residuals, Verdict,
+    Ambiguity, Diagnosis, FitSummary, FoundEffect, Glitch, GrossSpan, Rejected, Residuals, Verdict,
 };
 use super::fitted::{coefficient, linear_of, linear_se, params_of};
 use super::gross::Span;
@@ -140,6 +140,7 @@ pub(crate) fn report(
         .iter()
         .map(|sp| gross_span(setup, sp, Fate::Calibration))
         .collect();
+    let glitches: Vec<Glitch> = round.glitches.iter().map(|g| glitch(setup, g)).collect();
     let located = Located {
         segments: spans
             .iter()
@@ -187,6 +188,7 @@ pub(crate) fn report(
         noise_floor_ut: setup.noise_floor_ut,
         reference_floor_ut,
         spans,
+        glitches,
         rejected,
         samples_used: used,
         samples_excluded: n - used,
@@ -561,6 +563,17 @@ pub(crate) fn gross_span(setup: &Setup<'_>, sp: &Span, fate: Fate) -> GrossSpan 
         modelled: fate == Fate::Calibration && sp.modelled(),
         explanation: explain::span(sp, &when, setup.vector, fate),
         kept_samples: 0,
+    }
+}
+
+/// A glitch as the report gives it.
+pub(crate) fn glitch(setup: &Setup<'_>, g: &Span) -> Glitch {
+    let (t0_s, t1_s) = span_time(setup.samples, g);
+    Glitch {
+        t0_s,
+        t1_s,
+        samples: g.end - g.start,
+        peak_ut: g.peak_ut,
     }
 }
 

@@ -21,8 +21,10 @@ use super::{ROUNDS, guard, problem};
 
 /// One pass of stages 2–5: the spans, which samples the fits include, the candidates and the selection.
 pub(crate) struct Round {
-    /// The gross spans, classified.
+    /// The gross spans that are findings, classified.
     pub spans: Vec<Span>,
+    /// The gross spans that are glitches (too short, or within what the noise makes by chance).
+    pub glitches: Vec<Span>,
     /// Per sample: in the fits (clean, or in a modelled span's window).
     pub included: Vec<bool>,
     /// Per sample: outside every gross span.
@@ -183,6 +185,7 @@ fn round(
     let sel = select::stage(setup, &problem, &cands)?;
     Ok(Round {
         spans: gross.spans,
+        glitches: gross.glitches,
         included: gross.included,
         clean: gross.clean,
         cands,
