@@ -9,7 +9,7 @@
 use std::collections::VecDeque;
 use std::fmt;
 use std::io::{self, ErrorKind, Read, Write};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError, channel};
 use std::time::{Duration, Instant};
 
 use mavlink::MavHeader;
@@ -372,6 +372,14 @@ pub struct MemoryPort {
     rx: Receiver<Vec<u8>>,
     tx: Sender<Vec<u8>>,
     pending: VecDeque<u8>,
+    timeout: Duration,
+}
+
+impl MemoryPort {
+    /// Sets how long a read waits for bytes; zero: not at all (`WouldBlock`, as a non-blocking port).
+    pub fn set_read_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
 }
 
 /// Two connected [`MemoryPort`]s.
@@ -383,11 +391,13 @@ pub fn duplex() -> (MemoryPort, MemoryPort) {
             rx: a_rx,
             tx: a_tx,
             pending: VecDeque::new(),
+            timeout: Duration::from_millis(20),
         },
         MemoryPort {
             rx: b_rx,
             tx: b_tx,
             pending: VecDeque::new(),
+            timeout: Duration::from_millis(20),
         },
     )
 }
@@ -395,10 +405,18 @@ pub fn duplex() -> (MemoryPort, MemoryPort) {
 impl Read for MemoryPort {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         if self.pending.is_empty() {
-            match self.rx.recv_timeout(Duration::from_millis(20)) {
-                Ok(bytes) => self.pending.extend(bytes),
-                Err(RecvTimeoutError::Timeout) => return Err(ErrorKind::TimedOut.into()),
-                Err(RecvTimeoutError::Disconnected) => return Ok(0),
+            if self.timeout.is_zero() {
+                match self.rx.try_recv() {
+                    Ok(bytes) => self.pending.extend(bytes),
+                    Err(TryRecvError::Empty) => return Err(ErrorKind::WouldBlock.into()),
+                    Err(TryRecvError::Disconnected) => return Ok(0),
+                }
+            } else {
+                match self.rx.recv_timeout(self.timeout) {
+                    Ok(bytes) => self.pending.extend(bytes),
+                    Err(RecvTimeoutError::Timeout) => return Err(ErrorKind::TimedOut.into()),
+                    Err(RecvTimeoutError::Disconnected) => return Ok(0),
+                }
             }
         }
         while let Ok(bytes) = self.rx.try_recv() {
