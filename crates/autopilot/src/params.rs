@@ -309,7 +309,8 @@ impl WriteFailure {
 /// Sets every parameter of `wanted` (name, value), confirming each by the `PARAM_VALUE` it answers, then reads each
 /// back. `previous` holds what the autopilot had (from [`read_all`]; it gives each parameter's type). Anything
 /// refused (answered with another value), unanswered or read back otherwise stops the write-back: the parameters
-/// written so far, and the one that failed, are set back to their `previous` values, and the error says which
+/// written so far, and the one that failed unless it answered with its previous value, are set back to their
+/// `previous` values, and the error says which
 /// parameter, why, and what was restored. Returns what was read back.
 pub fn write_all<P: Read + Write>(
     conn: &mut Connection<P>,
@@ -336,6 +337,10 @@ pub fn write_all<P: Read + Write>(
         match conn.set_param(name, *value, old.kind) {
             Ok(held) if holds(autopilot, &held, *value) => {}
             Ok(held) => {
+                if holds(autopilot, &held, old.value) {
+                    // Refused, and still holding its previous value: nothing to set back.
+                    touched.pop();
+                }
                 failure = Some((
                     name.clone(),
                     format!(

@@ -324,7 +324,7 @@ fn a_write_back_that_meets_a_refusal_leaves_the_previous_values() {
         let err = write_all(&mut run.conn, &wanted, &previous).unwrap_err();
         assert_eq!(err.param, names[2]);
         assert!(err.why.contains("refused 1.1"), "{err}");
-        assert_eq!(err.restored, names[..3]);
+        assert_eq!(err.restored, names[..2]);
         let text = err.to_string();
         assert!(
             text.contains("the autopilot keeps its previous values"),
