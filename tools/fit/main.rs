@@ -129,19 +129,26 @@ fn undo_path(args: &Args) -> anyhow::Result<Option<PathBuf>> {
              parameters file: give --out PARAMS.toml (or --undo-out UNDO.param); nothing was read or written"
         ),
     };
-    if std::fs::symlink_metadata(&path).is_ok() {
+    Ok(Some(path))
+}
+
+/// An undo file is never replaced: it may hold the autopilot's values from before an earlier write-back. (Checked
+/// after the guard, which says first when the path holds a recording or an input.)
+fn undo_is_new(undo: Option<&std::path::Path>) -> anyhow::Result<()> {
+    if let Some(path) = undo
+        && std::fs::symlink_metadata(path).is_ok()
+    {
         bail!(
             "--undo-out {}: the file exists, and may hold the autopilot's values from before an earlier write-back: \
              move it, or name another with --undo-out; nothing was read or written",
             path.display()
         );
     }
-    Ok(Some(path))
+    Ok(())
 }
 
 /// Refuses outputs that would overwrite the recording, each other or another recording, files that cannot be made
-/// (a missing folder, a folder's name), or plots into a file's place, before anything is read or written. The undo
-/// file of a write-back never replaces a file (it may hold the values before an earlier write-back).
+/// (a missing folder, a folder's name), or plots into a file's place, before anything is read or written.
 fn check_paths(args: &Args, undo: Option<&std::path::Path>) -> anyhow::Result<()> {
     Ok(Guard::new("magcal-fit")
         .input("<RECORDING>", &args.recording)
@@ -158,13 +165,14 @@ fn check_paths(args: &Args, undo: Option<&std::path::Path>) -> anyhow::Result<()
             &PLOT_FILES,
             Replace::Products,
         )
-        .file("--undo-out", undo, Replace::New)
+        .file("--undo-out", undo, Replace::Products)
         .check()?)
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
     let undo = undo_path(&args)?;
     check_paths(&args, undo.as_deref())?;
+    undo_is_new(undo.as_deref())?;
     let name = args.recording.display().to_string();
     if let Some(f) = args.field_ut
         && !(f > 0.0 && f.is_finite())
