@@ -22,8 +22,11 @@ const SEEDS: u64 = 200;
 /// At most this share of the recordings of a row may turn the verdict.
 const FALSE_ALARMS: f64 = 0.01;
 
-/// The noise kinds of the study: a name and how a scenario gets it.
-fn kinds() -> Vec<(&'static str, fn(&mut Scenario))> {
+/// A noise kind: a name and how a scenario gets it.
+type Kind = (&'static str, fn(&mut Scenario));
+
+/// The noise kinds of the study.
+fn kinds() -> Vec<Kind> {
     vec![
         ("Gaussian", |_| {}),
         ("Student-t, 5 degrees of freedom", |s| {
