@@ -209,6 +209,12 @@ fn arguments(
             "--export".into(),
             "json".into(),
         ],
+        ("magcal-fit", "--undo-out") => vec![
+            rec,
+            "--no-diagnose".into(),
+            "--write-to".into(),
+            "mavlink:/dev/null".into(),
+        ],
         ("magcal-fit", _) => vec![rec, "--no-diagnose".into()],
         ("magcal-apply", "--out") => vec![params, rec],
         ("magcal-batch", _) => vec![rec, "--no-diagnose".into()],

@@ -21,7 +21,7 @@ use magcal_app::summary::summary_with_report;
 use magcal_app::units::ChipOption;
 use magcal_app::verdict::{Grade, target_model};
 use magcal_app::workflow::{FitRequest, Fitted, NotFitted, fit_file};
-use magcal_app::writeback::write_back_calibration;
+use magcal_app::writeback::{write_back_autopilot, write_back_calibration};
 use magcal_app::{say, tell, tellln};
 
 /// Fit a magnetometer calibration to a recording, say how far off a compass would be before and after, and write it out.
@@ -42,6 +42,9 @@ use magcal_app::{say, tell, tellln};
 /// serial:PATH[:BAUD] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
 /// echo; i2c:/dev/i2c-N:lis2mdl[@ADDR] (or sim:lis2mdl) gets the hard-iron offset in its offset registers, read back.
 /// The other chips have no place for a calibration: that is an error, and the parameters file is the way.
+/// mavlink:PATH[:BAUD][:ardupilot|px4] is a flight controller: the --export ardupilot|px4 parameters for the
+/// autopilot its heartbeat names, its previous values saved first to an undo file (--undo-out, by default next to
+/// --out), each parameter confirmed and read back; a refused one sets back what was written and exits non-zero.
 #[derive(Parser, Debug)]
 #[command(version)]
 struct Args {
@@ -75,9 +78,14 @@ struct Args {
     #[arg(long, value_name = "PATH", requires = "export")]
     export_out: Option<PathBuf>,
     /// Write the calibration to this device and verify it: serial:PATH[:BAUD] (MotionCal packet,
-    /// confirmed by the echo) or i2c:/dev/i2c-N:lis2mdl[@ADDR] / sim:lis2mdl (offset registers, read back).
+    /// confirmed by the echo), i2c:/dev/i2c-N:lis2mdl[@ADDR] / sim:lis2mdl (offset registers, read back) or
+    /// mavlink:PATH[:BAUD][:ardupilot|px4] (a flight controller's compass parameters, set and read back).
     #[arg(long, value_name = "DEV")]
     write_to: Option<DeviceSpec>,
+    /// With --write-to mavlink:…: where the autopilot's previous values go, as a parameter file it can load to undo
+    /// the write-back (default: next to --out, PARAMS.undo.param); never replaces a file.
+    #[arg(long, value_name = "UNDO.param", requires = "write_to")]
+    undo_out: Option<PathBuf>,
     /// Skip the diagnosis (what physics the 12-parameter model leaves out).
     #[arg(long)]
     no_diagnose: bool,
@@ -102,9 +110,46 @@ fn main() -> ExitCode {
     exit("magcal-fit", run(parse()))
 }
 
+/// Where a write-back to a flight controller saves its previous values: --undo-out, or next to --out; `None` for
+/// other devices. A flight controller without either is an error.
+fn undo_path(args: &Args) -> anyhow::Result<Option<PathBuf>> {
+    if !matches!(args.write_to, Some(DeviceSpec::Mavlink { .. })) {
+        if args.undo_out.is_some() {
+            bail!(
+                "--undo-out is for --write-to mavlink:…, whose previous parameter values it holds"
+            );
+        }
+        return Ok(None);
+    }
+    let path = match (&args.undo_out, &args.out) {
+        (Some(path), _) => path.clone(),
+        (None, Some(out)) => out.with_extension("undo.param"),
+        (None, None) => bail!(
+            "--write-to mavlink:… saves the autopilot's previous values to an undo file first, next to the \
+             parameters file: give --out PARAMS.toml (or --undo-out UNDO.param); nothing was read or written"
+        ),
+    };
+    Ok(Some(path))
+}
+
+/// An undo file is never replaced: it may hold the autopilot's values from before an earlier write-back. (Checked
+/// after the guard, which says first when the path holds a recording or an input.)
+fn undo_is_new(undo: Option<&std::path::Path>) -> anyhow::Result<()> {
+    if let Some(path) = undo
+        && std::fs::symlink_metadata(path).is_ok()
+    {
+        bail!(
+            "--undo-out {}: the file exists, and may hold the autopilot's values from before an earlier write-back: \
+             move it, or name another with --undo-out; nothing was read or written",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 /// Refuses outputs that would overwrite the recording, each other or another recording, files that cannot be made
 /// (a missing folder, a folder's name), or plots into a file's place, before anything is read or written.
-fn check_paths(args: &Args) -> anyhow::Result<()> {
+fn check_paths(args: &Args, undo: Option<&std::path::Path>) -> anyhow::Result<()> {
     Ok(Guard::new("magcal-fit")
         .input("<RECORDING>", &args.recording)
         .file("--out", args.out.as_deref(), Replace::Products)
@@ -120,11 +165,14 @@ fn check_paths(args: &Args) -> anyhow::Result<()> {
             &PLOT_FILES,
             Replace::Products,
         )
+        .file("--undo-out", undo, Replace::Products)
         .check()?)
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    check_paths(&args)?;
+    let undo = undo_path(&args)?;
+    check_paths(&args, undo.as_deref())?;
+    undo_is_new(undo.as_deref())?;
     let name = args.recording.display().to_string();
     if let Some(f) = args.field_ut
         && !(f > 0.0 && f.is_finite())
@@ -241,7 +289,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         if let (DeviceSpec::Serial(_), Some(why)) = (device, mirror_refusal(&target)) {
             bail!("{name}: not written to {device}: {why}");
         }
-        for line in write_back_calibration(device, &cal, rec.meta.sensor.as_deref())? {
+        let lines = match (device, &undo) {
+            (DeviceSpec::Mavlink { .. }, Some(undo)) => write_back_autopilot(device, &cal, undo)?,
+            _ => write_back_calibration(device, &cal, rec.meta.sensor.as_deref())?,
+        };
+        for line in lines {
             say(&format!("{line}\n"))?;
         }
     }

@@ -47,6 +47,8 @@ pub enum Holder {
     Board,
     /// A chip's offset registers written with `--write-to`.
     Chip,
+    /// A flight controller's parameters written with `--write-to mavlink:…`.
+    Autopilot,
 }
 
 impl Holder {
@@ -67,6 +69,10 @@ impl Holder {
                 "MotionCal's calibration packet holds an offset, a symmetric matrix and the field magnitude"
             }
             Holder::Chip => "the chip's offset registers hold an offset only",
+            Holder::Autopilot => {
+                "the autopilot's compass parameters hold an offset, a symmetric matrix and a field per amp of the \
+                 battery current (ArduPilot's COMPASS_MOT, PX4's CAL_MAG0_*COMP)"
+            }
         }
     }
 }
@@ -98,6 +104,10 @@ fn why_not(e: &FoundEffect, holder: Holder) -> String {
             "not written: CAL_MAG0_XCOMP/YCOMP/ZCOMP with CAL_MAG_COMP_TYP current-based hold a field per kA of a \
              battery's current (if {channel} is that current), but {fitted_without}; the parameters file (--out) \
              keeps it"
+        ),
+        (EffectId::CurrentBias, Holder::Autopilot) => format!(
+            "not written: the autopilot's current compensation holds a field per amp of the battery monitor's current \
+             (if {channel} is that current), but {fitted_without}; the parameters file (--out) keeps it"
         ),
         _ => "no place for it there; the parameters file (--out) keeps it".to_owned(),
     }
@@ -271,7 +281,6 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect], units:
         ));
     }
     let corrections_note = (dropped + fitted_without > 0).then(|| notes[1].clone());
-    let (raw_pg, cal_pg) = units.per_gauss().unwrap_or((100.0, 100.0));
     match format {
         ExportFormat::Ardupilot => {
             let mut out = String::from(
@@ -285,7 +294,7 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect], units:
             {
                 out += &format!("# {n}\n");
             }
-            out + &ardupilot_values(model, raw_pg, cal_pg)
+            out + &ardupilot_values(model, units)
         }
         ExportFormat::Px4 => {
             let mut out = String::from(
@@ -298,7 +307,7 @@ pub fn export(model: &Model, format: ExportFormat, found: &[FoundEffect], units:
             {
                 out += &format!("# {n}\n");
             }
-            out + &px4_values(model, raw_pg, cal_pg)
+            out + &px4_values(model, units)
         }
         ExportFormat::CHeader => c_header(model, units, corrections_note.as_deref(), &named),
         ExportFormat::Json => json(model, format, found, units, corrections_note),
@@ -318,39 +327,67 @@ fn units_comment(units: &Units) -> Option<String> {
     ))
 }
 
-/// ArduPilot's COMPASS_OFS, DIA and ODI lines for readings of `raw_pg` units and a calibrated field of `cal_pg` a
-/// gauss.
-fn ardupilot_values(model: &Model, raw_pg: f64, cal_pg: f64) -> String {
-    let mut out = String::new();
+/// The parameters an autopilot's format holds for `model` (ArduPilot's `COMPASS_OFS_*`, `DIA_*`, `ODI_*` in mGauss
+/// and unitless; PX4's `CAL_MAG0_*OFF`, `*SCALE`, `*ODIAG` in gauss and unitless), in the order the export writes
+/// them, for readings in `units` ([`Units::per_gauss`], µT's scale without one); the same values the export writes
+/// and `--write-to mavlink:…` sets. Empty for the other formats.
+pub fn autopilot_params(model: &Model, format: ExportFormat, units: &Units) -> Vec<(String, f64)> {
+    let (raw_pg, cal_pg) = units.per_gauss().unwrap_or((100.0, 100.0));
     let s = Polar::of(&model.a).symmetric * (raw_pg / cal_pg);
-    let ofs = -Vector3::from(offset_ut(model)) * (1000.0 / raw_pg);
-    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-        out += &format!("COMPASS_OFS_{axis},{:.3}\n", ofs[k]);
-    }
-    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-        out += &format!("COMPASS_DIA_{axis},{:.6}\n", s[(k, k)]);
-    }
-    for (name, (r, c)) in [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))] {
-        out += &format!("COMPASS_ODI_{name},{:.6}\n", s[(r, c)]);
+    let offset = Vector3::from(offset_ut(model));
+    let axes = ["X", "Y", "Z"];
+    let off_diagonal = [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))];
+    let mut out = Vec::new();
+    match format {
+        ExportFormat::Ardupilot => {
+            let ofs = -offset * (1000.0 / raw_pg);
+            for (k, axis) in axes.iter().enumerate() {
+                out.push((format!("COMPASS_OFS_{axis}"), ofs[k]));
+            }
+            for (k, axis) in axes.iter().enumerate() {
+                out.push((format!("COMPASS_DIA_{axis}"), s[(k, k)]));
+            }
+            for (name, (r, c)) in off_diagonal {
+                out.push((format!("COMPASS_ODI_{name}"), s[(r, c)]));
+            }
+        }
+        ExportFormat::Px4 => {
+            let centre = offset / raw_pg;
+            for (k, axis) in axes.iter().enumerate() {
+                out.push((format!("CAL_MAG0_{axis}OFF"), centre[k]));
+            }
+            for (k, axis) in axes.iter().enumerate() {
+                out.push((format!("CAL_MAG0_{axis}SCALE"), s[(k, k)]));
+            }
+            for (name, (r, c)) in off_diagonal {
+                out.push((format!("CAL_MAG0_{name}ODIAG"), s[(r, c)]));
+            }
+        }
+        ExportFormat::CHeader | ExportFormat::Json => {}
     }
     out
 }
 
-/// PX4's CAL_MAG0 lines (QGroundControl's format) for readings of `raw_pg` units and a calibrated field of `cal_pg`
-/// a gauss.
-fn px4_values(model: &Model, raw_pg: f64, cal_pg: f64) -> String {
+/// ArduPilot's COMPASS_OFS, DIA and ODI lines ([`autopilot_params`]): offsets to 3 decimals of a mGauss, the matrix
+/// to 6.
+fn ardupilot_values(model: &Model, units: &Units) -> String {
+    autopilot_params(model, ExportFormat::Ardupilot, units)
+        .into_iter()
+        .map(|(name, v)| {
+            if name.starts_with("COMPASS_OFS") {
+                format!("{name},{v:.3}\n")
+            } else {
+                format!("{name},{v:.6}\n")
+            }
+        })
+        .collect()
+}
+
+/// PX4's CAL_MAG0 lines (QGroundControl's format, [`autopilot_params`]).
+fn px4_values(model: &Model, units: &Units) -> String {
     let mut out = String::from("# Vehicle-Id\tComponent-Id\tName\tValue\tType\n");
-    let s = Polar::of(&model.a).symmetric * (raw_pg / cal_pg);
-    let centre = Vector3::from(offset_ut(model)) / raw_pg;
-    let mut param = |name: &str, v: f64| out += &format!("1\t1\tCAL_MAG0_{name}\t{v:.9}\t9\n");
-    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-        param(&format!("{axis}OFF"), centre[k]);
-    }
-    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
-        param(&format!("{axis}SCALE"), s[(k, k)]);
-    }
-    for (name, (r, c)) in [("X", (0, 1)), ("Y", (0, 2)), ("Z", (1, 2))] {
-        param(&format!("{name}ODIAG"), s[(r, c)]);
+    for (name, v) in autopilot_params(model, ExportFormat::Px4, units) {
+        out += &format!("1\t1\t{name}\t{v:.9}\t9\n");
     }
     out
 }

@@ -120,6 +120,12 @@ pub fn how_to_apply(
                     corrects every reading as S·(raw − V) before its orientation filter; its Raw: lines stay raw, so a \
                     new recording through it can be checked\n";
         }
+        Target::Device(DeviceSpec::Mavlink { .. }) => {
+            out += "the flight controller now holds them (its compass parameters, set and read back): it applies them \
+                    to the compass at once and keeps them over a reboot; to undo, load the undo file the write-back \
+                    named (Mission Planner: Config → Full Parameter List → Load from file; QGroundControl: \
+                    Parameters → Tools → Load from file)\n";
+        }
         Target::Device(_) => {
             out += "the chip now subtracts the hard-iron offset itself until it is reset or powered off: firmware \
                     must write the offset registers at start-up and apply A itself (magcal-record resets the chip, so \
@@ -130,6 +136,7 @@ pub fn how_to_apply(
         Target::None => None,
         Target::Export { format, .. } => Some(Holder::Format(format)),
         Target::Device(DeviceSpec::Serial(_)) => Some(Holder::Board),
+        Target::Device(DeviceSpec::Mavlink { .. }) => Some(Holder::Autopilot),
         Target::Device(_) => Some(Holder::Chip),
     };
     let corrections = found

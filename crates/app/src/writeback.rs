@@ -7,19 +7,27 @@
 //! - `i2c:…:lis2mdl` and `sim:lis2mdl`: the LIS2MDL's hard-iron offset registers, which the chip subtracts from
 //!   every sample, get `V` in the chip's raw axes; they are read back and compared. The chip clears them at reset and
 //!   power-up, so firmware must write them at start-up.
+//! - `mavlink:…`: an ArduPilot or PX4 flight controller ([`write_back_autopilot`]): the export's parameters (the same
+//!   values and units as `--export ardupilot|px4`), the current values read first and saved to an undo `.param`
+//!   file, then each set with `PARAM_SET`, confirmed by its `PARAM_VALUE` and read back; a refused or unconfirmed
+//!   parameter sets back what was written ([`magcal_autopilot::write_all`]) and is an error naming it.
 //! - Other chips hold no calibration: that is an error that says so.
 
 use std::cell::RefCell;
+use std::path::Path;
 use std::rc::Rc;
 use std::time::Duration;
 
 use embedded_hal::i2c::I2c;
+use magcal_autopilot::params::{param_file, parse_param_file, read_all, write_all};
+use magcal_autopilot::{Autopilot, Connection, ParamValue};
 use magcal_driver::serial::{CalibrationPacket, WriteError, split_affine};
 use magcal_driver::{ChipKind, Error as ChipError, HardIronOffset, Lis2mdl, Magnetometer};
 use magcal_mockhw::{SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
 use crate::device::DeviceSpec;
+use crate::export::{ExportFormat, autopilot_params, refusal, warnings};
 use crate::fit::Calibration;
 use crate::source::sim::bench_config;
 
@@ -212,6 +220,9 @@ pub fn write_back(
             )?;
             Ok(offset_lines(&device, offset_ut, held))
         }
+        DeviceSpec::Mavlink { .. } => Err(unsendable(
+            "a flight controller takes the fitted calibration as parameters (magcal-fit --write-to)".to_owned(),
+        )),
         DeviceSpec::I2c { chip, .. } | DeviceSpec::Sim { chip } => {
             Err(WriteBackError::NoOffsetRegisters {
                 device,
@@ -265,4 +276,164 @@ pub fn write_lis2mdl_offset<I: I2c>(
         });
     }
     Ok(held)
+}
+
+/// How long a flight controller has to send its heartbeat (ArduPilot and PX4 send one a second).
+pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// A MAVLink connection to the flight controller `spec` names: its serial port opened (8N1, reads waiting at most
+/// 20 ms), its heartbeat awaited; returns the connection and the autopilot (the one named in the device string, or
+/// the heartbeat's).
+fn connect(
+    spec: &DeviceSpec,
+) -> Result<(Connection<Box<dyn serialport::SerialPort>>, Autopilot), WriteBackError> {
+    let device = spec.to_string();
+    let DeviceSpec::Mavlink {
+        path,
+        baud,
+        autopilot,
+    } = spec
+    else {
+        return Err(WriteBackError::Unsendable {
+            device,
+            why: "not a flight controller (mavlink:PATH[:BAUD])".to_owned(),
+        });
+    };
+    let port = serialport::new(path, *baud)
+        .timeout(Duration::from_millis(20))
+        .open()
+        .map_err(|e| WriteBackError::Device {
+            device: device.clone(),
+            error: format!("cannot open serial port {path}: {e}"),
+        })?;
+    let mut conn = Connection::new(port, path);
+    let found = conn
+        .wait_heartbeat(HEARTBEAT_TIMEOUT, *autopilot)
+        .map_err(|e| WriteBackError::Device {
+            device: device.clone(),
+            error: format!("{e}; nothing was written"),
+        })?;
+    Ok((conn, found))
+}
+
+/// The export format of `autopilot`.
+fn format_of(autopilot: Autopilot) -> ExportFormat {
+    match autopilot {
+        Autopilot::ArduPilot => ExportFormat::Ardupilot,
+        Autopilot::Px4 => ExportFormat::Px4,
+    }
+}
+
+/// Reads the current values of `wanted`'s parameters, saves them to `undo` (atomically, in the autopilot's
+/// parameter file format, with `comments`), then sets `wanted` ([`write_all`]). Returns what was read back and what
+/// was there before.
+fn set_with_undo<P: std::io::Read + std::io::Write>(
+    conn: &mut Connection<P>,
+    autopilot: Autopilot,
+    device: &str,
+    wanted: &[(String, f64)],
+    undo: Option<(&Path, &[String])>,
+) -> Result<(Vec<ParamValue>, Vec<ParamValue>), WriteBackError> {
+    let names: Vec<&str> = wanted.iter().map(|(n, _)| n.as_str()).collect();
+    let previous = read_all(conn, &names).map_err(|e| WriteBackError::Device {
+        device: device.to_owned(),
+        error: format!("reading the current values: {e}; nothing was written"),
+    })?;
+    if let Some((path, comments)) = undo {
+        let text = param_file(autopilot, &previous, comments);
+        crate::files::write_atomic(path, text.as_bytes()).map_err(|e| WriteBackError::Device {
+            device: device.to_owned(),
+            error: format!(
+                "writing the undo file {}: {e}; nothing was written to the autopilot",
+                path.display()
+            ),
+        })?;
+    }
+    let back = write_all(conn, wanted, &previous).map_err(|e| WriteBackError::Verification {
+        device: device.to_owned(),
+        detail: e.to_string(),
+    })?;
+    Ok((back, previous))
+}
+
+/// Writes a fitted calibration to the flight controller `spec` names (`mavlink:…`): the export's parameters for
+/// its autopilot ([`autopilot_params`], the base fit [`crate::verdict::target_model`]), the current values saved
+/// first to `undo` (ArduPilot's `NAME,VALUE` or QGroundControl's tab-separated lines), each set, confirmed and read
+/// back; anything refused or unconfirmed sets back what was written and is an error naming the parameter.
+pub fn write_back_autopilot(
+    spec: &DeviceSpec,
+    cal: &Calibration,
+    undo: &Path,
+) -> Result<Vec<String>, WriteBackError> {
+    let device = spec.to_string();
+    let model = crate::verdict::target_model(cal);
+    let (mut conn, autopilot) = connect(spec)?;
+    let format = format_of(autopilot);
+    if let Some(why) = refusal(&model, format, &cal.units) {
+        return Err(WriteBackError::Unsendable { device, why });
+    }
+    let wanted = autopilot_params(&model, format, &cal.units);
+    let comments = [format!(
+        "{autopilot}'s values before magcal-fit wrote its calibration to {device}: load this file to undo it"
+    )];
+    let (back, previous) = set_with_undo(
+        &mut conn,
+        autopilot,
+        &device,
+        &wanted,
+        Some((undo, &comments)),
+    )?;
+    let mut lines = vec![format!(
+        "{device}: {autopilot} (by its heartbeat{}): set {} parameters, each confirmed by the autopilot and read back; \
+         the previous values are in {}",
+        if matches!(
+            spec,
+            DeviceSpec::Mavlink {
+                autopilot: Some(_),
+                ..
+            }
+        ) {
+            ", or as named"
+        } else {
+            ""
+        },
+        back.len(),
+        undo.display()
+    )];
+    for (b, p) in back.iter().zip(&previous) {
+        lines.push(format!("  {:<16} {:>14} (was {})", b.name, b.wire, p.wire));
+    }
+    for w in warnings(&model, format, &cal.units) {
+        lines.push(format!("  WARNING: {w}"));
+    }
+    let corrections = cal.model().corrections().count();
+    if corrections > 0 {
+        lines.push(format!(
+            "  the model's {corrections} body-fixed correction(s) are not among these parameters: it got A and b \
+             fitted without them; the parameters file keeps them"
+        ));
+    }
+    Ok(lines)
+}
+
+/// Loads a parameter file (an undo file [`write_back_autopilot`] wrote, or any ArduPilot `.param` / QGroundControl
+/// `.params`) into the flight controller `spec` names, as the write-back does: every parameter confirmed and read
+/// back, or what was written set back. Returns lines saying what was done.
+pub fn load_param_file(spec: &DeviceSpec, path: &Path) -> Result<Vec<String>, WriteBackError> {
+    let device = spec.to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| WriteBackError::Device {
+        device: device.clone(),
+        error: format!("reading {}: {e}", path.display()),
+    })?;
+    let wanted = parse_param_file(&text).map_err(|why| WriteBackError::Unsendable {
+        device: device.clone(),
+        why: format!("{}: {why}", path.display()),
+    })?;
+    let (mut conn, autopilot) = connect(spec)?;
+    let (back, _) = set_with_undo(&mut conn, autopilot, &device, &wanted, None)?;
+    Ok(vec![format!(
+        "{device}: {autopilot}: loaded {} parameters from {}, each confirmed and read back",
+        back.len(),
+        path.display()
+    )])
 }

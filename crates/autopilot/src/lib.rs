@@ -1,7 +1,15 @@
 //! Flight controllers over MAVLink, on the `mavlink` crate: what they send a calibration needs, in physical units
-//! ([`mod@telemetry`]). The device for `magcal-record`, the bench motor routine and the write-back of parameters are
-//! not built yet (docs/flight-logs.md, "Not done").
+//! ([`mod@telemetry`]); a connection over any byte port that finds the autopilot by its heartbeat ([`link`]); the
+//! parameter protocol, a write-back that leaves the autopilot's previous values when it fails, and `.param` files
+//! ([`params`]). The device for `magcal-record` and the bench motor routine are not built yet (docs/autopilot.md,
+//! "Not done").
 
+pub mod link;
+pub mod params;
 pub mod telemetry;
 
+pub use link::{Autopilot, Connection, FrameBuffer, LinkError, MemoryPort, duplex};
+pub use params::{
+    ParamError, ParamValue, WriteFailure, param_file, parse_param_file, read_all, write_all,
+};
 pub use telemetry::{ReadError, Telemetry, read_stream, telemetry};

@@ -14,6 +14,9 @@
 //!
 //! Faults ([`Fault`]): NACKs, a dropped bus, ignored writes, stuck outputs, and a magnet that saturates the chip.
 //!
+//! [`autopilot`] is an ArduPilot or PX4 flight controller over MAVLink on the same bench: its calibration applied to
+//! the compass it streams, its parameters read and set.
+//!
 //! [`firmware`] holds the same idea for serial boards: firmware that streams MotionCal `Raw:` lines from a bench and
 //! takes calibration packets.
 //!
@@ -42,6 +45,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod autopilot;
 mod bus;
 pub mod clock;
 pub mod fault;

@@ -329,7 +329,14 @@ impl Bench {
     /// Sets up the bench; refuses effects that need a current channel (the bench has none) or a temperature
     /// effect without a temperature profile.
     pub fn new(config: BenchConfig) -> Result<Bench, SimError> {
-        check_channels(&config.effects, config.temperature.is_some(), 0)?;
+        Bench::with_currents(config, 0)
+    }
+
+    /// Sets up the bench with `channels` current channels, whose values each sample is given
+    /// ([`sample_with_currents`](Self::sample_with_currents)): a twin that knows its own currents (an autopilot's
+    /// battery monitor); refuses effects on other channels, or a temperature effect without a temperature profile.
+    pub fn with_currents(config: BenchConfig, channels: usize) -> Result<Bench, SimError> {
+        check_channels(&config.effects, config.temperature.is_some(), channels)?;
         Ok(Bench {
             forward: Box::new(config.sensor.forward()),
             noise_rng: stream_rng(config.seed, 3),
@@ -365,6 +372,12 @@ impl Bench {
 
     /// Everything at `t_s`, with fresh noise. Times should not decrease (the hand only moves forwards).
     pub fn sample(&mut self, t_s: f64) -> BenchSample {
+        self.sample_with_currents(t_s, &[])
+    }
+
+    /// [`sample`](Self::sample) with the current channels at `currents_a` (A): the effects on them act through the
+    /// same function as the batch simulator's; give one value per channel the effects use.
+    pub fn sample_with_currents(&mut self, t_s: f64, currents_a: &[f64]) -> BenchSample {
         let pose = self.hand.pose(t_s);
         let temp_c = self.temperature_c(pose.t_s);
         let clean = clean_reading(
@@ -373,7 +386,7 @@ impl Bench {
             &self.forward,
             &against_true_north(&pose, self.config.reference_heading_deg),
             temp_c,
-            &[],
+            currents_a,
         );
         let raw_ut = std::array::from_fn(|k| {
             let g: f64 = StandardNormal.sample(&mut self.noise_rng);

@@ -1,0 +1,624 @@
+//! A simulated autopilot: ArduPilot or PX4 as a ground station sees it over MAVLink 2, on any byte port (a
+//! pseudo-terminal's master for the tools, a [`magcal_autopilot::MemoryPort`] in unit tests).
+//!
+//! Its compass is the simulator's [`Bench`]: a sensor with hard and soft iron ([`BenchConfig::sensor`]) and any
+//! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`]), a time
+//! lag — computed by the same function the fitter's regressors use. Like the real firmware it applies its own
+//! calibration to what it sends, with its parameters as they are at that moment:
+//!
+//! - ArduPilot: `RAW_IMU` (compass in mGauss) = `M·(raw + COMPASS_OFS) + COMPASS_MOT·I` (the last with
+//!   `COMPASS_MOTCT` = 2), `M` from `COMPASS_DIA_*` and `COMPASS_ODI_*`;
+//! - PX4: `HIGHRES_IMU` (gauss) = `S·(raw + I/1000·CAL_MAG0_*COMP − CAL_MAG0_*OFF)` (the current term with
+//!   `CAL_MAG_COMP_TYP` = 2), `S` from `CAL_MAG0_*SCALE` and `*ODIAG`;
+//!
+//! and `ATTITUDE_QUATERNION` (the bench's attitude), `BATTERY_STATUS` (the current, cA) and a `HEARTBEAT` each
+//! second, all in bench time paced against the wall clock.
+//!
+//! Its parameters answer `PARAM_REQUEST_READ` (by name or index) and `PARAM_REQUEST_LIST` with `PARAM_VALUE`, and
+//! `PARAM_SET` with `PARAM_VALUE` holding the new value — or, for a value outside the parameter's range (or not a
+//! number), its old value, which is how a ground station sees a refusal. A name it does not have gets no answer,
+//! as ArduPilot and PX4 give none. The ranges are the twin's own (wide enough for any sensor the simulator draws);
+//! a test narrows one ([`TwinConfig::ranges`]) to be refused.
+
+use std::io::{ErrorKind, Read, Write};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use magcal_autopilot::link::FrameBuffer;
+use magcal_autopilot::params::{from_wire, param_id, param_name, to_wire};
+use magcal_autopilot::{Autopilot, ParamValue};
+use magcal_sim::SimError;
+use magcal_sim::bench::{Bench, BenchConfig};
+use mavlink::MavHeader;
+use mavlink::dialects::common::{
+    ATTITUDE_QUATERNION_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, HIGHRES_IMU_DATA,
+    HighresImuUpdatedFlags, MavMessage, MavModeFlag, MavParamType, MavState, MavType,
+    PARAM_VALUE_DATA, RAW_IMU_DATA,
+};
+
+/// The battery current over bench time: a raised cosine between `idle_a` and `peak_a` with period `period_s` (a
+/// hand raising and lowering the throttle), or constant when `period_s` is not positive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CurrentProfile {
+    /// The lowest current, A.
+    pub idle_a: f64,
+    /// The highest current, A.
+    pub peak_a: f64,
+    /// The period of one rise and fall, s.
+    pub period_s: f64,
+}
+
+impl CurrentProfile {
+    /// The current at `t_s`, A.
+    pub fn at(&self, t_s: f64) -> f64 {
+        if self.period_s <= 0.0 {
+            return self.idle_a;
+        }
+        let phase = std::f64::consts::TAU * t_s / self.period_s;
+        self.idle_a + (self.peak_a - self.idle_a) * (1.0 - phase.cos()) / 2.0
+    }
+}
+
+/// What the twin is.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TwinConfig {
+    /// ArduPilot or PX4.
+    pub autopilot: Autopilot,
+    /// The bench its compass sits on; a `CurrentBias` on channel 0 follows [`current`](Self::current).
+    pub bench: BenchConfig,
+    /// The battery current; `None`: 0 A and no `BATTERY_STATUS`.
+    pub current: Option<CurrentProfile>,
+    /// Compass, attitude and battery messages per second of bench time, Hz.
+    pub rate_hz: f64,
+    /// Bench seconds per wall second (the port is a pseudo-terminal or memory, so faster than real time is fine).
+    pub speed: f64,
+    /// Whether it streams telemetry (otherwise only heartbeats and parameters).
+    pub stream: bool,
+    /// Parameter values other than the defaults, by name.
+    pub values: Vec<(String, f64)>,
+    /// Parameter ranges other than the defaults, by name: (min, max).
+    pub ranges: Vec<(String, f64, f64)>,
+}
+
+impl TwinConfig {
+    /// `autopilot` on `bench`, no current, streaming at 50 Hz, 10 times faster than real time, its calibration
+    /// parameters at their defaults (no correction).
+    pub fn new(autopilot: Autopilot, bench: BenchConfig) -> TwinConfig {
+        TwinConfig {
+            autopilot,
+            bench,
+            current: None,
+            rate_hz: 50.0,
+            speed: 10.0,
+            stream: true,
+            values: Vec::new(),
+            ranges: Vec::new(),
+        }
+    }
+}
+
+/// A twin that cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum TwinError {
+    /// The bench's effects need what it does not have.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// A value or range was given for a parameter it does not have.
+    #[error("the {autopilot} twin has no parameter {name}")]
+    NoParam {
+        /// The autopilot.
+        autopilot: Autopilot,
+        /// The name given.
+        name: String,
+    },
+}
+
+/// One parameter the twin holds.
+#[derive(Clone, Debug, PartialEq)]
+struct Param {
+    name: String,
+    value: f64,
+    kind: MavParamType,
+    min: f64,
+    max: f64,
+}
+
+const REAL: MavParamType = MavParamType::MAV_PARAM_TYPE_REAL32;
+
+/// The parameters of `autopilot`, at their defaults, with the twin's ranges.
+fn default_params(autopilot: Autopilot) -> Vec<Param> {
+    let p = |name: &str, value: f64, kind, min: f64, max: f64| Param {
+        name: name.to_owned(),
+        value,
+        kind,
+        min,
+        max,
+    };
+    let mut out = Vec::new();
+    match autopilot {
+        Autopilot::ArduPilot => {
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("COMPASS_OFS_{a}"), 0.0, REAL, -4000.0, 4000.0));
+            }
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("COMPASS_DIA_{a}"), 1.0, REAL, 0.2, 5.0));
+            }
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("COMPASS_ODI_{a}"), 0.0, REAL, -1.0, 1.0));
+            }
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("COMPASS_MOT_{a}"), 0.0, REAL, -1000.0, 1000.0));
+            }
+            out.push(p(
+                "COMPASS_MOTCT",
+                0.0,
+                MavParamType::MAV_PARAM_TYPE_INT8,
+                0.0,
+                3.0,
+            ));
+            out.push(p(
+                "COMPASS_USE",
+                1.0,
+                MavParamType::MAV_PARAM_TYPE_INT8,
+                0.0,
+                1.0,
+            ));
+            out.push(p(
+                "SYSID_THISMAV",
+                1.0,
+                MavParamType::MAV_PARAM_TYPE_INT16,
+                1.0,
+                255.0,
+            ));
+        }
+        Autopilot::Px4 => {
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("CAL_MAG0_{a}OFF"), 0.0, REAL, -40.0, 40.0));
+            }
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("CAL_MAG0_{a}SCALE"), 1.0, REAL, 0.2, 5.0));
+            }
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("CAL_MAG0_{a}ODIAG"), 0.0, REAL, -1.0, 1.0));
+            }
+            for a in ["X", "Y", "Z"] {
+                out.push(p(&format!("CAL_MAG0_{a}COMP"), 0.0, REAL, -1000.0, 1000.0));
+            }
+            out.push(p(
+                "CAL_MAG_COMP_TYP",
+                0.0,
+                MavParamType::MAV_PARAM_TYPE_INT32,
+                0.0,
+                3.0,
+            ));
+            out.push(p(
+                "CAL_MAG0_ID",
+                396809.0,
+                MavParamType::MAV_PARAM_TYPE_INT32,
+                0.0,
+                1e9,
+            ));
+            out.push(p(
+                "MAV_SYS_ID",
+                1.0,
+                MavParamType::MAV_PARAM_TYPE_INT32,
+                1.0,
+                250.0,
+            ));
+        }
+    }
+    out
+}
+
+/// What one compass message carried, for a test to compare with what a tool saw.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sent {
+    /// Bench time, s.
+    pub t_s: f64,
+    /// The sensor's raw reading (with noise), µT: what a tool must get back by undoing the autopilot's calibration.
+    pub raw_ut: [f64; 3],
+    /// The field sent, µT (after the autopilot's calibration, before the message's rounding).
+    pub sent_ut: [f64; 3],
+    /// The attitude, sensor (body) → NED, `[w, x, y, z]`.
+    pub quat: [f64; 4],
+    /// The battery current, A.
+    pub current_a: f64,
+}
+
+/// What the twin did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TwinReport {
+    /// Every compass message sent.
+    pub sent: Vec<Sent>,
+    /// `PARAM_SET`s taken.
+    pub sets_taken: u32,
+    /// `PARAM_SET`s refused (answered with the old value).
+    pub sets_refused: u32,
+    /// `PARAM_SET`s and reads of a name it does not have (not answered).
+    pub unknown_names: Vec<String>,
+    /// Its parameters at the end, by name.
+    pub params: Vec<(String, f64)>,
+    /// Frames the port could not take (nobody read the other side), dropped.
+    pub frames_dropped: u64,
+    /// Why it stopped.
+    pub stopped: String,
+}
+
+impl TwinReport {
+    /// A parameter's value at the end.
+    pub fn param(&self, name: &str) -> Option<f64> {
+        self.params.iter().find(|(n, _)| n == name).map(|p| p.1)
+    }
+}
+
+/// The twin; see the [module docs](self).
+pub struct AutopilotTwin<P> {
+    port: P,
+    config: TwinConfig,
+    bench: Bench,
+    params: Vec<Param>,
+    frames: FrameBuffer,
+    sequence: u8,
+    report: TwinReport,
+    alive: bool,
+}
+
+/// The twin's own ids: system 1, component 1 (the autopilot).
+const SYSTEM: u32 = 1;
+const COMPONENT: u8 = 1;
+/// How long a frame may wait for the port before it is dropped.
+const SEND_TIMEOUT: Duration = Duration::from_millis(20);
+
+impl<P: Read + Write> AutopilotTwin<P> {
+    /// The twin on `port` (reads should not block long: a non-blocking pseudo-terminal master, or a
+    /// [`magcal_autopilot::MemoryPort`] with a short timeout). Refuses a bench whose effects need channels other
+    /// than the battery current, and parameter values or ranges of names it does not have.
+    pub fn new(port: P, config: TwinConfig) -> Result<AutopilotTwin<P>, TwinError> {
+        let mut bench = Bench::with_currents(config.bench.clone(), 1)?;
+        bench.hand_mut().tumble(0.0, 1.0);
+        let mut params = default_params(config.autopilot);
+        for (name, value) in &config.values {
+            let p =
+                params
+                    .iter_mut()
+                    .find(|p| &p.name == name)
+                    .ok_or_else(|| TwinError::NoParam {
+                        autopilot: config.autopilot,
+                        name: name.clone(),
+                    })?;
+            p.value = *value;
+        }
+        for (name, min, max) in &config.ranges {
+            let p =
+                params
+                    .iter_mut()
+                    .find(|p| &p.name == name)
+                    .ok_or_else(|| TwinError::NoParam {
+                        autopilot: config.autopilot,
+                        name: name.clone(),
+                    })?;
+            (p.min, p.max) = (*min, *max);
+        }
+        Ok(AutopilotTwin {
+            port,
+            config,
+            bench,
+            params,
+            frames: FrameBuffer::new(),
+            sequence: 0,
+            report: TwinReport::default(),
+            alive: true,
+        })
+    }
+
+    /// A parameter's value now.
+    fn value(&self, name: &str) -> f64 {
+        self.params
+            .iter()
+            .find(|p| p.name == name)
+            .map_or(0.0, |p| p.value)
+    }
+
+    /// Runs until `stop()` says so or the other side is gone; returns what it did.
+    pub fn run(mut self, stop: impl Fn() -> bool) -> TwinReport {
+        let start = Instant::now();
+        let dt = 1.0 / self.config.rate_hz;
+        let mut t_s = 0.0;
+        let mut next_heartbeat_s = 0.0;
+        self.report.stopped = loop {
+            if !self.alive {
+                break "the other side went away".to_owned();
+            }
+            if stop() {
+                break "told to stop".to_owned();
+            }
+            let due = Duration::from_secs_f64(t_s / self.config.speed);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                thread::sleep(wait);
+            }
+            self.receive();
+            if t_s >= next_heartbeat_s {
+                self.heartbeat();
+                next_heartbeat_s += 1.0;
+            }
+            if self.config.stream {
+                self.telemetry(t_s);
+            }
+            t_s += dt;
+        };
+        self.report.params = self
+            .params
+            .iter()
+            .map(|p| (p.name.clone(), p.value))
+            .collect();
+        self.report
+    }
+
+    fn send(&mut self, msg: &MavMessage) {
+        let header = MavHeader {
+            system_id: SYSTEM,
+            component_id: COMPONENT,
+            sequence: self.sequence,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        let mut bytes = Vec::with_capacity(64);
+        mavlink::write_v2_msg(&mut bytes, header, msg).expect("writing to a Vec");
+        let mut at = 0;
+        let deadline = Instant::now() + SEND_TIMEOUT;
+        while at < bytes.len() {
+            match self.port.write(&bytes[at..]) {
+                Ok(0) => {
+                    self.alive = false;
+                    return;
+                }
+                Ok(n) => at += n,
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
+                    if Instant::now() >= deadline {
+                        self.report.frames_dropped += 1;
+                        return;
+                    }
+                    thread::sleep(Duration::from_millis(1));
+                }
+                Err(_) => {
+                    self.alive = false;
+                    return;
+                }
+            }
+        }
+        let _ = self.port.flush();
+    }
+
+    fn heartbeat(&mut self) {
+        let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: self.config.autopilot.field(),
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        });
+        self.send(&msg);
+    }
+
+    /// The compass, attitude and battery messages at `t_s`.
+    fn telemetry(&mut self, t_s: f64) {
+        let current_a = self.config.current.map_or(0.0, |c| c.at(t_s));
+        let s = self.bench.sample_with_currents(t_s, &[current_a]);
+        let v = |n: &str| self.value(n);
+        let time_usec = (t_s * 1e6) as u64;
+        let (msg, sent_ut) = match self.config.autopilot {
+            Autopilot::ArduPilot => {
+                let raw = s.raw_ut.map(|x| x * 10.0);
+                let ofs = [v("COMPASS_OFS_X"), v("COMPASS_OFS_Y"), v("COMPASS_OFS_Z")];
+                let (d, o) = (
+                    [v("COMPASS_DIA_X"), v("COMPASS_DIA_Y"), v("COMPASS_DIA_Z")],
+                    [v("COMPASS_ODI_X"), v("COMPASS_ODI_Y"), v("COMPASS_ODI_Z")],
+                );
+                let m = [[d[0], o[0], o[1]], [o[0], d[1], o[2]], [o[1], o[2], d[2]]];
+                let x: [f64; 3] = std::array::from_fn(|k| raw[k] + ofs[k]);
+                let motct = v("COMPASS_MOTCT").round() as i64;
+                let mot = [v("COMPASS_MOT_X"), v("COMPASS_MOT_Y"), v("COMPASS_MOT_Z")];
+                let mg: [f64; 3] = std::array::from_fn(|j| {
+                    (0..3).map(|k| m[j][k] * x[k]).sum::<f64>()
+                        + if motct == 2 { mot[j] * current_a } else { 0.0 }
+                });
+                let [xmag, ymag, zmag] =
+                    mg.map(|f| f.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16);
+                let centi = (s.temp_c * 100.0).round() as i16;
+                (
+                    MavMessage::RAW_IMU(RAW_IMU_DATA {
+                        time_usec,
+                        xmag,
+                        ymag,
+                        zmag,
+                        id: 0,
+                        temperature: if centi == 0 { 1 } else { centi },
+                        ..RAW_IMU_DATA::default()
+                    }),
+                    mg.map(|f| f / 10.0),
+                )
+            }
+            Autopilot::Px4 => {
+                let raw = s.raw_ut.map(|x| x / 100.0);
+                let off = [v("CAL_MAG0_XOFF"), v("CAL_MAG0_YOFF"), v("CAL_MAG0_ZOFF")];
+                let (d, o) = (
+                    [
+                        v("CAL_MAG0_XSCALE"),
+                        v("CAL_MAG0_YSCALE"),
+                        v("CAL_MAG0_ZSCALE"),
+                    ],
+                    [
+                        v("CAL_MAG0_XODIAG"),
+                        v("CAL_MAG0_YODIAG"),
+                        v("CAL_MAG0_ZODIAG"),
+                    ],
+                );
+                let m = [[d[0], o[0], o[1]], [o[0], d[1], o[2]], [o[1], o[2], d[2]]];
+                let comp_typ = v("CAL_MAG_COMP_TYP").round() as i64;
+                let comp = [
+                    v("CAL_MAG0_XCOMP"),
+                    v("CAL_MAG0_YCOMP"),
+                    v("CAL_MAG0_ZCOMP"),
+                ];
+                let power = if comp_typ == 2 {
+                    current_a / 1000.0
+                } else {
+                    0.0
+                };
+                let x: [f64; 3] = std::array::from_fn(|k| raw[k] + power * comp[k] - off[k]);
+                let g: [f64; 3] = std::array::from_fn(|j| (0..3).map(|k| m[j][k] * x[k]).sum());
+                (
+                    MavMessage::HIGHRES_IMU(HIGHRES_IMU_DATA {
+                        time_usec,
+                        xmag: g[0] as f32,
+                        ymag: g[1] as f32,
+                        zmag: g[2] as f32,
+                        temperature: s.temp_c as f32,
+                        fields_updated: HighresImuUpdatedFlags::from_bits_truncate(0x1c0 | 0x1000),
+                        id: 0,
+                        ..HIGHRES_IMU_DATA::default()
+                    }),
+                    g.map(|f| f * 100.0),
+                )
+            }
+        };
+        self.send(&msg);
+        let [w, x, y, z] = s.quat.map(|q| q as f32);
+        self.send(&MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+            time_boot_ms: (t_s * 1000.0) as u32,
+            q1: w,
+            q2: x,
+            q3: y,
+            q4: z,
+            ..ATTITUDE_QUATERNION_DATA::default()
+        }));
+        if self.config.current.is_some() {
+            self.send(&MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
+                current_battery: (current_a * 100.0).round() as i16,
+                id: 0,
+                ..BATTERY_STATUS_DATA::default()
+            }));
+        }
+        self.report.sent.push(Sent {
+            t_s,
+            raw_ut: s.raw_ut,
+            sent_ut,
+            quat: s.quat,
+            current_a,
+        });
+    }
+
+    /// Takes what arrived and answers the parameter requests among it.
+    fn receive(&mut self) {
+        let mut buf = [0u8; 512];
+        loop {
+            match self.port.read(&mut buf) {
+                Ok(0) => {
+                    self.alive = false;
+                    break;
+                }
+                Ok(n) => self.frames.push(&buf[..n]),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                    ) =>
+                {
+                    break;
+                }
+                Err(_) => {
+                    self.alive = false;
+                    break;
+                }
+            }
+        }
+        while let Some((_, msg)) = self.frames.next_message() {
+            self.handle(&msg);
+        }
+    }
+
+    fn param_value(&self, index: usize) -> MavMessage {
+        let p = &self.params[index];
+        MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+            param_value: to_wire(self.config.autopilot, p.kind, p.value),
+            param_count: self.params.len() as u16,
+            param_index: index as u16,
+            param_id: param_id(&p.name).into(),
+            param_type: p.kind,
+        })
+    }
+
+    fn index_of(&self, name: &str) -> Option<usize> {
+        self.params.iter().position(|p| p.name == name)
+    }
+
+    fn handle(&mut self, msg: &MavMessage) {
+        match msg {
+            MavMessage::PARAM_REQUEST_LIST(_) => {
+                for i in 0..self.params.len() {
+                    let m = self.param_value(i);
+                    self.send(&m);
+                }
+            }
+            MavMessage::PARAM_REQUEST_READ(r) => {
+                let index = if r.param_index >= 0 {
+                    Some(r.param_index as usize).filter(|i| *i < self.params.len())
+                } else {
+                    let name = param_name(&r.param_id[..]);
+                    let found = self.index_of(&name);
+                    if found.is_none() {
+                        self.report.unknown_names.push(name);
+                    }
+                    found
+                };
+                if let Some(i) = index {
+                    let m = self.param_value(i);
+                    self.send(&m);
+                }
+            }
+            MavMessage::PARAM_SET(set) => {
+                let name = param_name(&set.param_id[..]);
+                let Some(i) = self.index_of(&name) else {
+                    self.report.unknown_names.push(name);
+                    return;
+                };
+                let p = &mut self.params[i];
+                let value = from_wire(self.config.autopilot, p.kind, set.param_value);
+                if value.is_finite() && (p.min..=p.max).contains(&value) {
+                    p.value = if p.kind == REAL {
+                        f64::from(value as f32)
+                    } else {
+                        value
+                    };
+                    self.report.sets_taken += 1;
+                } else {
+                    self.report.sets_refused += 1;
+                }
+                let m = self.param_value(i);
+                self.send(&m);
+            }
+            _ => {}
+        }
+    }
+}
+
+/// The parameters a twin holds, as [`ParamValue`]s (for comparing with what a tool read).
+pub fn values_of(report: &TwinReport, autopilot: Autopilot) -> Vec<ParamValue> {
+    let defaults = default_params(autopilot);
+    report
+        .params
+        .iter()
+        .enumerate()
+        .map(|(i, (name, value))| {
+            let kind = defaults[i].kind;
+            ParamValue {
+                name: name.clone(),
+                value: *value,
+                wire: to_wire(autopilot, kind, *value),
+                kind,
+                index: i as u16,
+                count: report.params.len() as u16,
+            }
+        })
+        .collect()
+}
