@@ -311,6 +311,7 @@ fn heading_claims_are_calibrated_on_caps_bands_and_the_sphere() {
          |---|---|---|---|---|---|\n",
     );
     let mut failures = Vec::new();
+    let started = std::time::Instant::now();
     let pct = |(one, two): (f64, f64)| format!("{:.0} %, {:.1} %", 100.0 * one, 100.0 * two);
     for region in [Region::Cap(70.0), Region::Band(25.0), Region::Sphere] {
         for method in [Method::Vector, Method::Scalar] {
@@ -324,6 +325,11 @@ fn heading_claims_are_calibrated_on_caps_bands_and_the_sphere() {
                 pct(r.each),
                 pct(r.rms),
                 pct(r.worst)
+            );
+            eprintln!(
+                "{:.0} s: {}",
+                started.elapsed().as_secs_f64(),
+                table.lines().last().unwrap_or_default()
             );
             if r.fitted < FITS {
                 failures.push(format!(
