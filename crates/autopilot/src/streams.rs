@@ -12,7 +12,8 @@ use mavlink::dialects::common::{
     ATTITUDE_QUATERNION_DATA, BATTERY_STATUS_DATA, COMMAND_LONG_DATA, HIGHRES_IMU_DATA, MavCmd,
     MavMessage, MavResult, RAW_IMU_DATA,
 };
-#[allow(deprecated)] // superseded by SET_MESSAGE_INTERVAL, still what ArduPilot's stream groups answer
+#[allow(deprecated)]
+// superseded by SET_MESSAGE_INTERVAL, still what ArduPilot's stream groups answer
 use mavlink::dialects::common::{MavDataStream, REQUEST_DATA_STREAM_DATA};
 
 use crate::link::{Autopilot, Connection, LinkError};
@@ -89,7 +90,9 @@ impl<P: Read + Write> Connection<P> {
                 break;
             };
             match &msg {
-                MavMessage::COMMAND_ACK(ack) if ack.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
+                MavMessage::COMMAND_ACK(ack)
+                    if ack.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL =>
+                {
                     answers[got].result = Some(ack.result);
                     got += 1;
                 }

@@ -550,11 +550,11 @@ impl<P: Read + Write> AutopilotTwin<P> {
         let [w, x, y, z] = s.quat.map(|q| q as f32);
         if due[ATTITUDE] {
             self.send(&MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
-            time_boot_ms: (t_s * 1000.0) as u32,
-            q1: w,
-            q2: x,
-            q3: y,
-            q4: z,
+                time_boot_ms: (t_s * 1000.0) as u32,
+                q1: w,
+                q2: x,
+                q3: y,
+                q4: z,
                 ..ATTITUDE_QUATERNION_DATA::default()
             }));
         }
