@@ -17,7 +17,7 @@ use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
 use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
-use magcal_autopilot::{Autopilot, Connection, parse_param_file, read_all};
+use magcal_autopilot::{Autopilot, Connection, Telemetry, parse_param_file, read_all, telemetry};
 use magcal_calib::Effect;
 use magcal_driver::ChipKind;
 use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig, TwinReport};
@@ -68,6 +68,25 @@ impl Twin {
             .into_iter()
             .map(|p| (p.name, p.value))
             .collect()
+    }
+
+    /// Listens to the twin for `wall` (so it never waits on a full port) and returns the bench time of the first
+    /// compass message heard: every compass message from then on was sent after now.
+    fn listen(&self, wall: Duration) -> f64 {
+        let port = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&self.path)
+            .unwrap();
+        let mut conn = Connection::new(port, &self.path);
+        let deadline = std::time::Instant::now() + wall;
+        let mut first = None;
+        while let Some((_, msg)) = conn.next_message(deadline).unwrap() {
+            if let Some(Telemetry::Mag { t_s, .. }) = telemetry(&msg) {
+                first.get_or_insert(t_s);
+            }
+        }
+        first.expect("compass messages after the write-back")
     }
 
     fn finish(self) -> TwinReport {
@@ -275,12 +294,11 @@ fn each_autopilot_is_recorded_fitted_written_and_read_back_and_the_fit_recovers_
                 "{autopilot} {name}: holds {h}, exported {value}"
             );
         }
-        // The twin, with the fit written, sends a field of the true magnitude (the last 5 s of bench time, after
-        // the write-back; the autopilots' symmetric matrices hold no rotation, so the sensor's mounting
+        // The twin, with the fit written, sends a field of the true magnitude (what it sent after the write-back and
+        // the read-back, 5 s of bench time or more; the autopilots' symmetric matrices hold no rotation, so the sensor's mounting
         // misalignment of up to 3° stays, and the direction is not compared), where before it was tens of µT off.
-        thread::sleep(Duration::from_secs_f64(6.0 / SPEED));
+        let after_s = twin.listen(Duration::from_secs_f64(6.0 / SPEED));
         let report = twin.finish();
-        let end = report.sent.last().unwrap().t_s;
         let magnitude_rms = |from: f64, to: f64| {
             let errors: Vec<f64> = report
                 .sent
@@ -296,7 +314,7 @@ fn each_autopilot_is_recorded_fitted_written_and_read_back_and_the_fit_recovers_
         let first = report.sent[0].t_s;
         let (was, now) = (
             magnitude_rms(first, first + 5.0),
-            magnitude_rms(end - 5.0, end + 1.0),
+            magnitude_rms(after_s, f64::INFINITY),
         );
         let noise = TruthFile::of(ChipKind::Lis3mdl, seed).noise_ut;
         let noise_rms = (noise.iter().map(|s| s * s).sum::<f64>() / 3.0).sqrt();
