@@ -22,6 +22,12 @@ use magcal_app::{sayln, tellln};
 ///                                   the routine
 ///   i2c:/dev/i2c-N:CHIP[@ADDR]      a chip on a Linux I2C bus, e.g. i2c:/dev/i2c-1:lis3mdl@0x1c
 ///   serial:PATH[:BAUD][:FORMAT]     a board streaming lines, 115200 baud unless given, e.g. serial:/dev/ttyACM0
+///   mavlink:PATH[:BAUD][:ardupilot|px4]
+///                                   a flight controller over MAVLink (115200 baud unless given; which autopilot
+///                                   from its heartbeat unless named): its compass with the autopilot's own
+///                                   calibration undone (the raw field, µT), its attitude, battery current
+///                                   (i_battery) and IMU temperature, at --rate asked (the rate got is in the
+///                                   metadata)
 ///   CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma.
 ///
 /// SERIAL FORMATS (the FORMAT of serial:PATH[:BAUD][:FORMAT]):
@@ -73,7 +79,8 @@ use magcal_app::{sayln, tellln};
 #[derive(Parser, Debug)]
 #[command(version, verbatim_doc_comment)]
 struct Args {
-    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT] (see above).
+    /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT] |
+    /// mavlink:PATH[:BAUD][:ardupilot|px4] (see above).
     #[arg(long, default_value = "sim", value_name = "DEV")]
     device: String,
     /// The routine.
@@ -241,6 +248,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         tellln!("{note}");
     }
     let mut source = device::open(&spec, &open)?;
+    // What the device asked for, got and undid (a flight controller's streams and calibration), as written to the
+    // recording's metadata.
+    for (key, value) in source.metadata() {
+        tellln!("{spec}: {key}: {value}");
+    }
     // Said only of a rate asked for: without --rate, the chip's nearest to the default is no news.
     if let (Some(asked), Some(rate_hz)) = (args.rate, source.rate_hz())
         && (rate_hz - asked).abs() > 0.01 * asked

@@ -8,8 +8,10 @@
 //!   default), native CSV, the Adafruit Unified Sensor examples' `X: … Y: … Z: … uT`, three numbers `x,y,z`, or any
 //!   line a `pattern=REGEX` with named groups `mx`, `my`, `mz` reads (see [`magcal_driver::serial`]).
 //! - `mavlink:PATH[:BAUD][:ardupilot|px4]`: a flight controller speaking MAVLink on a serial port (default 115200
-//!   baud); which autopilot it is comes from its heartbeat unless named. Only `magcal-fit --write-to` takes it so far
-//!   (its parameters, [`crate::writeback::write_back_autopilot`]); recording from it is not built.
+//!   baud); which autopilot it is comes from its heartbeat unless named. `magcal-record` records its compass with
+//!   the autopilot's calibration undone, its attitude, battery current and IMU temperature
+//!   ([`crate::source::mavlink`]); `magcal-fit --write-to` sets its calibration parameters
+//!   ([`crate::writeback::write_back_autopilot`]).
 
 use std::fmt;
 use std::str::FromStr;
@@ -22,6 +24,7 @@ pub use magcal_mockhw::Fault;
 
 use crate::cli::number;
 use crate::source::clock::WallClock;
+use crate::source::mavlink::MavlinkSource;
 use crate::source::{ChipSource, LineSource, Source, SourceError};
 
 /// Chip of `sim` without one.
@@ -30,7 +33,7 @@ pub const DEFAULT_SIM_CHIP: ChipKind = ChipKind::Lis3mdl;
 /// The device syntax, for `--help` texts.
 pub const DEVICE_HELP: &str = "sim[:CHIP] (a simulated chip, the default) | i2c:/dev/i2c-N:CHIP[@ADDR] (Linux I2C) | \
 serial:PATH[:BAUD][:FORMAT][:unit=UNIT][:scale=K] (a streaming board; FORMAT motioncal, csv, adafruit, xyz or \
-pattern=REGEX) | mavlink:PATH[:BAUD][:ardupilot|px4] (a flight controller, for --write-to); CHIP is lis3mdl, \
+pattern=REGEX) | mavlink:PATH[:BAUD][:ardupilot|px4] (a flight controller over MAVLink); CHIP is lis3mdl, \
 lis2mdl, qmc5883l, hmc5883l or mmc5983ma";
 
 /// The baud rate of `mavlink:PATH` without one: ArduPilot's default on its telemetry ports (USB takes any).
@@ -442,13 +445,28 @@ pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, So
             let idle = Duration::from_secs_f64(opts.idle_timeout_s);
             Ok(Box::new(LineSource::new(device, source, idle)))
         }
-        DeviceSpec::Mavlink { .. } => Err(SourceError::Open {
-            device,
-            error: "recording from a flight controller over MAVLink is not built yet (docs/autopilot.md, \"Not \
-                    done\"): record its flight log and fit the .ulg or .bin, or record the compass on the bench; \
-                    mavlink: devices take a write-back (magcal-fit --write-to)"
-                .to_owned(),
-        }),
+        DeviceSpec::Mavlink {
+            path,
+            baud,
+            autopilot,
+        } => {
+            let port = serialport::new(path, *baud)
+                .timeout(Duration::from_millis(20))
+                .open()
+                .map_err(|e| SourceError::Open {
+                    device: device.clone(),
+                    error: format!("cannot open serial port {path}: {e}"),
+                })?;
+            let idle = Duration::from_secs_f64(opts.idle_timeout_s);
+            Ok(Box::new(MavlinkSource::start(
+                device,
+                port,
+                path,
+                *autopilot,
+                opts.rate_hz,
+                idle,
+            )?))
+        }
     }
 }
 

@@ -1,11 +1,12 @@
 //! Flight controllers over MAVLink, on the `mavlink` crate: what they send a calibration needs, in physical units
 //! ([`mod@telemetry`]); a connection over any byte port that finds the autopilot by its heartbeat ([`link`]); the
 //! parameter protocol, a write-back that leaves the autopilot's previous values when it fails, and `.param` files
-//! ([`params`]). The device for `magcal-record` and the bench motor routine are not built yet (docs/autopilot.md,
-//! "Not done").
+//! ([`params`]); the requests for the streams a recording needs ([`streams`]). The bench motor routine is not built
+//! yet (docs/autopilot.md, "Not done").
 
 pub mod link;
 pub mod params;
+pub mod streams;
 pub mod telemetry;
 
 pub use link::{Autopilot, Connection, FrameBuffer, LinkError, MemoryPort, duplex};

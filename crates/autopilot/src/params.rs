@@ -147,6 +147,28 @@ impl<P: Read + Write> Connection<P> {
         })
     }
 
+    /// Reads the parameter `name` if the autopilot has it: one `PARAM_REQUEST_READ` by name, its answer waited for
+    /// [`ANSWER_TIMEOUT`]; `None` when none came (a parameter another firmware version lacks).
+    pub fn read_param_if_any(&mut self, name: &str) -> Result<Option<ParamValue>, ParamError> {
+        let (target_system, target_component, autopilot) = self.target_or_err()?;
+        self.send(&MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+            param_index: -1,
+            target_system,
+            target_component,
+            param_id: param_id(name).into(),
+        }))?;
+        let deadline = Instant::now() + ANSWER_TIMEOUT;
+        while let Some((header, msg)) = self.next_message(deadline)? {
+            if let MavMessage::PARAM_VALUE(v) = &msg
+                && param_name(&v.param_id[..]) == name
+            {
+                return Ok(Some(value_of(autopilot, v)));
+            }
+            self.keep((header, msg));
+        }
+        Ok(None)
+    }
+
     /// Reads the parameter `name` (`PARAM_REQUEST_READ` by name).
     pub fn read_param(&mut self, name: &str) -> Result<ParamValue, ParamError> {
         let (target_system, target_component, _) = self.target_or_err()?;

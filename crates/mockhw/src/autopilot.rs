@@ -14,6 +14,11 @@
 //! and `ATTITUDE_QUATERNION` (the bench's attitude), `BATTERY_STATUS` (the current, cA) and a `HEARTBEAT` each
 //! second, all in bench time paced against the wall clock.
 //!
+//! Its streams start at [`TwinConfig::rate_hz`], or, with [`TwinConfig::await_request`], only when a ground station
+//! asks: `SET_MESSAGE_INTERVAL` (`COMMAND_LONG`, answered by `COMMAND_ACK`) for any of the three messages, and for
+//! ArduPilot also `REQUEST_DATA_STREAM` (`RAW_SENSORS`: `RAW_IMU`; `EXTENDED_STATUS`: `BATTERY_STATUS`; as
+//! ArduPilot, `ATTITUDE_QUATERNION` is in no stream group). A rate above [`TwinConfig::rate_hz`] gets that rate.
+//!
 //! Its parameters answer `PARAM_REQUEST_READ` (by name or index) and `PARAM_REQUEST_LIST` with `PARAM_VALUE`, and
 //! `PARAM_SET` with `PARAM_VALUE` holding the new value — or, for a value outside the parameter's range (or not a
 //! number), its old value, which is how a ground station sees a refusal. A name it does not have gets no answer,
@@ -29,12 +34,24 @@ use magcal_autopilot::params::{from_wire, param_id, param_name, to_wire};
 use magcal_autopilot::{Autopilot, ParamValue};
 use magcal_sim::SimError;
 use magcal_sim::bench::{Bench, BenchConfig};
-use mavlink::MavHeader;
 use mavlink::dialects::common::{
-    ATTITUDE_QUATERNION_DATA, BATTERY_STATUS_DATA, HEARTBEAT_DATA, HIGHRES_IMU_DATA,
-    HighresImuUpdatedFlags, MavMessage, MavModeFlag, MavParamType, MavState, MavType,
-    PARAM_VALUE_DATA, RAW_IMU_DATA,
+    ATTITUDE_QUATERNION_DATA, BATTERY_STATUS_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
+    HEARTBEAT_DATA, HIGHRES_IMU_DATA, HighresImuUpdatedFlags, MavCmd, MavMessage, MavModeFlag,
+    MavParamType, MavResult, MavState, MavType, PARAM_VALUE_DATA, RAW_IMU_DATA,
 };
+// Deprecated by MAVLink (SET_MESSAGE_INTERVAL supersedes it), and still what ArduPilot's stream groups answer.
+#[allow(deprecated)]
+use mavlink::dialects::common::{MavDataStream, REQUEST_DATA_STREAM_DATA};
+use mavlink::{MavHeader, MessageData};
+
+/// A rate in words: whole hertz without decimals.
+fn fmt_hz(hz: f64) -> String {
+    if hz.fract() == 0.0 {
+        format!("{hz:.0}")
+    } else {
+        format!("{hz:.2}")
+    }
+}
 
 /// The battery current over bench time: a raised cosine between `idle_a` and `peak_a` with period `period_s` (a
 /// hand raising and lowering the throttle), or constant when `period_s` is not positive.
@@ -68,12 +85,16 @@ pub struct TwinConfig {
     pub bench: BenchConfig,
     /// The battery current; `None`: 0 A and no `BATTERY_STATUS`.
     pub current: Option<CurrentProfile>,
-    /// Compass, attitude and battery messages per second of bench time, Hz.
+    /// Compass, attitude and battery messages per second of bench time, Hz: the fastest it sends any of them (a
+    /// request for more gets this).
     pub rate_hz: f64,
     /// Bench seconds per wall second (the port is a pseudo-terminal or memory, so faster than real time is fine).
     pub speed: f64,
-    /// Whether it streams telemetry (otherwise only heartbeats and parameters).
+    /// Whether it streams telemetry (otherwise only heartbeats and parameters, whatever is asked).
     pub stream: bool,
+    /// Whether it waits for a ground station to ask for each stream (`REQUEST_DATA_STREAM`, ArduPilot only, or
+    /// `SET_MESSAGE_INTERVAL`) before it sends it; otherwise every stream starts at [`rate_hz`](Self::rate_hz).
+    pub await_request: bool,
     /// Parameter values other than the defaults, by name.
     pub values: Vec<(String, f64)>,
     /// Parameter ranges other than the defaults, by name: (min, max).
@@ -91,6 +112,7 @@ impl TwinConfig {
             rate_hz: 50.0,
             speed: 10.0,
             stream: true,
+            await_request: false,
             values: Vec::new(),
             ranges: Vec::new(),
         }
@@ -240,6 +262,8 @@ pub struct TwinReport {
     pub params: Vec<(String, f64)>,
     /// Frames the port could not take (nobody read the other side), dropped.
     pub frames_dropped: u64,
+    /// Stream requests taken, in words (`RAW_IMU at 50 Hz (asked 100 Hz)`).
+    pub requests: Vec<String>,
     /// Why it stopped.
     pub stopped: String,
 }
@@ -261,7 +285,18 @@ pub struct AutopilotTwin<P> {
     sequence: u8,
     report: TwinReport,
     alive: bool,
+    /// Each stream's rate, Hz (0: not sent), and when it is next due, bench s: the compass, the attitude, the
+    /// battery.
+    rates_hz: [f64; 3],
+    due_s: [f64; 3],
+    /// Bench time now, s.
+    now_s: f64,
 }
+
+/// The streams the twin sends, by index into its rates.
+const COMPASS: usize = 0;
+const ATTITUDE: usize = 1;
+const BATTERY: usize = 2;
 
 /// The twin's own ids: system 1, component 1 (the autopilot).
 const SYSTEM: u32 = 1;
@@ -299,6 +334,11 @@ impl<P: Read + Write> AutopilotTwin<P> {
                     })?;
             (p.min, p.max) = (*min, *max);
         }
+        let initial_hz = if config.await_request {
+            0.0
+        } else {
+            config.rate_hz
+        };
         Ok(AutopilotTwin {
             port,
             config,
@@ -306,6 +346,9 @@ impl<P: Read + Write> AutopilotTwin<P> {
             params,
             frames: FrameBuffer::new(),
             sequence: 0,
+            rates_hz: [initial_hz; 3],
+            due_s: [0.0; 3],
+            now_s: 0.0,
             report: TwinReport::default(),
             alive: true,
         })
@@ -336,6 +379,7 @@ impl<P: Read + Write> AutopilotTwin<P> {
             if let Some(wait) = due.checked_sub(start.elapsed()) {
                 thread::sleep(wait);
             }
+            self.now_s = t_s;
             self.receive();
             if t_s >= next_heartbeat_s {
                 self.heartbeat();
@@ -402,6 +446,17 @@ impl<P: Read + Write> AutopilotTwin<P> {
 
     /// The compass, attitude and battery messages at `t_s`.
     fn telemetry(&mut self, t_s: f64) {
+        let mut due = [false; 3];
+        for (k, d) in due.iter_mut().enumerate() {
+            let rate = self.rates_hz[k];
+            if rate > 0.0 && t_s + 1e-9 >= self.due_s[k] {
+                *d = true;
+                self.due_s[k] = (self.due_s[k] + 1.0 / rate).max(t_s + 0.5 / rate);
+            }
+        }
+        if due == [false; 3] {
+            return;
+        }
         let current_a = self.config.current.map_or(0.0, |c| c.at(t_s));
         let s = self.bench.sample_with_currents(t_s, &[current_a]);
         let v = |n: &str| self.value(n);
@@ -482,30 +537,121 @@ impl<P: Read + Write> AutopilotTwin<P> {
                 )
             }
         };
-        self.send(&msg);
+        if due[COMPASS] {
+            self.send(&msg);
+            self.report.sent.push(Sent {
+                t_s,
+                raw_ut: s.raw_ut,
+                sent_ut,
+                quat: s.quat,
+                current_a,
+            });
+        }
         let [w, x, y, z] = s.quat.map(|q| q as f32);
-        self.send(&MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
-            time_boot_ms: (t_s * 1000.0) as u32,
-            q1: w,
-            q2: x,
-            q3: y,
-            q4: z,
-            ..ATTITUDE_QUATERNION_DATA::default()
-        }));
-        if self.config.current.is_some() {
+        if due[ATTITUDE] {
+            self.send(&MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+                time_boot_ms: (t_s * 1000.0) as u32,
+                q1: w,
+                q2: x,
+                q3: y,
+                q4: z,
+                ..ATTITUDE_QUATERNION_DATA::default()
+            }));
+        }
+        if due[BATTERY] && self.config.current.is_some() {
             self.send(&MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
                 current_battery: (current_a * 100.0).round() as i16,
                 id: 0,
                 ..BATTERY_STATUS_DATA::default()
             }));
         }
-        self.report.sent.push(Sent {
-            t_s,
-            raw_ut: s.raw_ut,
-            sent_ut,
-            quat: s.quat,
-            current_a,
-        });
+    }
+
+    /// The stream a message id is sent in, if the twin sends it.
+    fn stream_of(&self, message_id: u32) -> Option<usize> {
+        let compass = match self.config.autopilot {
+            Autopilot::ArduPilot => RAW_IMU_DATA::ID,
+            Autopilot::Px4 => HIGHRES_IMU_DATA::ID,
+        };
+        match message_id {
+            id if id == compass => Some(COMPASS),
+            ATTITUDE_QUATERNION_DATA::ID => Some(ATTITUDE),
+            BATTERY_STATUS_DATA::ID => Some(BATTERY),
+            _ => None,
+        }
+    }
+
+    /// Sets stream `k` to `asked_hz` (0: off), at most the twin's rate, from now on; notes it as `name`.
+    fn set_rate(&mut self, k: usize, asked_hz: f64, name: &str) {
+        let got = asked_hz.clamp(0.0, self.config.rate_hz);
+        self.rates_hz[k] = got;
+        self.due_s[k] = self.now_s;
+        self.report.requests.push(format!(
+            "{name} at {} Hz (asked {} Hz)",
+            fmt_hz(got),
+            fmt_hz(asked_hz)
+        ));
+    }
+
+    /// `REQUEST_DATA_STREAM` (ArduPilot's stream groups; PX4 ignores it): `RAW_SENSORS` holds `RAW_IMU`,
+    /// `EXTENDED_STATUS` `BATTERY_STATUS`, `ALL` both. `ATTITUDE_QUATERNION` is in no group (ArduPilot sends it only
+    /// when asked for by `SET_MESSAGE_INTERVAL`). MAVLink deprecates the message; ArduPilot still takes it.
+    #[allow(deprecated)]
+    fn request_data_stream(&mut self, r: &REQUEST_DATA_STREAM_DATA) {
+        if self.config.autopilot != Autopilot::ArduPilot {
+            return;
+        }
+        let hz = if r.start_stop == 0 {
+            0.0
+        } else {
+            f64::from(r.req_message_rate)
+        };
+        let streams: &[(usize, &str)] = match r.req_stream_id {
+            MavDataStream::MAV_DATA_STREAM_RAW_SENSORS => &[(COMPASS, "RAW_IMU")],
+            MavDataStream::MAV_DATA_STREAM_EXTENDED_STATUS => &[(BATTERY, "BATTERY_STATUS")],
+            MavDataStream::MAV_DATA_STREAM_ALL => {
+                &[(COMPASS, "RAW_IMU"), (BATTERY, "BATTERY_STATUS")]
+            }
+            _ => &[],
+        };
+        for (k, name) in streams {
+            self.set_rate(*k, hz, name);
+        }
+    }
+
+    /// `COMMAND_LONG` `SET_MESSAGE_INTERVAL` (param1 the message id, param2 the interval in µs: −1 off, 0 the
+    /// default rate), answered with `COMMAND_ACK`; any other command is answered `UNSUPPORTED`.
+    fn command(&mut self, c: &COMMAND_LONG_DATA) {
+        let result = if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL {
+            let id = c.param1.round() as u32;
+            match self.stream_of(id) {
+                Some(k) => {
+                    let interval_us = f64::from(c.param2);
+                    let hz = if interval_us < 0.0 {
+                        0.0
+                    } else if interval_us == 0.0 {
+                        self.config.rate_hz
+                    } else {
+                        1e6 / interval_us
+                    };
+                    let name = match k {
+                        COMPASS => "the compass message",
+                        ATTITUDE => "ATTITUDE_QUATERNION",
+                        _ => "BATTERY_STATUS",
+                    };
+                    self.set_rate(k, hz, name);
+                    MavResult::MAV_RESULT_ACCEPTED
+                }
+                None => MavResult::MAV_RESULT_FAILED,
+            }
+        } else {
+            MavResult::MAV_RESULT_UNSUPPORTED
+        };
+        self.send(&MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            command: c.command,
+            result,
+            ..COMMAND_ACK_DATA::default()
+        }));
     }
 
     /// Takes what arrived and answers the parameter requests among it.
@@ -552,8 +698,11 @@ impl<P: Read + Write> AutopilotTwin<P> {
         self.params.iter().position(|p| p.name == name)
     }
 
+    #[allow(deprecated)] // REQUEST_DATA_STREAM, which ArduPilot still takes
     fn handle(&mut self, msg: &MavMessage) {
         match msg {
+            MavMessage::REQUEST_DATA_STREAM(r) => self.request_data_stream(r),
+            MavMessage::COMMAND_LONG(c) => self.command(c),
             MavMessage::PARAM_REQUEST_LIST(_) => {
                 for i in 0..self.params.len() {
                     let m = self.param_value(i);

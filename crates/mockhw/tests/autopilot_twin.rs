@@ -344,3 +344,46 @@ fn a_write_back_that_meets_a_refusal_leaves_the_previous_values() {
         run.finish();
     }
 }
+
+#[test]
+fn a_twin_that_awaits_requests_streams_only_what_is_asked_at_the_rate_asked_capped_at_its_own() {
+    for autopilot in [Autopilot::ArduPilot, Autopilot::Px4] {
+        let mut c = config(autopilot, 7);
+        c.await_request = true;
+        c.rate_hz = 50.0;
+        let mut run = start(c);
+        run.conn
+            .wait_heartbeat(Duration::from_secs(5), None)
+            .unwrap();
+        // Heartbeats only, until asked.
+        let quiet_until = Instant::now() + Duration::from_millis(300);
+        while let Some((_, m)) = run.conn.next_message(quiet_until).unwrap() {
+            assert!(telemetry(&m).is_none(), "{autopilot}: sent {m:?} unasked");
+        }
+        let messages = magcal_autopilot::streams::recording_messages(autopilot);
+        let answers = run.conn.request_streams(&messages, 20.0).unwrap();
+        assert!(
+            answers.iter().all(
+                |a| a.result == Some(mavlink::dialects::common::MavResult::MAV_RESULT_ACCEPTED)
+            ),
+            "{answers:?}"
+        );
+        // Half a second of wall time: 10 s of bench time at the twin's speed.
+        let until = Instant::now() + Duration::from_millis(500);
+        while run.conn.next_message(until).unwrap().is_some() {}
+        let report = run.finish();
+        let sent = &report.sent;
+        assert!(sent.len() >= 5, "{autopilot}: {}", sent.len());
+        let span = sent[sent.len() - 1].t_s - sent[0].t_s;
+        let rate = (sent.len() - 1) as f64 / span;
+        assert!((rate - 20.0).abs() < 1.5, "{autopilot}: {rate} Hz");
+        assert!(
+            report
+                .requests
+                .iter()
+                .any(|r| r.contains("at 20 Hz (asked 20 Hz)")),
+            "{:?}",
+            report.requests
+        );
+    }
+}

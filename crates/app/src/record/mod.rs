@@ -438,9 +438,11 @@ impl Out {
             t: true,
             temp: source.has_temperature(),
             quat: opts.routine == Routine::Cube24 || source.has_quaternion(),
+            currents: source.current_channel().into_iter().collect(),
             ..Layout::default()
         };
         let mut meta = opts.meta.clone();
+        meta.other.extend(source.metadata());
         meta.sensor.get_or_insert_with(|| source.sensor());
         meta.sample_rate_hz = source.rate_hz();
         meta.routine = Some(opts.routine.name().to_owned());
@@ -499,6 +501,11 @@ impl Out {
                 f64::NAN
             },
             quat: quat.unwrap_or([f64::NAN; 4]),
+            currents_a: if self.layout.currents.is_empty() {
+                Vec::new()
+            } else {
+                vec![r.current_a.unwrap_or(f64::NAN)]
+            },
             ..Sample::default()
         };
         self.writer

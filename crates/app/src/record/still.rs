@@ -85,6 +85,7 @@ mod tests {
             mag_ut: [x, 10.0, -5.0],
             temp_c: None,
             quat: None,
+            current_a: None,
         }
     }
 

@@ -1,6 +1,8 @@
-//! Where samples come from: a chip driver polled over I2C (real or simulated), or a serial line stream.
+//! Where samples come from: a chip driver polled over I2C (real or simulated), a serial line stream, or a flight
+//! controller over MAVLink ([`mavlink`]).
 
 pub mod clock;
+pub mod mavlink;
 pub mod sim;
 
 use std::fmt::Debug;
@@ -42,6 +44,8 @@ pub struct Reading {
     pub temp_c: Option<f64>,
     /// Attitude quaternion `[w, x, y, z]` (sensor axes into NED), where the device gives one.
     pub quat: Option<[f64; 4]>,
+    /// The current of the device's current channel ([`Source::current_channel`]), A, where it gives one.
+    pub current_a: Option<f64>,
 }
 
 /// Why a source gave no sample.
@@ -126,6 +130,14 @@ pub trait Source {
     /// Whether readings carry an attitude quaternion (a board that prints its own).
     fn has_quaternion(&self) -> bool {
         false
+    }
+    /// The name of the current channel readings carry (a flight controller's battery current, `i_battery`), if any.
+    fn current_channel(&self) -> Option<String> {
+        None
+    }
+    /// Metadata the device adds to the recording (what it was asked and gave, what it undid), as unknown keys.
+    fn metadata(&self) -> Vec<(String, String)> {
+        Vec::new()
     }
     /// The next sample, waiting for it on the device's clock; `None` when none came within a short wait, or the
     /// device gave a saturated sample (call again: the caller meanwhile looks at Ctrl-C and the clock). A saturated
@@ -300,6 +312,7 @@ where
                         mag_ut: m.map(f64::from),
                         temp_c: self.temp_c,
                         quat: None,
+                        current_a: None,
                     }));
                 }
                 Err(ChipError::NotReady) => {}
@@ -591,6 +604,7 @@ impl Source for LineSource {
                     mag_ut: r.sample.mag_ut,
                     temp_c: r.sample.temp_c.filter(|t| t.is_finite()),
                     quat: r.sample.quat_wxyz,
+                    current_a: None,
                 }))
             }
             Err(StreamStop::Idle { .. }) => {
