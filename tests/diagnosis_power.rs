@@ -167,12 +167,10 @@ fn detection_at_half_sigma_and_false_alarms_over_200_seeds() {
             if let (true, Some((heading_deg, heading_se_deg))) = (direction, heading) {
                 let entry = z.entry("declination_error_deg").or_default();
                 let (found_deg, found_se_deg) =
-                    found
-                        .and_then(|f| declination(f))
-                        .map_or((0.0, 0.0), |(v, se)| {
-                            entry.pop();
-                            (v, se)
-                        });
+                    found.and_then(declination).map_or((0.0, 0.0), |(v, se)| {
+                        entry.pop();
+                        (v, se)
+                    });
                 let Effect::FieldDirectionError {
                     declination_error_deg,
                     ..
