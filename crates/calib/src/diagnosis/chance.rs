@@ -86,17 +86,6 @@ impl Chance {
         }
     }
 
-    /// The energy of samples `[a, b)` of a residual of sizes `sizes` over the noise (`scale`, `dims` as in [`of`]).
-    ///
-    /// [`of`]: Chance::of
-    pub(crate) fn evidence(sizes: &[f64], (a, b): (usize, usize), scale: f64, dims: f64) -> f64 {
-        sizes[a..b]
-            .iter()
-            .filter(|s| s.is_finite())
-            .map(|s| excess(*s, scale, dims))
-            .sum()
-    }
-
     /// Whether a span of `len` samples lasting `duration_s` (`None` without time) whose energy over the noise, less
     /// its strongest sample's, is `evidence` is a finding: long enough to be one, and its other samples less likely
     /// than [`FALSE_ALARM`] to be made by the noise anywhere in the recording.
@@ -145,12 +134,9 @@ pub(crate) fn judge(
     let evidence: Vec<f64> = spans
         .iter()
         .map(|&(a, b, _)| {
-            let strongest = sizes[a..b]
-                .iter()
-                .filter(|s| s.is_finite())
-                .map(|s| excess(*s, scale, dims))
-                .fold(0.0, f64::max);
-            Chance::evidence(sizes, (a, b), scale, dims) - strongest
+            let (sum, strongest) = excesses(&sizes[a..b], scale, dims)
+                .fold((0.0, 0.0_f64), |(sum, top), x| (sum + x, top.max(x)));
+            sum - strongest
         })
         .collect();
     let mut findings: Vec<bool> = spans
@@ -185,6 +171,14 @@ fn long_enough(len: usize, duration_s: Option<f64>) -> bool {
     len > 1 && duration_s.is_none_or(|d| d >= GLITCH_S)
 }
 
+/// The evidence of each sample of `sizes` with a finite size.
+fn excesses(sizes: &[f64], scale: f64, dims: f64) -> impl Iterator<Item = f64> + '_ {
+    sizes
+        .iter()
+        .filter(|s| s.is_finite())
+        .map(move |s| excess(*s, scale, dims))
+}
+
 /// One sample's evidence: its squared size in scales, up to the gross threshold's, less the noise's own.
 fn excess(size: f64, scale: f64, dims: f64) -> f64 {
     (size / scale).powi(2).min(GROSS_SIGMA * GROSS_SIGMA) - dims
@@ -196,6 +190,11 @@ mod tests {
     use rand_distr::{Distribution, Normal, StudentT};
 
     use super::*;
+
+    /// The energy of samples `[a, b)` of a residual of sizes `sizes` over the noise.
+    fn evidence(sizes: &[f64], (a, b): (usize, usize), scale: f64, dims: f64) -> f64 {
+        excesses(&sizes[a..b], scale, dims).sum()
+    }
 
     /// Residual norms of `n` samples of three-axis noise drawn by `draw`, unit scale.
     fn sizes(n: usize, mut draw: impl FnMut() -> f64) -> Vec<f64> {
@@ -213,7 +212,7 @@ mod tests {
         let chance = Chance::of(&s, &clean, 1.0, 3.0);
         // The noise's own largest window of 16 samples is no finding.
         let largest = (0..s.len() - 16)
-            .map(|a| Chance::evidence(&s, (a, a + 16), 1.0, 3.0))
+            .map(|a| evidence(&s, (a, a + 16), 1.0, 3.0))
             .fold(f64::MIN, f64::max);
         assert!(
             !chance.is_finding(16, None, largest),
