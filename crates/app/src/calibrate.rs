@@ -20,6 +20,7 @@ use crate::checks;
 use crate::field::ReferenceField;
 use crate::fit::{
     Calibration, Fit, Method, ReferenceDoubt, ReferenceHeading, RobustSummary, SampleCounts,
+    UndeterminedPart,
 };
 use crate::readings::{
     MissingReference, calibrate_row, expected_field, noise_measurable, noise_source,
@@ -48,7 +49,11 @@ fn reference_out_of_convention(
         }
         _ => None,
     };
-    ReferenceDoubt { convention, offset }
+    ReferenceDoubt {
+        convention,
+        offset,
+        part: None,
+    }
 }
 
 /// Why a recording could not be calibrated.
@@ -348,7 +353,7 @@ pub fn calibrate_with(
     warnings.extend(time_unit_mismatch(rec));
     let mut notes = Vec::new();
     let base = match method {
-        Method::Vector => vector_base(rec, &field, &mut notes)?,
+        Method::Vector => vector_base(rec, &field, &mut notes, &mut warnings)?,
         _ => scalar_base(rec, &field, &mut notes, &mut warnings)?,
     };
     let mut cal = measured(rec, base, field, notes, warnings, chip)?;
@@ -441,6 +446,7 @@ fn vector_base(
     rec: &Recording,
     field: &ReferenceField,
     notes: &mut Vec<String>,
+    warnings: &mut Vec<String>,
 ) -> Result<Base, CalibrateError> {
     let expected = expected_field(rec, field)?;
     let noise = noise::estimate(&rec.mag_ut, Some(&expected));
@@ -464,10 +470,95 @@ fn vector_base(
         }
         Search::Left(_) | Search::NoAttitude => {}
     }
-    let r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-    let reference =
+    let mut r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+    let mut reference =
         reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
+    if !reference.is_some() && looks_off(&r, &noise) {
+        match consistent_part(&problem, rec, r) {
+            Consistent::Part(part, warning) => {
+                warnings.push(warning);
+                r = part;
+            }
+            Consistent::Undetermined(majority, part) => {
+                reference.part = Some(part);
+                r = majority;
+            }
+            Consistent::None(majority) => r = majority,
+        }
+    }
     Ok(vector_base_of(rec, expected, r, noise, reference, None))
+}
+
+/// A consistent part's residual scale at most this share of the majority fit's replaces it ([`consistent_part`]).
+const CONSISTENT_PART_RATIO: f64 = 0.5;
+
+/// What [`consistent_part`] makes of a mostly disturbed recording.
+enum Consistent {
+    /// The consistent part, which determines the calibration, and the warning that says so.
+    Part(robust::Robust<VectorFit>, String),
+    /// The majority's fit, and the consistent part that does not determine the calibration.
+    Undetermined(robust::Robust<VectorFit>, UndeterminedPart),
+    /// The majority's fit: no part agrees with the reference.
+    None(robust::Robust<VectorFit>),
+}
+
+/// The robust fit `majority` of a recording that looks off, or the consistent part of it when there is one
+/// ([`robust::consistent_part`]) whose residual's scale is at most [`CONSISTENT_PART_RATIO`] of the majority's:
+/// most of the recording disturbed, the rest agreeing with the reference. It calibrates when it predicts itself
+/// across time ([`robust::holds_out`]); otherwise it is said, with what it lacks.
+fn consistent_part(
+    problem: &VectorProblem,
+    rec: &Recording,
+    majority: robust::Robust<VectorFit>,
+) -> Consistent {
+    let t_s = rec.t_s.as_deref();
+    let part = match robust::consistent_part(problem, t_s) {
+        Some(part) if part.sigma_ut <= CONSISTENT_PART_RATIO * majority.sigma_ut => part,
+        _ => return Consistent::None(majority),
+    };
+    let usable = part.residual_ut.iter().filter(|e| e.is_finite()).count();
+    let inside: Vec<bool> = (0..part.kept.len())
+        .map(|i| part.kept[i] && part.residual_ut[i].is_finite())
+        .collect();
+    let share = inside.iter().filter(|k| **k).count() as f64 / usable.max(1) as f64;
+    if robust::holds_out(problem, &part, t_s) {
+        let warning = format!(
+            "most of this recording disagrees with the attitude reference: only {:.0} % of the readings with a \
+             reference agree with it under one calibration, to {:.2} µT per axis (a fit of the majority misses by \
+             {:.2} µT), and the calibration comes from them; the rest is left out as disturbed (the spans below). \
+             Check them, and record again away from magnets and metal to confirm",
+            100.0 * share,
+            part.sigma_ut,
+            majority.sigma_ut
+        );
+        return Consistent::Part(part, warning);
+    }
+    let covered = robust::RobustProblem::covered(problem, &part.fit, &inside);
+    let undetermined = UndeterminedPart {
+        share,
+        sigma_ut: part.sigma_ut,
+        majority_sigma_ut: majority.sigma_ut,
+        stretches: longest_stretches(rec, &inside),
+        covered,
+    };
+    Consistent::Undetermined(majority, undetermined)
+}
+
+/// The longest stretches of rows `inside` (at most four, in time order), as `(t0_s, t1_s)`, or 1-based rows
+/// without time.
+fn longest_stretches(rec: &Recording, inside: &[bool]) -> Vec<(f64, f64)> {
+    const SHOWN: usize = 4;
+    let outside: Vec<bool> = inside.iter().map(|k| !k).collect();
+    let mut runs = robust::excluded_runs(&outside);
+    runs.sort_by_key(|(a, b)| std::cmp::Reverse(b - a));
+    runs.truncate(SHOWN);
+    runs.sort_unstable();
+    runs.into_iter()
+        .map(|(a, b)| match &rec.t_s {
+            Some(t) => (t[a], t[b - 1]),
+            None => ((a + 1) as f64, b as f64),
+        })
+        .collect()
 }
 
 /// Whether a robust vector fit looks off ([`fit_looks_off`]) against the raw readings' `noise`. The search for a
@@ -693,6 +784,14 @@ fn measured(
 /// stands on its own (a recording it calibrates is not refused for what the diagnosis could not do).
 fn diagnose_into(rec: &Recording, cal: &mut Calibration) -> Result<(), CalibrateError> {
     let used = cal.samples.used;
+    if cal.reference.part.is_some() {
+        cal.notes.push(
+            "not diagnosed: most of the recording is disturbed, and the part that agrees with the reference does not \
+             determine a calibration to judge the rest against (the WARNING says when it agreed)"
+                .to_owned(),
+        );
+        return Ok(());
+    }
     if cal.reference.is_some() {
         cal.notes.push(
             "not diagnosed: the attitude reference fits far better in another convention or shifted in time (the \

@@ -8,7 +8,7 @@ use magcal_calib::{FitError, Model, frames};
 use nalgebra::Matrix3;
 
 use crate::field::ReferenceField;
-use crate::fit::{Fit, ReferenceDoubt};
+use crate::fit::{Fit, ReferenceDoubt, UndeterminedPart};
 
 pub use crate::units::EARTH_FIELD_UT;
 /// `A`'s singular values may differ by this factor before the gains are called implausible.
@@ -58,6 +58,8 @@ pub fn check(
         warnings.push(convention_warning(b));
     } else if let Some(o) = &reference.offset {
         warnings.push(offset_warning(o));
+    } else if let Some(part) = &reference.part {
+        warnings.push(part_warning(part));
     } else if let Some((rms, f)) = reference_off {
         warnings.push(format!(
             "the readings and the attitude reference disagree by {rms:.1} µT RMS per axis, {:.0} % of the field: \
@@ -161,6 +163,27 @@ pub fn convention_warning(b: &Better) -> String {
         b.better.median_ut,
         100.0 * b.given.explained,
         b.given.median_ut
+    )
+}
+
+/// The warning for a mostly disturbed recording whose consistent part does not determine a calibration.
+pub fn part_warning(p: &UndeterminedPart) -> String {
+    let stretches: Vec<String> = p
+        .stretches
+        .iter()
+        .map(|(t0, t1)| format!("{t0:.1}–{t1:.1} s"))
+        .collect();
+    format!(
+        "most of this recording is disturbed: only {:.0} % of the readings with a reference agree with it under one \
+         calibration, to {:.2} µT per axis (the majority's fit misses by {:.2} µT) — mostly at {} — but they do \
+         not determine the calibration: fitted on half of that time they miss the other half, and they cover {:.0} % \
+         of the directions. The reference itself is not at fault there. Record again away from magnets and metal, \
+         turning through more directions. A and b here are not a calibration",
+        100.0 * p.share,
+        p.sigma_ut,
+        p.majority_sigma_ut,
+        stretches.join(", "),
+        100.0 * p.covered
     )
 }
 

@@ -128,13 +128,32 @@ pub struct ReferenceDoubt {
     pub convention: Option<convention::Better>,
     /// The reference out of step with the readings (looked for when no other convention is found).
     pub offset: Option<convention::OutOfStep>,
+    /// A part of a mostly disturbed recording that agrees with the reference but does not determine a calibration
+    /// (looked for when neither of the others is found).
+    pub part: Option<UndeterminedPart>,
 }
 
 impl ReferenceDoubt {
-    /// Whether either was found.
+    /// Whether any was found.
     pub fn is_some(&self) -> bool {
-        self.convention.is_some() || self.offset.is_some()
+        self.convention.is_some() || self.offset.is_some() || self.part.is_some()
     }
+}
+
+/// The part of a mostly disturbed recording one calibration explains, when it does not determine the calibration:
+/// fitted on half of its time, it misses the other half ([`magcal_calib::robust::holds_out`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct UndeterminedPart {
+    /// Its share of the samples with a reference.
+    pub share: f64,
+    /// Its residual's scale, µT per axis.
+    pub sigma_ut: f64,
+    /// The scale of the fit of the whole recording's majority, µT per axis.
+    pub majority_sigma_ut: f64,
+    /// Its longest stretches, in time order: `(t0_s, t1_s)` (rows, 1-based, without time).
+    pub stretches: Vec<(f64, f64)>,
+    /// The share of the sphere of directions its expected fields cover.
+    pub covered: f64,
 }
 
 /// A vector fit whose residual exceeds this share of the field's magnitude does not fit its attitude reference: the

@@ -462,7 +462,8 @@ impl Figures {
 }
 
 /// The verdict the heading figures gave, overruled where they do not tell the story: a reference in another
-/// convention or out of step, or off by a good part of the field; a calibration of the state between two stretches
+/// convention or out of step, a mostly disturbed recording whose consistent part does not determine a calibration,
+/// or a reference off by a good part of the field; a calibration of the state between two stretches
 /// on another offset; a fit the last checks warn about.
 fn overruled(
     mut verdict: Verdict,
@@ -496,6 +497,18 @@ fn overruled(
             ),
             todo: "put the readings and the reference on one clock (the WARNING below says by how much to shift) \
                    and fit again"
+                .to_owned(),
+        };
+    } else if let Some(p) = &cal.reference.part {
+        verdict = Verdict {
+            grade: Grade::Redo,
+            reason: format!(
+                "only {:.0} % of the readings agree with the attitude reference under one calibration, and they do \
+                 not determine it: the rest is disturbed",
+                100.0 * p.share
+            ),
+            todo: "record again away from magnets and metal, turning through more directions (the WARNING below \
+                   says when the readings agreed)"
                 .to_owned(),
         };
     } else if verdict.grade != Grade::Good

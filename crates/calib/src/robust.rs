@@ -173,6 +173,190 @@ pub fn fit<P: RobustProblem>(problem: &P, t_s: Option<&[f64]>) -> Result<Robust<
     Ok(robust)
 }
 
+/// The shares of the samples the consistent part's concentration steps fit ([`consistent_part`]): it must hold at
+/// least one of them.
+const PART_SHARES: [f64; 3] = [0.1, 0.2, 0.3];
+/// The consistent part's seeds: contiguous spans of a 24th and a 12th of the recording.
+const PART_SPANS: [usize; 2] = [24, 12];
+/// Concentration steps of a consistent part's seed, at most.
+const PART_STEPS: usize = 15;
+/// A consistent part's samples cover at least this share of the directions all samples cover: a still stretch any
+/// matrix explains is no consistent part.
+const PART_COVERAGE: f64 = 0.4;
+/// Passes of the scale of the consistent part's residual, at most ([`mode_scale`]).
+const MODE_PASSES: usize = 30;
+
+/// The largest part of a recording one calibration explains to its own scale, when most of it is disturbed (a
+/// recording carried past metal for most of the time): what the module's majority fit cannot give.
+///
+/// Seeds from short spans (a 24th and a 12th of the recording, on a subsample of at most [`SEED_SAMPLES`]) are
+/// brought by concentration steps to the tenth, fifth or third of all samples they fit best (least trimmed squares
+/// at a small share); each plausible one's scale is that of the mode of its residual ([`mode_scale`]), and the seed
+/// with the smallest scale whose samples within [`GROSS_SIGMA`] of it are at least the share it was concentrated on
+/// wins. On all samples, the runs of samples beyond [`GROSS_SIGMA`] scales of that fit, widened over their ramps,
+/// are left out and the rest fitted (twice), as in the module's step 3 but without merging lulls: between the
+/// disturbances of a mostly disturbed recording the lulls are the consistent part. `None` when no seed gives a
+/// plausible part or its final fit is refused (too few directions, say).
+pub fn consistent_part<P: RobustProblem>(
+    problem: &P,
+    t_s: Option<&[f64]>,
+) -> Option<Robust<P::Fit>> {
+    let stride = problem.len().div_ceil(SEED_SAMPLES).max(1);
+    let sub = (stride > 1).then(|| problem.every(stride));
+    let seeds = sub.as_ref().unwrap_or(problem);
+    let m = seeds.len();
+    let starts: Vec<((usize, usize), f64)> = PART_SPANS
+        .iter()
+        .flat_map(|&k| (0..k).map(move |i| (i * m / k, (i + 1) * m / k)))
+        .flat_map(|span| PART_SHARES.iter().map(move |&q| (span, q)))
+        .collect();
+    let parts = chunks::parts(starts.len(), |k| {
+        let ((a, b), share) = starts[k];
+        concentrated(seeds, (a, b), share)
+    });
+    let (seed, _) = parts
+        .into_iter()
+        .flatten()
+        .min_by(|x, y| x.1.total_cmp(&y.1))?;
+    drop(sub);
+    let mut fit = seed;
+    let mut residual_ut = problem.residuals(&fit);
+    let mut sigma_ut = mode_scale::<P>(&residual_ut);
+    let n = problem.len();
+    let mut kept = outside(&ramped_runs(&residual_ut, sigma_ut, t_s, P::RAMP_TAIL), n);
+    for _ in 0..SPAN_PASSES {
+        fit = problem.final_fit(&kept, Some(&fit)).ok()?;
+        refresh(problem, &fit, &mut residual_ut);
+        sigma_ut = mode_scale::<P>(&residual_ut);
+        kept = outside(&ramped_runs(&residual_ut, sigma_ut, t_s, P::RAMP_TAIL), n);
+    }
+    let fit = problem.final_fit(&kept, Some(&fit)).ok()?;
+    refresh(problem, &fit, &mut residual_ut);
+    for (k, e) in kept.iter_mut().zip(&residual_ut) {
+        *k |= !e.is_finite();
+    }
+    Some(Robust {
+        fit,
+        kept,
+        sigma_ut,
+        residual_ut,
+        mixed: Vec::new(),
+    })
+}
+
+/// Blocks of time a consistent part is cut into to check that it holds out ([`holds_out`]).
+const HOLD_OUT_BLOCKS: usize = 10;
+/// A consistent part holds out when, fitted on every other block of time, the other blocks' residual scale is at
+/// most this many times its own.
+const HOLD_OUT_RATIO: f64 = 1.5;
+
+/// Whether a consistent part ([`consistent_part`]) of `problem` predicts itself across time: the time from its
+/// first kept sample to its last (of samples, without `t_s`) cut into [`HOLD_OUT_BLOCKS`] blocks, its kept samples
+/// fitted on the even blocks and on the odd ones, each fit's residual scale on the other blocks' kept samples at
+/// most [`HOLD_OUT_RATIO`] times the part's.
+/// A calibration made up of a few stretches it happens to fit (a still stretch, a slow arc) does not.
+pub fn holds_out<P: RobustProblem>(
+    problem: &P,
+    part: &Robust<P::Fit>,
+    t_s: Option<&[f64]>,
+) -> bool {
+    let n = part.kept.len();
+    let usable: Vec<usize> = (0..n)
+        .filter(|&i| part.kept[i] && part.residual_ut[i].is_finite())
+        .collect();
+    let (Some(&first), Some(&last)) = (usable.first(), usable.last()) else {
+        return false;
+    };
+    // Each usable kept sample's block of time (of rank, without times) between the first and the last.
+    let mut block: Vec<Option<usize>> = vec![None; n];
+    for (rank, &i) in usable.iter().enumerate() {
+        let at = match t_s {
+            Some(t) if t[last] > t[first] => (t[i] - t[first]) / (t[last] - t[first]),
+            _ => rank as f64 / usable.len() as f64,
+        };
+        block[i] = Some(((at * HOLD_OUT_BLOCKS as f64) as usize).min(HOLD_OUT_BLOCKS - 1));
+    }
+    (0..2).all(|parity| {
+        let fitted: Vec<f64> = block
+            .iter()
+            .map(|b| f64::from(u8::from(b.is_some_and(|b| b % 2 == parity))))
+            .collect();
+        let Ok(fit) = problem.quick_fit(&fitted, None) else {
+            return false;
+        };
+        let e = problem.residuals(&fit);
+        let held: Vec<f64> = (0..n)
+            .filter(|&i| block[i].is_some_and(|b| b % 2 != parity))
+            .map(|i| e[i])
+            .collect();
+        scale::<P>(&held) <= HOLD_OUT_RATIO * part.sigma_ut
+    })
+}
+
+/// From the fit on the samples of `span`, concentration steps on the `share` of the samples it fits best: the fit and
+/// the scale of its residual's mode ([`mode_scale`]), in raw units; `None` when a fit fails, is implausible, or
+/// fewer than `share` of the samples lie within [`GROSS_SIGMA`] of that scale, or they cover less than
+/// [`PART_COVERAGE`] of the directions all samples cover.
+fn concentrated<P: RobustProblem>(
+    p: &P,
+    (a, b): (usize, usize),
+    share: f64,
+) -> Option<(P::Fit, f64)> {
+    let mut w = vec![0.0; p.len()];
+    w[a..b].fill(1.0);
+    let mut fit = p.quick_fit(&w, None).ok()?;
+    let mut kept_prev: Vec<bool> = Vec::new();
+    for _ in 0..PART_STEPS {
+        let e = p.residuals(&fit);
+        let cut = quantile(&e, share);
+        let kept: Vec<bool> = e.iter().map(|x| x.is_finite() && *x <= cut).collect();
+        let moved = kept.iter().zip(&kept_prev).filter(|(a, b)| a != b).count();
+        if !kept_prev.is_empty() && moved * TRIM_SETTLED <= kept.len() {
+            break;
+        }
+        fit = p.quick_fit(&weights_of(&kept), None).ok()?;
+        kept_prev = kept;
+    }
+    let a = P::model(&fit).a;
+    if !plausible(&a) {
+        return None;
+    }
+    let e = p.residuals(&fit);
+    let sigma = mode_scale::<P>(&e);
+    let usable: Vec<bool> = e.iter().map(|x| x.is_finite()).collect();
+    let within: Vec<bool> = e.iter().map(|x| *x <= GROSS_SIGMA * sigma).collect();
+    let count = |k: &[bool]| k.iter().filter(|k| **k).count() as f64;
+    let held = count(&within) >= share * count(&usable);
+    let spread = p.covered(&fit, &within) >= PART_COVERAGE * p.covered(&fit, &usable);
+    (held && spread).then(|| (fit, sigma / mean_gain(&a)))
+}
+
+/// The scale of the mode of residual sizes `e` that hold a consistent part and disturbed samples far off: from the
+/// scale of their smallest tenth, the scale of the samples within [`GROSS_SIGMA`] of the last, until it settles
+/// (at most [`MODE_PASSES`] times).
+fn mode_scale<P: RobustProblem>(e: &[f64]) -> f64 {
+    mode_scale_of(e, P::MEDIAN_OF_UNIT)
+}
+
+/// [`mode_scale`] for residual sizes whose median, for pure noise of unit standard deviation, is `median_of_unit`.
+fn mode_scale_of(e: &[f64], median_of_unit: f64) -> f64 {
+    let mut sigma = quantile(e, PART_SHARES[0]) / median_of_unit;
+    for _ in 0..MODE_PASSES {
+        let within: Vec<f64> = e
+            .iter()
+            .copied()
+            .filter(|x| x.is_finite() && *x <= GROSS_SIGMA * sigma)
+            .collect();
+        let next = median(&within) / median_of_unit;
+        let settled = (next - sigma).abs() <= 1e-3 * sigma;
+        sigma = next;
+        if settled || !sigma.is_finite() {
+            break;
+        }
+    }
+    sigma
+}
+
 /// A seed's fit, the scale of its residual and how much of the sphere of directions the samples cover seen from it
 /// ([`RobustProblem::support`]).
 struct Seed<F> {
@@ -428,12 +612,58 @@ pub fn outside(spans: &[(usize, usize)], n: usize) -> Vec<bool> {
     kept
 }
 
+/// The scale of residual sizes `e` and their gross spans ([`gross_spans`], with `t_s` and `tail`), for the state
+/// most samples are in: `median_scale`, their median's. When fewer than half the usable samples lie within
+/// [`GROSS_SIGMA`] of the scale of their mode ([`mode_scale`]; `median_of_unit` is the median size of unit noise) —
+/// a consistent part of a mostly disturbed recording ([`consistent_part`]) — the mode's scale, and the runs without
+/// lulls merged.
+pub fn state_spans(
+    e: &[f64],
+    median_scale: f64,
+    median_of_unit: f64,
+    t_s: Option<&[f64]>,
+    tail: f64,
+) -> (f64, Vec<(usize, usize)>) {
+    let mode = mode_scale_of(e, median_of_unit);
+    let usable = e.iter().filter(|x| x.is_finite()).count();
+    let within = e.iter().filter(|x| **x <= GROSS_SIGMA * mode).count();
+    if 2 * within < usable {
+        (mode, ramped_runs(e, mode, t_s, tail))
+    } else {
+        (median_scale, gross_spans(e, median_scale, t_s, tail))
+    }
+}
+
 /// The gross spans of residual sizes `e` against the scale `sigma` (per axis): the samples beyond [`GROSS_SIGMA`],
 /// merged across gaps of up to [`SPAN_GAP_S`] (or [`SPAN_GAP_SAMPLES`] without time), widened over their ramps
 /// (neighbours beyond [`RAMP_SIGMA`], and on beyond them for `tail` times a ramp's length: see
 /// [`RobustProblem::RAMP_TAIL`]), and merged across lulls shorter than [`GAP_SHARE`] of the mean of the spans around
 /// them, as sample ranges `[start, end)`.
 pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>, tail: f64) -> Vec<(usize, usize)> {
+    let widened = ramped_runs(e, sigma, t_s, tail);
+    // Lulls shorter than a share of the spans around them are part of one disturbance.
+    let length = |(a, b): (usize, usize)| match t_s {
+        Some(t) => t[b - 1] - t[a],
+        None => (b - a) as f64,
+    };
+    let gap = |(_, b): (usize, usize), (c, _): (usize, usize)| match t_s {
+        Some(t) => t[c] - t[b - 1],
+        None => (c - b) as f64,
+    };
+    let mut out: Vec<(usize, usize)> = Vec::with_capacity(widened.len());
+    for span in widened {
+        match out.last_mut() {
+            Some(last) if gap(*last, span) <= GAP_SHARE * (length(*last) + length(span)) / 2.0 => {
+                last.1 = span.1
+            }
+            _ => out.push(span),
+        }
+    }
+    out
+}
+
+/// The runs of gross samples of [`gross_spans`], widened over their ramps, before lulls between them are merged.
+fn ramped_runs(e: &[f64], sigma: f64, t_s: Option<&[f64]>, tail: f64) -> Vec<(usize, usize)> {
     let gross = |i: usize| e[i].is_finite() && e[i] > GROSS_SIGMA * sigma;
     let ramp = |i: usize| e[i].is_finite() && e[i] > RAMP_SIGMA * sigma;
     let mut runs: Vec<(usize, usize)> = Vec::new();
@@ -466,25 +696,7 @@ pub fn gross_spans(e: &[f64], sigma: f64, t_s: Option<&[f64]>, tail: f64) -> Vec
         b = (b + ((b - rb) as f64 * tail) as usize).min(ceiling);
         widened.push((a, b));
     }
-    // Lulls shorter than a share of the spans around them are part of one disturbance.
-    let length = |(a, b): (usize, usize)| match t_s {
-        Some(t) => t[b - 1] - t[a],
-        None => (b - a) as f64,
-    };
-    let gap = |(_, b): (usize, usize), (c, _): (usize, usize)| match t_s {
-        Some(t) => t[c] - t[b - 1],
-        None => (c - b) as f64,
-    };
-    let mut out: Vec<(usize, usize)> = Vec::with_capacity(widened.len());
-    for span in widened {
-        match out.last_mut() {
-            Some(last) if gap(*last, span) <= GAP_SHARE * (length(*last) + length(span)) / 2.0 => {
-                last.1 = span.1
-            }
-            _ => out.push(span),
-        }
-    }
-    out
+    widened
 }
 
 /// The seeds' spans: all samples, and contiguous sixths, thirds, halves and two-thirds at offsets of a sixth.

@@ -26,7 +26,7 @@ use std::borrow::Cow;
 
 use crate::FitError;
 use crate::chunks;
-use crate::coverage::{Coverage, SphereGrid};
+use crate::coverage::{Coverage, SphereGrid, sphere_fraction};
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 use crate::robust::RobustProblem;
@@ -152,6 +152,19 @@ impl RobustProblem for VectorProblem<'_> {
 
     fn model(fit: &VectorFit) -> Model {
         fit.model()
+    }
+
+    /// The share of the sphere of directions the expected fields of the samples `kept` cover in sensor axes (the
+    /// fit does not change them).
+    fn covered(&self, _: &VectorFit, kept: &[bool]) -> f64 {
+        sphere_fraction(
+            self.expected_ut
+                .iter()
+                .zip(kept)
+                .filter(|(e, k)| **k && e.iter().all(|v| v.is_finite()))
+                .map(|(e, _)| *e),
+            DIRECTION_CELLS,
+        )
     }
 }
 

@@ -49,7 +49,6 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
     let setup = Setup::new(input, &samples, model);
     let corrections: Vec<Effect> = model.corrections().copied().collect();
     let residual = setup.residual(&model.a, model.b_ut, &corrections);
-    let scale = setup.scale(&residual);
     let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
     let times = samples.has_time.then_some(&samples.t[..]);
     let tail = if setup.vector {
@@ -57,10 +56,14 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
     } else {
         ScalarProblem::RAMP_TAIL
     };
-    let kept = robust::outside(
-        &robust::gross_spans(&sizes, scale, times, tail),
-        sizes.len(),
+    let (scale, spans) = robust::state_spans(
+        &sizes,
+        setup.scale(&residual),
+        setup.median_of_unit(),
+        times,
+        tail,
     );
+    let kept = robust::outside(&spans, sizes.len());
     let stage = gross::stage(&setup, &residual, &kept, scale, &[]);
     let mut left_out = vec![false; input.raw_ut.len()];
     for (k, &row) in samples.rows.iter().enumerate() {

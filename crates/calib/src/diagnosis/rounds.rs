@@ -153,14 +153,17 @@ impl<'s> Search<'s> {
         let (a, b) = linear_of(&round.sel.last, setup.vector, &setup.base, setup.raw_mean);
         let effects = round.catalogue_effects();
         let residual = setup.residual(&a, b, &effects);
-        let scale = setup.scale(&residual);
         let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
         let times = setup.samples.has_time.then_some(&setup.samples.t[..]);
         let tail = crate::vector::VectorProblem::RAMP_TAIL;
-        let kept = robust::outside(
-            &robust::gross_spans(&sizes, scale, times, tail),
-            sizes.len(),
+        let (scale, spans) = robust::state_spans(
+            &sizes,
+            setup.scale(&residual),
+            setup.median_of_unit(),
+            times,
+            tail,
         );
+        let kept = robust::outside(&spans, sizes.len());
         if kept == self.kept {
             return false;
         }

@@ -112,12 +112,16 @@ impl<'a> Setup<'a> {
         let mut v: Vec<f64> = residual.iter().map(|e| self.size(e)).collect();
         let mid = v.len() / 2;
         let median = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
-        median
-            / if self.vector {
-                <crate::vector::VectorProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
-            } else {
-                <crate::scalar::ScalarProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
-            }
+        median / self.median_of_unit()
+    }
+
+    /// The median residual size of pure noise of unit standard deviation, for this method.
+    pub fn median_of_unit(&self) -> f64 {
+        if self.vector {
+            <crate::vector::VectorProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
+        } else {
+            <crate::scalar::ScalarProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT
+        }
     }
 
     /// The columns of `A` in the design.
