@@ -25,6 +25,15 @@ enum Added {
         w_s: f64,
         peak_ned_ut: [f64; 3],
     },
+    /// A source moving past from `t0_s` to `t1_s`: in room axes, `peak_ut·sin²(π·u)` along a direction turning from
+    /// `from` to `to` (`u` the share of the window gone), nothing outside it.
+    Moving {
+        t0_s: f64,
+        t1_s: f64,
+        peak_ut: f64,
+        from: [f64; 3],
+        to: [f64; 3],
+    },
 }
 
 impl Added {
@@ -48,6 +57,21 @@ impl Added {
                 let share = (1.0 + ((t - tc_s) / w_s).powi(2)).powf(-1.5);
                 frames::expected_sensor_field(q, frames::scale(peak_ned_ut, share))
             }),
+            Added::Moving {
+                t0_s,
+                t1_s,
+                peak_ut,
+                from,
+                to,
+            } => match q {
+                Some(q) if (t0_s..=t1_s).contains(&t) => {
+                    let u = (t - t0_s) / (t1_s - t0_s);
+                    let d = frames::add(frames::scale(from, 1.0 - u), frames::scale(to, u));
+                    let size = peak_ut * (std::f64::consts::PI * u).sin().powi(2);
+                    frames::expected_sensor_field(q, frames::scale(d, size / frames::norm(d)))
+                }
+                _ => [0.0; 3],
+            },
         }
     }
 }
@@ -72,7 +96,12 @@ fn with_added(rel: &str, dir: &Path, name: &str, added: &[Added], scalar: bool) 
             let t: f64 = cells[column("t")].parse().unwrap();
             let q: Option<[f64; 4]> = ["qw", "qx", "qy", "qz"]
                 .iter()
-                .map(|c| cells[column(c)].parse::<f64>().ok())
+                .map(|c| {
+                    cells[column(c)]
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                })
                 .collect::<Option<Vec<f64>>>()
                 .map(|v| [v[0], v[1], v[2], v[3]]);
             let d = added
@@ -238,10 +267,12 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
 
 /// 300 µT on the board for the middle 90 s of the turning (49.9–140.1 s): the robust fit took the state with most
 /// directions — the one with the magnet — and the stretches before and after, on the sensor's own offset, for
-/// spans; the calibration was 300 µT off, graded usable with a warning that the rest "sat on another offset". The
-/// recording began and ended on that offset: the verdict is now redo, saying so.
+/// spans; the calibration was 300 µT off, graded usable with a warning that the rest "sat on another offset". Then
+/// the verdict became redo, saying the recording began and ended on that offset. Now the fit of that majority
+/// looks off and the part that agrees with the reference under one calibration — the sensor's own state, before
+/// and after — calibrates, within the shared README's tolerances, with the warning.
 #[test]
-fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() {
+fn the_state_before_and_after_a_magnet_on_the_board_for_half_the_time_is_calibrated() {
     let dir = tempfile::tempdir().unwrap();
     let added = [Added::Effect(Effect::BiasWindow {
         t0_s: 49.911,
@@ -250,7 +281,8 @@ fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() 
     })];
     let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
     let r = fit_report(&path, &[]);
-    assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+    assert!(a_err < 0.02 && o_err < 1.0, "A {a_err}, offset {o_err} µT");
     // The readings the fit kept are in µT: the stretches on the other offset are no unit.
     let warnings = r["warnings"].as_array().expect("the report's warnings");
     assert!(
@@ -558,4 +590,88 @@ fn a_reference_out_of_step_with_the_readings_is_named_with_its_offset() {
         "{}",
         r["diagnosis"]["effects"]
     );
+}
+
+/// Sources moving past for `share` of the referenced time `t0_s..t1_s`: windows of 3–8 s at random places until
+/// their union covers it, each with a peak of 10–40 µT along a direction turning as it goes.
+fn moving_sources(t0_s: f64, t1_s: f64, share: f64, seed: u64) -> Vec<Added> {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut windows: Vec<(f64, f64)> = Vec::new();
+    let covered = |w: &[(f64, f64)]| {
+        let mut v: Vec<(f64, f64)> = w.iter().map(|&(a, b)| (a.max(t0_s), b.min(t1_s))).collect();
+        v.sort_by(|x, y| x.0.total_cmp(&y.0));
+        let (mut total, mut end) = (0.0, f64::NEG_INFINITY);
+        for (a, b) in v {
+            if b > end.max(a) {
+                total += b - end.max(a);
+                end = b;
+            }
+        }
+        total
+    };
+    while covered(&windows) < share * (t1_s - t0_s) {
+        let w = rng.random_range(3.0..8.0);
+        let a = rng.random_range(t0_s - w / 2.0..t1_s - w / 2.0);
+        windows.push((a, a + w));
+    }
+    let mut direction = || -> [f64; 3] { std::array::from_fn(|_| rng.random_range(-1.0..1.0)) };
+    windows
+        .iter()
+        .map(|&(a, b)| Added::Moving {
+            t0_s: a,
+            t1_s: b,
+            peak_ut: 10.0 + 30.0 * direction()[0].abs(),
+            from: direction(),
+            to: direction(),
+        })
+        .collect()
+}
+
+/// Issue 37, acceptance 2: BROAD 02 and the Nexus 5 NoDist trial with sources moving past (world-fixed, several,
+/// changing as they go) for 50 %, 70 % and 85 % of the referenced time. The fit of the majority follows the
+/// disturbances (before: "the reference is likely in another convention" at 70 % and 85 %); the consistent part
+/// calibrates within the shared README's tolerances, or the verdict is redo (naming the part that agrees and what it
+/// lacks when it does not predict itself) — never a convention or a clock.
+#[test]
+fn the_consistent_part_of_a_mostly_disturbed_recording_calibrates_or_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let nexus = "inria-nexus5/nexus5_nodist_AR.csv";
+    // The referenced time of each (the Nexus 5's reference ends at 64 s).
+    for (rel, t0_s, t1_s, a_tol, offset_tol_ut) in [
+        (BROAD_02, 0.3, 186.0, 0.03, 1.0),
+        (nexus, 0.0, 64.0, 0.05, 3.0),
+    ] {
+        let clean = truth(&real(rel));
+        for share in [0.5, 0.7, 0.85] {
+            let name = format!("{}_{share}.csv", rel.replace('/', "_"));
+            let added = moving_sources(t0_s, t1_s, share, 1);
+            let path = with_added(rel, dir.path(), &name, &added, false);
+            let r = fit_report(&path, &[]);
+            let warnings = r["warnings"].to_string();
+            let verdict = r["verdict"].to_string();
+            assert!(
+                r.get("attitude_convention").is_none()
+                    && r.get("reference_offset").is_none()
+                    && !warnings.contains("another convention")
+                    && !verdict.contains("convention and timing"),
+                "{name}: a convention or a clock named: {warnings} {verdict}"
+            );
+            if r.get("undetermined_part").is_some() {
+                assert_eq!(r["verdict"]["grade"], "redo", "{name}");
+                assert!(warnings.contains("do not determine"), "{name}: {warnings}");
+                continue;
+            }
+            // Within the tolerances, or redo: never a wrong calibration graded usable.
+            let (a_err, offset_err) = errors(&r, &clean);
+            assert!(
+                (a_err < a_tol && offset_err < offset_tol_ut) || r["verdict"]["grade"] == "redo",
+                "{name}: A off by {a_err:.3}, offset by {offset_err:.2} µT ({verdict})"
+            );
+            eprintln!(
+                "{name}: A off by {a_err:.3}, offset by {offset_err:.2} µT, {}",
+                r["verdict"]["grade"]
+            );
+        }
+    }
 }

@@ -50,6 +50,10 @@ pub struct Report {
     /// calibration).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_offset: Option<OffsetReport>,
+    /// The part of a mostly disturbed recording that agrees with the reference but does not determine a
+    /// calibration (absent otherwise; the fit is then no calibration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub undetermined_part: Option<UndeterminedPartReport>,
     /// Where the attitude reference's north points, when found off true north and fitted (absent otherwise; the
     /// calibration does not depend on it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -137,6 +141,21 @@ pub struct OffsetReport {
     pub explained: f64,
     /// The share as the file gives the reference.
     pub given_explained: f64,
+}
+
+/// The part of a mostly disturbed recording one calibration explains, when it does not determine the calibration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UndeterminedPartReport {
+    /// Its share of the samples with a reference.
+    pub share: f64,
+    /// Its residual's scale, µT per axis.
+    pub sigma_ut: f64,
+    /// The scale of the fit of the recording's majority, µT per axis.
+    pub majority_sigma_ut: f64,
+    /// Its longest stretches, `[t0_s, t1_s]` (1-based rows without time).
+    pub stretches_s: Vec<(f64, f64)>,
+    /// The share of the sphere of directions it covers.
+    pub directions_covered: f64,
 }
 
 /// The attitude reference's north, found off true north and fitted (`magcal_app::reference_heading`).
@@ -721,6 +740,13 @@ impl Report {
                 offset_s: o.offset_s,
                 explained: o.shifted.explained,
                 given_explained: o.given.explained,
+            }),
+            undetermined_part: cal.reference.part.as_ref().map(|p| UndeterminedPartReport {
+                share: p.share,
+                sigma_ut: p.sigma_ut,
+                majority_sigma_ut: p.majority_sigma_ut,
+                stretches_s: p.stretches.clone(),
+                directions_covered: p.covered,
             }),
             reference_heading: ReferenceHeadingReport::of(cal),
             heading: None,

@@ -112,6 +112,8 @@ impl RobustProblem for VectorProblem<'_> {
     type Fit = VectorFit;
     /// The median of a χ distribution with three degrees of freedom.
     const MEDIAN_OF_UNIT: f64 = 1.538_2;
+    /// Its median below three.
+    const MEDIAN_OF_UNIT_IN_MODE: f64 = 1.512_9;
 
     fn len(&self) -> usize {
         self.raw_ut.len()

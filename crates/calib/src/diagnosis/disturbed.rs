@@ -59,7 +59,7 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
     let (scale, spans) = robust::state_spans(
         &sizes,
         setup.scale(&residual),
-        setup.median_of_unit(),
+        setup.median_of_unit_in_mode(),
         times,
         tail,
     );

@@ -159,7 +159,7 @@ impl<'s> Search<'s> {
         let (scale, spans) = robust::state_spans(
             &sizes,
             setup.scale(&residual),
-            setup.median_of_unit(),
+            setup.median_of_unit_in_mode(),
             times,
             tail,
         );

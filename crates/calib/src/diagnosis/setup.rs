@@ -124,6 +124,15 @@ impl<'a> Setup<'a> {
         }
     }
 
+    /// The same median among sizes below [`crate::robust::MODE_WINDOW`], for this method.
+    pub fn median_of_unit_in_mode(&self) -> f64 {
+        if self.vector {
+            <crate::vector::VectorProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT_IN_MODE
+        } else {
+            <crate::scalar::ScalarProblem<'_> as RobustProblem>::MEDIAN_OF_UNIT_IN_MODE
+        }
+    }
+
     /// The columns of `A` in the design.
     pub fn a_columns(&self) -> Vec<usize> {
         if self.vector {
