@@ -474,7 +474,7 @@ fn vector_base(
     let mut reference =
         reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
     if !reference.is_some() && looks_off(&r, &noise) {
-        match consistent_part(&problem, rec, r) {
+        match consistent_part(&problem, rec, field, r) {
             Consistent::Part(part, warning) => {
                 warnings.push(warning);
                 r = part;
@@ -504,11 +504,14 @@ enum Consistent {
 
 /// The robust fit `majority` of a recording that looks off, or the consistent part of it when there is one
 /// ([`robust::consistent_part`]) whose residual's scale is at most [`CONSISTENT_PART_RATIO`] of the majority's:
-/// most of the recording disturbed, the rest agreeing with the reference. It calibrates when it predicts itself
-/// across time ([`robust::holds_out`]); otherwise it is said, with what it lacks.
+/// most of the recording disturbed, the rest agreeing with the reference. It calibrates when it holds through the
+/// recording ([`robust::holds_out`]); when it is spread through it but does not predict itself, it is said, with
+/// what it lacks; so is a part in few stretches when the majority's misfit would blame the reference, and
+/// otherwise it is none (an offset that drifts agrees with one calibration for a while).
 fn consistent_part(
     problem: &VectorProblem,
     rec: &Recording,
+    field: &ReferenceField,
     majority: robust::Robust<VectorFit>,
 ) -> Consistent {
     let t_s = rec.t_s.as_deref();
@@ -521,7 +524,15 @@ fn consistent_part(
         .map(|i| part.kept[i] && part.residual_ut[i].is_finite())
         .collect();
     let share = inside.iter().filter(|k| **k).count() as f64 / usable.max(1) as f64;
-    if robust::holds_out(problem, &part, t_s) {
+    let check = robust::holds_out(problem, &part, t_s);
+    // A part in few stretches says the reference is not at fault where the majority's misfit would blame it.
+    let blamed = field
+        .magnitude()
+        .is_some_and(|f| rms3(majority.fit.residual_rms_ut) > crate::fit::REFERENCE_OFF_SHARE * f);
+    if check == robust::PartCheck::Brief && !blamed {
+        return Consistent::None(majority);
+    }
+    if check == robust::PartCheck::Holds {
         let warning = format!(
             "most of this recording disagrees with the attitude reference: only {:.0} % of the readings with a \
              reference agree with it under one calibration, to {:.2} µT per axis (a fit of the majority misses by \
@@ -540,6 +551,7 @@ fn consistent_part(
         majority_sigma_ut: majority.sigma_ut,
         stretches: longest_stretches(rec, &inside),
         covered,
+        brief: check == robust::PartCheck::Brief,
     };
     Consistent::Undetermined(majority, undetermined)
 }

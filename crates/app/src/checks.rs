@@ -176,13 +176,18 @@ pub fn part_warning(p: &UndeterminedPart) -> String {
     format!(
         "most of this recording is disturbed: only {:.0} % of the readings with a reference agree with it under one \
          calibration, to {:.2} µT per axis (the majority's fit misses by {:.2} µT) — mostly at {} — but they do \
-         not determine the calibration: fitted on half of that time they miss the other half, and they cover {:.0} % \
-         of the directions. The reference itself is not at fault there. Record again away from magnets and metal, \
-         turning through more directions. A and b here are not a calibration",
+         not determine the calibration: {} (they cover {:.0} % of the directions). The reference itself is not \
+         at fault there. Record again away from magnets and metal, turning through more directions. A and b here \
+         are not a calibration",
         100.0 * p.share,
         p.sigma_ut,
         p.majority_sigma_ut,
         stretches.join(", "),
+        if p.brief {
+            "they sit in few stretches of the recording"
+        } else {
+            "fitted on every other tenth of the recording they miss the rest"
+        },
         100.0 * p.covered
     )
 }

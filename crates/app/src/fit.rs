@@ -140,8 +140,9 @@ impl ReferenceDoubt {
     }
 }
 
-/// The part of a mostly disturbed recording one calibration explains, when it does not determine the calibration:
-/// fitted on half of its time, it misses the other half ([`magcal_calib::robust::holds_out`]).
+/// The part of a mostly disturbed recording one calibration explains, when it does not determine the
+/// calibration: it sits in few stretches, or fitted on half of its time it misses the other half
+/// ([`magcal_calib::robust::holds_out`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct UndeterminedPart {
     /// Its share of the samples with a reference.
@@ -154,6 +155,8 @@ pub struct UndeterminedPart {
     pub stretches: Vec<(f64, f64)>,
     /// The share of the sphere of directions its expected fields cover.
     pub covered: f64,
+    /// Whether it sits in few stretches of the recording (rather than missing itself across them).
+    pub brief: bool,
 }
 
 /// A vector fit whose residual exceeds this share of the field's magnitude does not fit its attitude reference: the

@@ -156,6 +156,8 @@ pub struct UndeterminedPartReport {
     pub stretches_s: Vec<(f64, f64)>,
     /// The share of the sphere of directions it covers.
     pub directions_covered: f64,
+    /// Whether it sits in few stretches of the recording (else: fitted on half of its time, it misses the rest).
+    pub brief: bool,
 }
 
 /// The attitude reference's north, found off true north and fitted (`magcal_app::reference_heading`).
@@ -747,6 +749,7 @@ impl Report {
                 majority_sigma_ut: p.majority_sigma_ut,
                 stretches_s: p.stretches.clone(),
                 directions_covered: p.covered,
+                brief: p.brief,
             }),
             reference_heading: ReferenceHeadingReport::of(cal),
             heading: None,

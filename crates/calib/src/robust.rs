@@ -255,33 +255,43 @@ const HOLD_OUT_BLOCKS: usize = 10;
 /// most this many times its own.
 const HOLD_OUT_RATIO: f64 = 1.5;
 
-/// Whether a consistent part ([`consistent_part`]) of `problem` predicts itself across time: the time from its
-/// first kept sample to its last (of samples, without `t_s`) cut into [`HOLD_OUT_BLOCKS`] blocks, its kept samples
-/// fitted on the even blocks and on the odd ones, each fit's residual scale on the other blocks' kept samples at
-/// most [`HOLD_OUT_RATIO`] times the part's.
-/// A calibration made up of a few stretches it happens to fit (a still stretch, a slow arc) does not.
+/// Whether a consistent part ([`consistent_part`]) of `problem` holds through the recording ([`PartCheck`]): the time from its
+/// first usable sample to its last (of samples, without `t_s`) cut into [`HOLD_OUT_BLOCKS`] blocks, the part has
+/// samples in at least half of them (disturbances come and go; an offset that drifts agrees with one calibration
+/// only for a while), and its samples fitted on the even blocks and on the odd ones, each fit's residual scale on
+/// the other blocks' samples is at most [`HOLD_OUT_RATIO`] times the part's. A calibration made up of a few
+/// stretches it happens to fit (a still stretch, a slow arc) does not.
 pub fn holds_out<P: RobustProblem>(
     problem: &P,
     part: &Robust<P::Fit>,
     t_s: Option<&[f64]>,
-) -> bool {
+) -> PartCheck {
     let n = part.kept.len();
     let usable: Vec<usize> = (0..n)
-        .filter(|&i| part.kept[i] && part.residual_ut[i].is_finite())
+        .filter(|&i| part.residual_ut[i].is_finite())
         .collect();
     let (Some(&first), Some(&last)) = (usable.first(), usable.last()) else {
-        return false;
+        return PartCheck::Brief;
     };
-    // Each usable kept sample's block of time (of rank, without times) between the first and the last.
+    // Each usable kept sample's block of the time from the first usable sample to the last (of rank, without
+    // times).
     let mut block: Vec<Option<usize>> = vec![None; n];
+    let mut seen = [false; HOLD_OUT_BLOCKS];
     for (rank, &i) in usable.iter().enumerate() {
         let at = match t_s {
             Some(t) if t[last] > t[first] => (t[i] - t[first]) / (t[last] - t[first]),
             _ => rank as f64 / usable.len() as f64,
         };
-        block[i] = Some(((at * HOLD_OUT_BLOCKS as f64) as usize).min(HOLD_OUT_BLOCKS - 1));
+        let b = ((at * HOLD_OUT_BLOCKS as f64) as usize).min(HOLD_OUT_BLOCKS - 1);
+        if part.kept[i] {
+            block[i] = Some(b);
+            seen[b] = true;
+        }
     }
-    (0..2).all(|parity| {
+    if 2 * seen.iter().filter(|s| **s).count() < HOLD_OUT_BLOCKS {
+        return PartCheck::Brief;
+    }
+    let predicts = (0..2).all(|parity| {
         let fitted: Vec<f64> = block
             .iter()
             .map(|b| f64::from(u8::from(b.is_some_and(|b| b % 2 == parity))))
@@ -295,7 +305,23 @@ pub fn holds_out<P: RobustProblem>(
             .map(|i| e[i])
             .collect();
         scale::<P>(&held) <= HOLD_OUT_RATIO * part.sigma_ut
-    })
+    });
+    if predicts {
+        PartCheck::Holds
+    } else {
+        PartCheck::Misses
+    }
+}
+
+/// What [`holds_out`] found of a consistent part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PartCheck {
+    /// Spread through the recording, and each half of its time predicts the other.
+    Holds,
+    /// Spread through the recording, but a half of its time misses the other: too few directions.
+    Misses,
+    /// In few stretches of the recording: one calibration explains it only for a while.
+    Brief,
 }
 
 /// From the fit on the samples of `span`, concentration steps on the `share` of the samples it fits best: the fit and
