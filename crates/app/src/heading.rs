@@ -27,7 +27,7 @@
 //!   it), so it is stated beside the figures, not in them.
 
 use magcal_calib::frames::{self, Mat3};
-use nalgebra::{DMatrix, Matrix3};
+use nalgebra::{DMatrix, DVector, Matrix3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -135,18 +135,42 @@ fn standard_draws(n: usize) -> DMatrix<f64> {
 }
 
 /// The one-standard-deviation figure of the largest error over the headings, radians: the [`ONE_SIGMA_SHARE`]
-/// quantile, over `draws` (one column a draw), of the largest `|g_k·z|`, where row `g_k` of `across` is the error
-/// across the field at heading `k` per unit draw, radians; never below the largest heading's own standard deviation
-/// `|g_k|` (which it equals but for the draws' chance when one heading dominates).
-fn worst_of_draws_rad(across: &DMatrix<f64>, draws: &DMatrix<f64>) -> f64 {
-    if across.ncols() == 0 {
+/// quantile, over `draws` (one column a draw), of the largest `|g_k·z|`, where `g_k`, the error across the field at
+/// heading `k` per unit draw (radians), is row `k` of `basis·coefficients`; never below the largest heading's own
+/// standard deviation `|g_k|` (which it equals but for the draws' chance when one heading dominates).
+fn worst_of_draws_rad(
+    basis: &DMatrix<f64>,
+    coefficients: &DMatrix<f64>,
+    draws: &DMatrix<f64>,
+) -> f64 {
+    if coefficients.ncols() == 0 {
         return 0.0;
     }
-    let mut worst: Vec<f64> = (across * draws).column_iter().map(|c| c.amax()).collect();
+    let mut worst: Vec<f64> = (basis * (coefficients * draws))
+        .column_iter()
+        .map(|c| c.amax())
+        .collect();
     worst.sort_by(f64::total_cmp);
     let rank = (ONE_SIGMA_SHARE * worst.len() as f64).ceil() as usize;
-    let largest_sd = across.row_iter().map(|g| g.norm()).fold(0.0, f64::max);
+    let largest_sd = (basis * coefficients)
+        .row_iter()
+        .map(|g| g.norm())
+        .fold(0.0, f64::max);
     worst[rank.clamp(1, worst.len()) - 1].max(largest_sd)
+}
+
+/// `1, cos ψ, sin ψ, cos 2ψ, sin 2ψ` at each heading ψ (a row each).
+fn harmonics() -> DMatrix<f64> {
+    DMatrix::from_fn(HEADINGS, 5, |k, j| {
+        let psi = (k as f64).to_radians();
+        match j {
+            0 => 1.0,
+            1 => psi.cos(),
+            2 => psi.sin(),
+            3 => (2.0 * psi).cos(),
+            _ => (2.0 * psi).sin(),
+        }
+    })
 }
 
 /// The errors at each heading for one face.
@@ -220,6 +244,7 @@ pub fn heading_errors(input: &HeadingInput<'_>) -> HeadingErrors {
         .uncertainty
         .map_or_else(Vec::new, FieldUncertainty::factors);
     let draws = standard_draws(factors.len());
+    let harmonics = harmonics();
     let unexplained_rad = unexplained_ut / h;
     let mut before = Stats::default();
     let mut left = Stats::default();
@@ -250,7 +275,14 @@ pub fn heading_errors(input: &HeadingInput<'_>) -> HeadingErrors {
                         .min(MAX_ERROR_DEG),
                 );
             }
-            let w_rad = worst_of_draws_rad(&per_draw_rad, &draws);
+            // Each column is a trigonometric polynomial of degree 2 in the heading (the raw reading and the direction
+            // across are each linear in its cosine and sine): its five Fourier coefficients give it exactly, and
+            // each draw's curve costs five products a heading instead of one per factor.
+            let coefficients = DMatrix::from_diagonal(&DVector::from_fn(5, |j, _| {
+                if j == 0 { 1.0 / 360.0 } else { 1.0 / 180.0 }
+            })) * harmonics.transpose()
+                * &per_draw_rad;
+            let w_rad = worst_of_draws_rad(&harmonics, &coefficients, &draws);
             let parameters_worst_deg = w_rad.to_degrees().min(MAX_ERROR_DEG);
             let left_worst_deg = w_rad.hypot(unexplained_rad).to_degrees().min(MAX_ERROR_DEG);
             parameters_deg = parameters_deg.max(parameters_worst_deg);
@@ -342,19 +374,80 @@ mod tests {
     #[test]
     fn the_worst_heading_figure_is_the_quantile_of_the_largest_error() {
         let draws = standard_draws(12);
+        let worst = |g: &DMatrix<f64>| {
+            worst_of_draws_rad(&DMatrix::identity(g.nrows(), g.nrows()), g, &draws)
+        };
         let one = DMatrix::from_fn(1, 12, |_, m| if m < 4 { 0.5 } else { 0.0 });
-        let w = worst_of_draws_rad(&one, &draws);
+        let w = worst(&one);
         assert!((1.0..1.04).contains(&w), "{w}");
-        let independent = DMatrix::<f64>::identity(12, 12);
-        let w = worst_of_draws_rad(&independent, &draws);
+        let w = worst(&DMatrix::identity(12, 12));
         assert!((w / 2.153 - 1.0).abs() < 0.04, "{w}");
-        // The same 360 headings twice over change nothing; no draws at all (no uncertainty) give zero.
+        // The same headings twice over change nothing; no draws at all (no uncertainty) give zero.
         let twice = DMatrix::from_fn(24, 12, |k, m| f64::from(u8::from(k % 12 == m)));
-        assert_eq!(worst_of_draws_rad(&twice, &draws), w);
-        assert_eq!(
-            worst_of_draws_rad(&DMatrix::zeros(HEADINGS, 0), &standard_draws(0)),
-            0.0
-        );
+        assert_eq!(worst(&twice), w);
+        assert_eq!(worst(&DMatrix::zeros(HEADINGS, 0)), 0.0);
+    }
+
+    /// The worst heading's figure of a scalar fit's uncertainty, taken from the curves' Fourier coefficients, is the
+    /// one the draws give at every one of the 360 headings directly; it is above the largest per-heading figure.
+    #[test]
+    fn the_worst_heading_from_five_coefficients_is_the_direct_one() {
+        use crate::uncertainty::ScalarParts;
+
+        let u = FieldUncertainty::Scalar(Box::new(ScalarParts {
+            a: [[1.05, 0.02, -0.01], [0.02, 0.97, 0.03], [-0.01, 0.03, 1.02]],
+            centre_ut: [12.0, -25.0, 7.0],
+            centre_cov_ut2: [[0.04, 0.01, 0.0], [0.01, 0.09, -0.02], [0.0, -0.02, 0.05]],
+            a_se: [
+                [0.004, 0.002, 0.003],
+                [0.002, 0.006, 0.001],
+                [0.003, 0.001, 0.005],
+            ],
+        }));
+        let a = [
+            [0.95, -0.02, 0.01],
+            [-0.02, 1.03, -0.03],
+            [0.01, -0.03, 0.98],
+        ];
+        let b_ut = [-11.0, 26.0, -6.0];
+        let field = LocalField::new(62.0, 48.0);
+        let out = heading_errors(&HeadingInput {
+            a,
+            b_ut,
+            field,
+            uncertainty: Some(&u),
+            residual_rms_ut: 0.0,
+            noise_floor_ut: 0.0,
+        });
+        let factors = u.factors();
+        let draws = standard_draws(factors.len());
+        let a_inv = Matrix3::from_fn(|j, k| a[j][k]).try_inverse().unwrap();
+        let h = field.horizontal_ut;
+        for curve in &out.curves {
+            let direct = DMatrix::from_fn(HEADINGS, factors.len(), |k, m| {
+                let r = curve.face.sensor_to_level((k as f64).to_radians());
+                let field_sensor =
+                    nalgebra::Vector3::from(frames::mat_t_vec(&r, [h, 0.0, field.vertical_ut]));
+                let raw = a_inv * (field_sensor - nalgebra::Vector3::from(b_ut));
+                let across = frames::mat_t_vec(&r, [0.0, 1.0, 0.0]);
+                frames::dot(factors[m].at([raw.x, raw.y, raw.z]), across) / h
+            });
+            let want_deg =
+                worst_of_draws_rad(&DMatrix::identity(HEADINGS, HEADINGS), &direct, &draws)
+                    .to_degrees();
+            assert!(
+                (curve.left_worst_deg - want_deg).abs() < 1e-9 * want_deg,
+                "{:?}: {} against {want_deg}",
+                curve.face,
+                curve.left_worst_deg
+            );
+            let largest = curve.left_deg.iter().fold(0.0f64, |m, e| m.max(*e));
+            assert!(
+                curve.left_worst_deg > 1.2 * largest,
+                "{} against {largest}",
+                curve.left_worst_deg
+            );
+        }
     }
 
     #[test]
