@@ -7,6 +7,8 @@
 //! <!-- example lines=2-6: magcal-fit ../shared/data/real/inria-nexus5/nexus5_nodist_AR.csv -->
 //! <!-- example stream=stderr lines=5: magcal-fit ../shared/data/flight/px4-ulog/quadrotor_local.ulg -->
 //! <!-- example lines=7-8: magcal-record --device sim:lis3mdl --routine cube24 --out rec.csv && magcal-fit rec.csv -->
+//! <!-- example terminal lines=3-20: magcal-record --device sim:lis3mdl --routine free --out rec.csv -->
+//! <!-- example mask=seconds: magcal-sim --out a.csv && magcal-batch a.csv --jobs 2 -->
 //! ```
 //!
 //! - The commands (one or more, joined by ` && `; arguments split at spaces, `'…'` or `"…"` keep one together) run in
@@ -16,15 +18,36 @@
 //! - The block holds the last command's standard output (`stream=stderr`: its standard error), with the temporary
 //!   directory's path taken out, and without the final line end; `lines=A-B,C` keeps only those lines (1-based, both
 //!   ends included), with a line `…` where lines were skipped between two ranges.
+//! - `terminal` runs the last command on a pseudo-terminal of [`COLS`] columns and [`ROWS`] rows (its controlling
+//!   terminal, `TERM=xterm-256color`, nothing typed), as a person's terminal runs it: the block holds the screen a
+//!   terminal emulator (vt100) shows when it has exited — both streams, a live display redrawn in place as its last
+//!   frame —, each row's trailing blanks and the empty rows at the end left out.
+//! - `mask=seconds` is for output that states wall time, which no two runs share: every number directly followed by
+//!   ` s` (`5.9 s`) is read as `_ s` when the block and the tool's output are compared (and when two runs are), so
+//!   the block keeps the time of the run that last rewrote it.
 //! - `heavy` marks an example too slow for the debug build: it is checked only by the ignored test
 //!   `heavy_doc_examples_match_the_tools` (CI runs it in release).
 //!
-//! Each example runs twice and both runs must give the same text. `MAGCAL_BLESS=1 cargo test --test doc_examples`
+//! Each example runs twice and both runs must give the same text (masked). `MAGCAL_BLESS=1 cargo test --test doc_examples`
 //! rewrites the blocks that differ (with `-- --ignored` for the heavy ones).
 
-use std::path::PathBuf;
-use std::process::Command;
+use std::fs::File;
+use std::io::Read;
+use std::num::NonZeroU16;
+use std::os::fd::OwnedFd;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
 use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use nix::pty::{Winsize, openpty};
+
+/// The `terminal` examples' screen: columns.
+const COLS: u16 = 100;
+/// The `terminal` examples' screen: rows (enough that nothing scrolls off).
+const ROWS: u16 = 200;
+/// How long a `terminal` example may run before it is stopped (and fails).
+const TERMINAL_TIMEOUT: Duration = Duration::from_secs(300);
 
 /// Held while a test checks or rewrites the documents, so two tests never rewrite one file at once.
 static DOCUMENTS: Mutex<()> = Mutex::new(());
@@ -58,6 +81,13 @@ enum Stream {
     Stderr,
 }
 
+/// What of an example's output is left out when it is compared.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mask {
+    /// Numbers of seconds (`5.9 s`): wall time.
+    Seconds,
+}
+
 /// What a marker line says.
 #[derive(Debug)]
 struct Marker {
@@ -65,6 +95,9 @@ struct Marker {
     /// Ranges of lines kept, 1-based, inclusive; empty: all.
     lines: Vec<(usize, usize)>,
     heavy: bool,
+    /// The last command runs on a pseudo-terminal; the block is its screen.
+    terminal: bool,
+    mask: Option<Mask>,
     /// The commands, each a tool and its arguments.
     commands: Vec<Vec<String>>,
 }
@@ -141,18 +174,26 @@ fn parse_marker(content: &str) -> Result<Marker, String> {
     let mut stream = Stream::Stdout;
     let mut lines = Vec::new();
     let mut heavy = false;
+    let mut terminal = false;
+    let mut mask = None;
     for option in options.split_whitespace() {
         match option.split_once('=') {
             Some(("stream", "stdout")) => stream = Stream::Stdout,
             Some(("stream", "stderr")) => stream = Stream::Stderr,
             Some(("lines", ranges)) => lines = parse_lines(ranges)?,
+            Some(("mask", "seconds")) => mask = Some(Mask::Seconds),
             None if option == "heavy" => heavy = true,
+            None if option == "terminal" => terminal = true,
             _ => {
                 return Err(format!(
-                    "unknown option {option:?} (known: stream=stdout|stderr, lines=A-B,C, heavy)"
+                    "unknown option {option:?} (known: stream=stdout|stderr, lines=A-B,C, heavy, terminal, \
+                     mask=seconds)"
                 ));
             }
         }
+    }
+    if terminal && stream == Stream::Stderr {
+        return Err("stream=stderr with terminal: a terminal shows both streams".into());
     }
     let mut commands = vec![Vec::new()];
     for arg in split_args(command)? {
@@ -169,6 +210,8 @@ fn parse_marker(content: &str) -> Result<Marker, String> {
         stream,
         lines,
         heavy,
+        terminal,
+        mask,
         commands,
     })
 }
@@ -241,12 +284,18 @@ fn run(example: &Marker) -> Result<String, String> {
                 }
             })
             .collect();
-        let out = Command::new(program)
-            .args(&args)
-            .current_dir(dir.path())
-            .env_remove("MAGCAL_BLESS")
-            .output()
-            .map_err(|e| format!("{} does not run: {e}", command[0]))?;
+        let last_one = n + 1 == example.commands.len();
+        let out = if example.terminal && last_one {
+            on_terminal(program, &args, dir.path())
+        } else {
+            Command::new(program)
+                .args(&args)
+                .current_dir(dir.path())
+                .env_remove("MAGCAL_BLESS")
+                .output()
+                .map_err(|e| e.to_string())
+        }
+        .map_err(|e| format!("{} does not run: {e}", command[0]))?;
         if n + 1 < example.commands.len() && !out.status.success() {
             return Err(format!(
                 "{} failed:\n{}",
@@ -299,6 +348,114 @@ fn run(example: &Marker) -> Result<String, String> {
         kept.extend_from_slice(&all[a - 1..b]);
     }
     Ok(kept.join("\n"))
+}
+
+/// Runs `program ARGS` in `dir` on a new pseudo-terminal (its controlling terminal, through `setsid -c`) until it
+/// exits, and returns its status with the screen a terminal emulator shows then as its standard output.
+fn on_terminal(program: &str, args: &[String], dir: &Path) -> Result<Output, String> {
+    let size = Winsize {
+        ws_row: ROWS,
+        ws_col: COLS,
+        ws_xpixel: 0,
+        ws_ypixel: 0,
+    };
+    let pty = openpty(Some(&size), None).map_err(|e| format!("openpty: {e}"))?;
+    let slave = |pty: &OwnedFd| pty.try_clone().map(Stdio::from).map_err(|e| e.to_string());
+    let mut child = Command::new("setsid")
+        .arg("-c")
+        .arg(program)
+        .args(args)
+        .current_dir(dir)
+        .env_remove("MAGCAL_BLESS")
+        .env("TERM", "xterm-256color")
+        .stdin(slave(&pty.slave)?)
+        .stdout(slave(&pty.slave)?)
+        .stderr(slave(&pty.slave)?)
+        .spawn()
+        .map_err(|e| format!("setsid (util-linux): {e}"))?;
+    drop(pty.slave);
+    let mut master = File::from(pty.master);
+    // Read while it runs (a full pseudo-terminal would block it); ends with an error (EIO) once its side is closed.
+    let reader = std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = master.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            bytes.extend_from_slice(&buf[..n]);
+        }
+        bytes
+    });
+    let deadline = Instant::now() + TERMINAL_TIMEOUT;
+    let status = loop {
+        if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
+            break status;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!("still running after {TERMINAL_TIMEOUT:?}"));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let bytes = reader.join().map_err(|_| "the reader panicked")?;
+    let cells = |n| NonZeroU16::new(n).expect("a screen of some size");
+    let mut parser = vt100::Parser::new(cells(ROWS), cells(COLS), 0);
+    parser.process(&bytes);
+    let mut rows: Vec<String> = parser
+        .screen()
+        .rows(0, COLS)
+        .map(|r| r.trim_end().to_owned())
+        .collect();
+    while rows.last().is_some_and(String::is_empty) {
+        rows.pop();
+    }
+    Ok(Output {
+        status,
+        stdout: (rows.join("\n") + "\n").into_bytes(),
+        stderr: Vec::new(),
+    })
+}
+
+/// `text` as it is compared under `mask`: with `Seconds`, every number directly followed by ` s` (and no letter
+/// after it) reads `_ s`.
+fn masked(text: &str, mask: Option<Mask>) -> String {
+    let Some(Mask::Seconds) = mask else {
+        return text.to_owned();
+    };
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = String::with_capacity(text.len());
+    let mut i = 0;
+    while i < chars.len() {
+        let number_starts =
+            chars[i].is_ascii_digit() && (i == 0 || !chars[i - 1].is_alphanumeric());
+        if number_starts {
+            let mut j = i;
+            while j < chars.len() && (chars[j].is_ascii_digit() || chars[j] == '.') {
+                j += 1;
+            }
+            let seconds = chars.get(j) == Some(&' ')
+                && chars.get(j + 1) == Some(&'s')
+                && !chars.get(j + 2).is_some_and(|c| c.is_alphanumeric());
+            if seconds {
+                out.push('_');
+            } else {
+                out.extend(&chars[i..j]);
+            }
+            i = j;
+        } else if chars[i].is_alphanumeric() {
+            // A word (`v2.5`) is kept whole: a number inside it is no number of seconds.
+            while i < chars.len() && (chars[i].is_alphanumeric() || chars[i] == '.') {
+                out.push(chars[i]);
+                i += 1;
+            }
+        } else {
+            out.push(chars[i]);
+            i += 1;
+        }
+    }
+    out
 }
 
 /// A line diff of `expected` (the block) against `actual` (the tool's), by their longest common subsequence.
@@ -357,8 +514,9 @@ fn check(heavy: bool) -> usize {
                     continue;
                 }
             };
+            let mask = example.marker.mask;
             match run(&example.marker) {
-                Ok(again) if again == actual => {}
+                Ok(again) if masked(&again, mask) == masked(&actual, mask) => {}
                 Ok(again) => {
                     failures.push(format!(
                         "{place}: two runs differ (the example must be deterministic):\n{}",
@@ -372,7 +530,7 @@ fn check(heavy: bool) -> usize {
                 }
             }
             let block = lines[example.body_start..example.body_end].join("\n");
-            if block == actual {
+            if masked(&block, mask) == masked(&actual, mask) {
                 continue;
             }
             if bless {
@@ -424,7 +582,7 @@ fn markers_are_read_as_documented() {
     assert_eq!((e.marker_line, e.body_start, e.body_end), (2, 3, 4));
     assert_eq!(m.stream, Stream::Stderr);
     assert_eq!(m.lines, [(1, 2), (5, 5)]);
-    assert!(!m.heavy);
+    assert!(!m.heavy && !m.terminal && m.mask.is_none());
     assert_eq!(
         m.commands,
         [
@@ -444,6 +602,14 @@ fn markers_are_read_as_documented() {
             "unknown option",
         ),
         ("<!-- example magcal-fit x -->\n```\n```\n", "no ': '"),
+        (
+            "<!-- example mask=minutes: magcal-fit x -->\n```\n```\n",
+            "unknown option",
+        ),
+        (
+            "<!-- example terminal stream=stderr: magcal-fit x -->\n```\n```\n",
+            "both streams",
+        ),
     ] {
         let error = examples(bad).unwrap_err();
         assert!(
@@ -451,6 +617,22 @@ fn markers_are_read_as_documented() {
             "{error}"
         );
     }
+}
+
+#[test]
+fn terminal_and_masked_markers_are_read_and_seconds_masked() {
+    let text =
+        "<!-- example terminal mask=seconds lines=2-4: magcal-record --out r.csv -->\n```\n```\n";
+    let m = &examples(text).unwrap()[0].marker;
+    assert!(m.terminal && m.mask == Some(Mask::Seconds));
+    assert_eq!(
+        masked(
+            "(2 at a time, 5.9 s): 12 boards; 64.2 s, 5135 samples; 3 sensors, v2.5 s",
+            Some(Mask::Seconds)
+        ),
+        "(2 at a time, _ s): 12 boards; _ s, 5135 samples; 3 sensors, v2.5 s"
+    );
+    assert_eq!(masked("5.9 s", None), "5.9 s");
 }
 
 #[test]

@@ -12,11 +12,11 @@
 //! the claim there. The vector method's sensor sits 2° off its axes (which it fits); the scalar method's is
 //! symmetric (the rotation it cannot see is not in its claim, and the summary says so).
 //!
-//! Asserted (≤ 32 % beyond the claim, ≤ 5 % beyond twice it): the claim at each heading, and the claim's RMS over
-//! 360 headings against the actual RMS (per face). Reported, not asserted: the actual worst heading against the
-//! largest per-heading claim — the summary's "worst" figure is the largest one-standard-deviation figure over the
-//! headings, not one standard deviation of the worst heading's error (the largest of 360 correlated errors exceeds
-//! it far more often: 44–56 % when measured), and docs/reading-the-results.md says so.
+//! Asserted (≤ 32 % beyond the claim, ≤ 5 % beyond twice it), per face: the claim at each heading, the claim's RMS
+//! over 360 headings against the actual RMS, and the worst heading's claim (`Curve::left_worst_deg`, drawn from the
+//! covariance) against the actual worst over 360 headings. Reported, not asserted: the actual worst against the
+//! largest per-heading claim, what the summary's "worst" was before it was drawn (the largest of 360 correlated
+//! errors exceeds it far more often than one standard deviation should).
 //!
 //! The table is the one in docs/reading-the-results.md (between the `heading-claims` markers): the test fails when
 //! they differ. `MAGCAL_BLESS=1` rewrites it. Heavy: `cargo test --release --test heading_claims -- --ignored
@@ -149,11 +149,13 @@ fn sensor(method: Method, rng: &mut ChaCha8Rng) -> (Matrix3<f64>, Vector3<f64>) 
 }
 
 /// What one fit's claims met: the actual error over the claim at every 10° of heading on both faces (the curve), and
-/// per face the actual worst and RMS over 360 headings over the summary's worst and RMS claims.
+/// per face the actual worst and RMS over 360 headings over the summary's worst and RMS claims, and the actual worst
+/// over the largest per-heading claim.
 struct Ratios {
     each: Vec<f64>,
     worst: Vec<f64>,
     rms: Vec<f64>,
+    largest: Vec<f64>,
 }
 
 /// The ratios of one seed's fit; `None` when the fit refuses.
@@ -209,6 +211,7 @@ fn ratios(method: Method, region: Region, seed: u64) -> Option<Ratios> {
         each: Vec::new(),
         worst: Vec::new(),
         rms: Vec::new(),
+        largest: Vec::new(),
     };
     for curve in &heading.curves {
         let (mut worst, mut ss) = (0.0f64, 0.0);
@@ -225,11 +228,12 @@ fn ratios(method: Method, region: Region, seed: u64) -> Option<Ratios> {
                 out.each.push(actual_deg.abs() / curve.left_deg[k]);
             }
         }
-        // This face's worst and RMS of the claim over 360 headings (the summary's are the worse face's).
-        let claim_worst = curve.left_deg.iter().fold(0.0f64, |m, e| m.max(*e));
+        // This face's worst and RMS claims over 360 headings (the summary's are the worse face's).
+        let largest = curve.left_deg.iter().fold(0.0f64, |m, e| m.max(*e));
         let claim_rms = (curve.left_deg.iter().map(|e| e * e).sum::<f64>() / 360.0).sqrt();
-        out.worst.push(worst / claim_worst);
+        out.worst.push(worst / curve.left_worst_deg);
         out.rms.push((ss / 360.0).sqrt() / claim_rms);
+        out.largest.push(worst / largest);
     }
     Some(out)
 }
@@ -250,10 +254,12 @@ struct Row {
     each: (f64, f64),
     worst: (f64, f64),
     rms: (f64, f64),
+    largest: (f64, f64),
 }
 
 fn study(region: Region, method: Method) -> Row {
-    let (mut each, mut worst, mut rms) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut each, mut worst, mut rms, mut largest) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut fitted, mut refused) = (0, 0);
     // Seeds in batches on all threads, in order, until FITS are accepted.
     let mut next = 0;
@@ -274,6 +280,7 @@ fn study(region: Region, method: Method) -> Row {
                     each.extend(r.each);
                     worst.extend(r.worst);
                     rms.extend(r.rms);
+                    largest.extend(r.largest);
                 }
                 None => refused += 1,
             }
@@ -287,6 +294,7 @@ fn study(region: Region, method: Method) -> Row {
         each: beyond(&each),
         worst: beyond(&worst),
         rms: beyond(&rms),
+        largest: beyond(&largest),
     }
 }
 
@@ -307,8 +315,9 @@ const END: &str = "<!-- heading-claims: end -->";
 fn heading_claims_are_calibrated_on_caps_bands_and_the_sphere() {
     let mut table = String::from(
         "| coverage | method | fits (refused) | at each heading: beyond 1σ, twice it | the RMS over headings: \
-         beyond its claim, twice it | the worst heading: beyond the largest claim, twice it (not asserted) |\n\
-         |---|---|---|---|---|---|\n",
+         beyond its claim, twice it | the worst heading: beyond its claim, twice it | the worst heading against the \
+         largest per-heading claim (not asserted) |\n\
+         |---|---|---|---|---|---|---|\n",
     );
     let mut failures = Vec::new();
     let started = std::time::Instant::now();
@@ -317,14 +326,15 @@ fn heading_claims_are_calibrated_on_caps_bands_and_the_sphere() {
         for method in [Method::Vector, Method::Scalar] {
             let r = study(region, method);
             table += &format!(
-                "| {} | {} | {} ({}) | {} | {} | {} |\n",
+                "| {} | {} | {} ({}) | {} | {} | {} | {} |\n",
                 r.region.name(),
                 r.method.as_str(),
                 r.fitted,
                 r.refused,
                 pct(r.each),
                 pct(r.rms),
-                pct(r.worst)
+                pct(r.worst),
+                pct(r.largest)
             );
             eprintln!(
                 "{:.0} s: {}",
@@ -340,8 +350,12 @@ fn heading_claims_are_calibrated_on_caps_bands_and_the_sphere() {
                 ));
             }
             // A calibrated claim: exceeded at most as often as a normal error's one standard deviation (31.7 %),
-            // twice over at most as often as its two (4.6 %). The worst heading is reported only (module docs).
-            for (what, (one, two)) in [("each heading", r.each), ("RMS", r.rms)] {
+            // twice over at most as often as its two (4.6 %).
+            for (what, (one, two)) in [
+                ("each heading", r.each),
+                ("RMS", r.rms),
+                ("worst heading", r.worst),
+            ] {
                 if one > 0.32 || two > 0.05 {
                     failures.push(format!(
                         "{}, {:?}, {what}: beyond the claim {:.1} %, twice it {:.1} %",

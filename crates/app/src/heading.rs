@@ -17,16 +17,31 @@
 //!   floor `f` does not account for: what the model leaves unexplained, taken as an error of that size in any
 //!   direction.
 //!   Figures above [`MAX_ERROR_DEG`] are capped there.
+//! - **Left at the worst heading**: not the largest of those figures, which the largest of 360 correlated errors
+//!   exceeds far more often than one standard deviation should, but the figure the worst heading's error stays
+//!   within as often as a normal error stays within one standard deviation (68.3 %): `√(w² + u²) / H`, where `w` is
+//!   that quantile of the largest error across the field over the headings, over [`WORST_DRAWS`] draws of the
+//!   parameters' errors from their covariance ([`FieldUncertainty::factors`]; a fixed seed, so the figure is the
+//!   same on every run). `tests/heading_claims.rs` measures it against actual errors.
 //! - **Noise**: `f / H`, the jitter of a single reading. It is not a calibration error (averaging readings reduces
 //!   it), so it is stated beside the figures, not in them.
 
 use magcal_calib::frames::{self, Mat3};
-use nalgebra::Matrix3;
+use nalgebra::{DMatrix, DVector, Matrix3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
 
 use crate::uncertainty::FieldUncertainty;
 
 /// Headings the figures are computed over (one per degree).
 pub const HEADINGS: usize = 360;
+/// Draws of the parameters' errors the worst heading's figure is taken over.
+pub const WORST_DRAWS: usize = 1000;
+/// The share of draws whose worst heading's error the figure covers: a normal error's within one standard deviation.
+pub const ONE_SIGMA_SHARE: f64 = 0.682_689_5;
+/// The draws' seed: the same draws for every fit, so the figure is the same on every run.
+const WORST_SEED: u64 = 0x6d61_6763_616c;
 /// A compass cannot be further off than this: larger linearised figures are capped (they mean "no heading").
 pub const MAX_ERROR_DEG: f64 = 180.0;
 
@@ -113,6 +128,51 @@ impl Stats {
     }
 }
 
+/// [`WORST_DRAWS`] draws of `n` independent standard normal errors, one column a draw, from [`WORST_SEED`].
+fn standard_draws(n: usize) -> DMatrix<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(WORST_SEED);
+    DMatrix::from_fn(n, WORST_DRAWS, |_, _| StandardNormal.sample(&mut rng))
+}
+
+/// The one-standard-deviation figure of the largest error over the headings, radians: the [`ONE_SIGMA_SHARE`]
+/// quantile, over `draws` (one column a draw), of the largest `|g_k·z|`, where `g_k`, the error across the field at
+/// heading `k` per unit draw (radians), is row `k` of `basis·coefficients`; never below the largest heading's own
+/// standard deviation `|g_k|` (which it equals but for the draws' chance when one heading dominates).
+fn worst_of_draws_rad(
+    basis: &DMatrix<f64>,
+    coefficients: &DMatrix<f64>,
+    draws: &DMatrix<f64>,
+) -> f64 {
+    if coefficients.ncols() == 0 {
+        return 0.0;
+    }
+    let mut worst: Vec<f64> = (basis * (coefficients * draws))
+        .column_iter()
+        .map(|c| c.amax())
+        .collect();
+    worst.sort_by(f64::total_cmp);
+    let rank = (ONE_SIGMA_SHARE * worst.len() as f64).ceil() as usize;
+    let largest_sd = (basis * coefficients)
+        .row_iter()
+        .map(|g| g.norm())
+        .fold(0.0, f64::max);
+    worst[rank.clamp(1, worst.len()) - 1].max(largest_sd)
+}
+
+/// `1, cos ψ, sin ψ, cos 2ψ, sin 2ψ` at each heading ψ (a row each).
+fn harmonics() -> DMatrix<f64> {
+    DMatrix::from_fn(HEADINGS, 5, |k, j| {
+        let psi = (k as f64).to_radians();
+        match j {
+            0 => 1.0,
+            1 => psi.cos(),
+            2 => psi.sin(),
+            3 => (2.0 * psi).cos(),
+            _ => (2.0 * psi).sin(),
+        }
+    })
+}
+
 /// The errors at each heading for one face.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Curve {
@@ -122,6 +182,10 @@ pub struct Curve {
     pub before_deg: Vec<f64>,
     /// What the calibration leaves at heading `k`° (one standard deviation), degrees.
     pub left_deg: Vec<f64>,
+    /// What the calibration leaves at the worst heading (one standard deviation of the worst; module docs), degrees.
+    pub left_worst_deg: f64,
+    /// The part of `left_worst_deg` from the fit's parameter uncertainty alone (`w / H`), degrees.
+    pub parameters_worst_deg: f64,
 }
 
 /// The heading figures of a calibration.
@@ -131,9 +195,9 @@ pub struct HeadingErrors {
     pub field: LocalField,
     /// Raw readings used as if calibrated (the worse face).
     pub before: Stats,
-    /// What the calibration leaves (the worse face).
+    /// What the calibration leaves (the worse face): at the worst heading (module docs) and the RMS over headings.
     pub left: Stats,
-    /// The part of `left` from the fit's parameter uncertainty alone, worst heading, degrees.
+    /// The part of `left`'s worst from the fit's parameter uncertainty alone (the worse face), degrees.
     pub parameters_deg: f64,
     /// The residual the noise does not account for, µT (`u` in the module docs).
     pub unexplained_ut: f64,
@@ -176,6 +240,12 @@ pub fn heading_errors(input: &HeadingInput<'_>) -> HeadingErrors {
         .max(0.0)
         .sqrt();
     let field_level = [h, 0.0, input.field.vertical_ut];
+    let factors = input
+        .uncertainty
+        .map_or_else(Vec::new, FieldUncertainty::factors);
+    let draws = standard_draws(factors.len());
+    let harmonics = harmonics();
+    let unexplained_rad = unexplained_ut / h;
     let mut before = Stats::default();
     let mut left = Stats::default();
     let mut parameters_deg = 0.0f64;
@@ -184,6 +254,8 @@ pub fn heading_errors(input: &HeadingInput<'_>) -> HeadingErrors {
         .map(|face| {
             let mut before_deg = Vec::with_capacity(HEADINGS);
             let mut left_deg = Vec::with_capacity(HEADINGS);
+            // The error across the field at each heading per unit draw, radians.
+            let mut per_draw_rad = DMatrix::zeros(HEADINGS, factors.len());
             for k in 0..HEADINGS {
                 let r = face.sensor_to_level((k as f64).to_radians());
                 let field_sensor = frames::mat_t_vec(&r, field_level);
@@ -191,22 +263,40 @@ pub fn heading_errors(input: &HeadingInput<'_>) -> HeadingErrors {
                 before_deg.push(error_deg(frames::mat_vec(&r, raw)));
                 // Across the field in the horizontal plane: level-frame east, in sensor axes.
                 let across = frames::mat_t_vec(&r, [0.0, 1.0, 0.0]);
+                for (m, f) in factors.iter().enumerate() {
+                    per_draw_rad[(k, m)] = frames::dot(f.at(raw), across) / h;
+                }
                 let sigma = input
                     .uncertainty
                     .map_or(0.0, |u| u.se_along_ut(raw, across));
-                parameters_deg = parameters_deg.max((sigma / h).to_degrees().min(MAX_ERROR_DEG));
                 left_deg.push(
                     ((sigma * sigma + unexplained_ut * unexplained_ut).sqrt() / h)
                         .to_degrees()
                         .min(MAX_ERROR_DEG),
                 );
             }
+            // Each column is a trigonometric polynomial of degree 2 in the heading (the raw reading and the direction
+            // across are each linear in its cosine and sine): its five Fourier coefficients give it exactly, and
+            // each draw's curve costs five products a heading instead of one per factor.
+            let coefficients = DMatrix::from_diagonal(&DVector::from_fn(5, |j, _| {
+                if j == 0 { 1.0 / 360.0 } else { 1.0 / 180.0 }
+            })) * harmonics.transpose()
+                * &per_draw_rad;
+            let w_rad = worst_of_draws_rad(&harmonics, &coefficients, &draws);
+            let parameters_worst_deg = w_rad.to_degrees().min(MAX_ERROR_DEG);
+            let left_worst_deg = w_rad.hypot(unexplained_rad).to_degrees().min(MAX_ERROR_DEG);
+            parameters_deg = parameters_deg.max(parameters_worst_deg);
             before = before.max(Stats::of(&before_deg));
-            left = left.max(Stats::of(&left_deg));
+            left = left.max(Stats {
+                worst_deg: left_worst_deg,
+                ..Stats::of(&left_deg)
+            });
             Curve {
                 face,
                 before_deg,
                 left_deg,
+                left_worst_deg,
+                parameters_worst_deg,
             }
         })
         .collect();
@@ -276,6 +366,88 @@ mod tests {
         assert!((out.before.rms_deg - rms[0].sqrt().max(rms[1].sqrt())).abs() < 1e-9);
         // A 30 µT offset on z does not turn a level compass; the x–y offsets of ~17 µT against H = 21.5 µT do.
         assert!(out.before.worst_deg > 30.0, "{:?}", out.before);
+    }
+
+    /// The worst heading's figure against what it is for errors whose law is known: one heading alone (its own
+    /// standard deviation), and twelve independent headings of one standard deviation each (the largest of twelve
+    /// |N(0, 1)| stays below 2.153 in 68.27 % of draws: (2Φ(x) − 1)¹² = 0.6827).
+    #[test]
+    fn the_worst_heading_figure_is_the_quantile_of_the_largest_error() {
+        let draws = standard_draws(12);
+        let worst = |g: &DMatrix<f64>| {
+            worst_of_draws_rad(&DMatrix::identity(g.nrows(), g.nrows()), g, &draws)
+        };
+        let one = DMatrix::from_fn(1, 12, |_, m| if m < 4 { 0.5 } else { 0.0 });
+        let w = worst(&one);
+        assert!((1.0..1.04).contains(&w), "{w}");
+        let w = worst(&DMatrix::identity(12, 12));
+        assert!((w / 2.153 - 1.0).abs() < 0.04, "{w}");
+        // The same headings twice over change nothing; no draws at all (no uncertainty) give zero.
+        let twice = DMatrix::from_fn(24, 12, |k, m| f64::from(u8::from(k % 12 == m)));
+        assert_eq!(worst(&twice), w);
+        assert_eq!(worst(&DMatrix::zeros(HEADINGS, 0)), 0.0);
+    }
+
+    /// The worst heading's figure of a scalar fit's uncertainty, taken from the curves' Fourier coefficients, is the
+    /// one the draws give at every one of the 360 headings directly; it is above the largest per-heading figure.
+    #[test]
+    fn the_worst_heading_from_five_coefficients_is_the_direct_one() {
+        use crate::uncertainty::ScalarParts;
+
+        let u = FieldUncertainty::Scalar(Box::new(ScalarParts {
+            a: [[1.05, 0.02, -0.01], [0.02, 0.97, 0.03], [-0.01, 0.03, 1.02]],
+            centre_ut: [12.0, -25.0, 7.0],
+            centre_cov_ut2: [[0.04, 0.01, 0.0], [0.01, 0.09, -0.02], [0.0, -0.02, 0.05]],
+            a_se: [
+                [0.004, 0.002, 0.003],
+                [0.002, 0.006, 0.001],
+                [0.003, 0.001, 0.005],
+            ],
+        }));
+        let a = [
+            [0.95, -0.02, 0.01],
+            [-0.02, 1.03, -0.03],
+            [0.01, -0.03, 0.98],
+        ];
+        let b_ut = [-11.0, 26.0, -6.0];
+        let field = LocalField::new(62.0, 48.0);
+        let out = heading_errors(&HeadingInput {
+            a,
+            b_ut,
+            field,
+            uncertainty: Some(&u),
+            residual_rms_ut: 0.0,
+            noise_floor_ut: 0.0,
+        });
+        let factors = u.factors();
+        let draws = standard_draws(factors.len());
+        let a_inv = Matrix3::from_fn(|j, k| a[j][k]).try_inverse().unwrap();
+        let h = field.horizontal_ut;
+        for curve in &out.curves {
+            let direct = DMatrix::from_fn(HEADINGS, factors.len(), |k, m| {
+                let r = curve.face.sensor_to_level((k as f64).to_radians());
+                let field_sensor =
+                    nalgebra::Vector3::from(frames::mat_t_vec(&r, [h, 0.0, field.vertical_ut]));
+                let raw = a_inv * (field_sensor - nalgebra::Vector3::from(b_ut));
+                let across = frames::mat_t_vec(&r, [0.0, 1.0, 0.0]);
+                frames::dot(factors[m].at([raw.x, raw.y, raw.z]), across) / h
+            });
+            let want_deg =
+                worst_of_draws_rad(&DMatrix::identity(HEADINGS, HEADINGS), &direct, &draws)
+                    .to_degrees();
+            assert!(
+                (curve.left_worst_deg - want_deg).abs() < 1e-9 * want_deg,
+                "{:?}: {} against {want_deg}",
+                curve.face,
+                curve.left_worst_deg
+            );
+            let largest = curve.left_deg.iter().fold(0.0f64, |m, e| m.max(*e));
+            assert!(
+                curve.left_worst_deg > 1.2 * largest,
+                "{} against {largest}",
+                curve.left_worst_deg
+            );
+        }
     }
 
     #[test]

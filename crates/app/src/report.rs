@@ -97,11 +97,12 @@ pub struct HeadingReport {
     pub before_worst_deg: f64,
     /// Raw readings used as if calibrated: RMS over headings, degrees.
     pub before_rms_deg: f64,
-    /// What the calibration leaves (one standard deviation): worst heading, degrees.
+    /// What the calibration leaves at the worst heading: one standard deviation of the largest error over the
+    /// headings (drawn from the parameters' covariance, with the unexplained residual), degrees.
     pub left_worst_deg: f64,
-    /// What the calibration leaves: RMS over headings, degrees.
+    /// What the calibration leaves: RMS over headings of each heading's one standard deviation, degrees.
     pub left_rms_deg: f64,
-    /// The part of `left` from the parameters' standard errors alone, worst heading, degrees.
+    /// The part of `left_worst_deg` from the parameters' uncertainty alone, degrees.
     pub left_parameters_deg: f64,
     /// The residual the measured noise does not account for, µT.
     pub unexplained_ut: f64,

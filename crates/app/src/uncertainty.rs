@@ -9,6 +9,9 @@
 //!   `Σ_B = A·Σ_c·Aᵀ + Σ_rs se_rs²·g_rs·g_rsᵀ`, with `g_rs = ∂B/∂A_rs` at `d = B̂ − c`. Fitting on the centre
 //!   decouples `c` from `A` on a well-covered sphere; whether the whole is honest is checked against the spread of
 //!   fits over simulated recordings (tests).
+//!
+//! [`FieldUncertainty::factors`] writes the same covariance as independent standard normal draws: what a figure that
+//! is a function of the errors at many readings at once (the worst of 360 headings) is drawn with.
 
 use magcal_calib::frames::{self, Mat3};
 use magcal_calib::scalar::{SYM, ScalarFit};
@@ -111,6 +114,76 @@ impl FieldUncertainty {
         let c = self.covariance_at(raw_ut);
         frames::dot(dir, frames::mat_vec(&c, dir)).max(0.0).sqrt()
     }
+
+    /// The calibrated field's error as independent standard normal draws `z_m`: at the raw reading `raw`, the error
+    /// is `Σ_m z_m·(M_m·raw + v_m)` µT, with the covariance [`FieldUncertainty::covariance_at`] gives (each
+    /// parameter block's covariance factored by its eigenvectors, negative eigenvalues taken as zero).
+    pub fn factors(&self) -> Vec<ErrorFactor> {
+        match self {
+            FieldUncertainty::Vector(fit) => (0..3)
+                .flat_map(|j| {
+                    // The error of row j is (δa_j·raw + δb_j) along axis j; δ(a_j, b_j) = L_j·z, L_j·L_jᵀ = Σ_j.
+                    let l = square_root(&fit.covariance[j]);
+                    (0..4).map(move |m| {
+                        let mut f = ErrorFactor::default();
+                        f.m[j] = [l[0][m], l[1][m], l[2][m]];
+                        f.v_ut[j] = l[3][m];
+                        f
+                    })
+                })
+                .collect(),
+            FieldUncertainty::Scalar(parts) => {
+                let ScalarParts {
+                    a,
+                    centre_ut,
+                    centre_cov_ut2,
+                    a_se,
+                } = &**parts;
+                // δB = −A·δc + δA·(raw − c): the centre's draws through A, then each entry of the symmetric A.
+                let l = square_root(centre_cov_ut2);
+                let centre = (0..3).map(|m| ErrorFactor {
+                    m: [[0.0; 3]; 3],
+                    v_ut: frames::mat_vec(a, [l[0][m], l[1][m], l[2][m]]),
+                });
+                let entries = SYM.iter().map(|&(r, s)| {
+                    let mut m = [[0.0; 3]; 3];
+                    m[r][s] = a_se[r][s];
+                    m[s][r] = a_se[r][s];
+                    ErrorFactor {
+                        m,
+                        v_ut: frames::scale(frames::mat_vec(&m, *centre_ut), -1.0),
+                    }
+                });
+                centre.chain(entries).collect()
+            }
+        }
+    }
+}
+
+/// One independent draw's share of the calibrated field's error ([`FieldUncertainty::factors`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ErrorFactor {
+    /// The part that grows with the raw reading, per µT of it.
+    pub m: Mat3,
+    /// The part that does not, µT.
+    pub v_ut: [f64; 3],
+}
+
+impl ErrorFactor {
+    /// This draw's error (µT per unit draw) at the raw reading `raw_ut`.
+    pub fn at(&self, raw_ut: [f64; 3]) -> [f64; 3] {
+        frames::add(frames::mat_vec(&self.m, raw_ut), self.v_ut)
+    }
+}
+
+/// `L` with `L·Lᵀ = c` for a symmetric `c` (eigenvectors scaled by the roots of the eigenvalues, negative ones
+/// taken as zero).
+fn square_root<const N: usize>(c: &[[f64; N]; N]) -> [[f64; N]; N] {
+    let eigen =
+        nalgebra::DMatrix::from_fn(N, N, |j, k| 0.5 * (c[j][k] + c[k][j])).symmetric_eigen();
+    std::array::from_fn(|j| {
+        std::array::from_fn(|m| eigen.eigenvectors[(j, m)] * eigen.eigenvalues[m].max(0.0).sqrt())
+    })
 }
 
 #[cfg(test)]
@@ -159,6 +232,54 @@ mod tests {
             let ratio = c[j][j].sqrt() / fit.b_se_ut[j];
             println!("axis {j}: propagated over the solver's SE of b: {ratio:.3}");
             assert!((0.75..1.33).contains(&ratio), "axis {j}: {ratio}");
+        }
+    }
+
+    /// The draws' factors give the covariance the propagation gives, for both methods, at readings near and far.
+    #[test]
+    fn the_factors_give_the_propagated_covariance() {
+        use crate::calibrate::calibrate;
+        use crate::field::ReferenceField;
+        use crate::fit::Method;
+
+        let chip = ChipModel::by_name("lis3mdl").unwrap();
+        let mut s = Scenario::new(
+            &chip,
+            Trajectory::Tumble {
+                duration_s: 20.0,
+                rate_rad_s: 1.0,
+            },
+            5,
+        );
+        s.sensor = SensorTruth::mounted(
+            [[1.08, 0.03, -0.01], [0.03, 0.95, 0.04], [-0.01, 0.04, 1.12]],
+            [12.0, -30.0, 8.0],
+            [0.02, -0.03, 0.01],
+        );
+        let run = simulate(&s).unwrap();
+        let field = ReferenceField::Vector {
+            field_ned_ut: s.field_ned_ut,
+            source: "test".into(),
+        };
+        for method in [Method::Vector, Method::Scalar] {
+            let cal = calibrate(&run.recording, method, field.clone(), false).unwrap();
+            let u = FieldUncertainty::of(&cal.fit);
+            let factors = u.factors();
+            assert_eq!(factors.len(), if method == Method::Vector { 12 } else { 9 });
+            for raw in [[0.0; 3], [30.0, -20.0, 45.0], [-50.0, 10.0, -5.0]] {
+                let want = u.covariance_at(raw);
+                let scale = (0..3).map(|j| want[j][j]).fold(0.0, f64::max);
+                for j in 0..3 {
+                    for k in 0..3 {
+                        let got: f64 = factors.iter().map(|f| f.at(raw)[j] * f.at(raw)[k]).sum();
+                        assert!(
+                            (got - want[j][k]).abs() <= 1e-9 * scale,
+                            "{method:?} at {raw:?}, ({j}, {k}): {got} against {}",
+                            want[j][k]
+                        );
+                    }
+                }
+            }
         }
     }
 
