@@ -155,8 +155,8 @@ fn fit(path: &Path) -> Found {
     found
 }
 
-/// Within 10 % and within three standard errors on every axis (two are expected 95 % of the time: the study counts
-/// them).
+/// Within 10 % and within three standard errors on every axis: one coefficient in twenty is beyond two, so a test of
+/// a few logs asks for three and the study counts the twos (it finds 93 %).
 fn recovered(found: &Found, coef: [f64; 3]) -> bool {
     let Some((est, se)) = found.coef else {
         return false;
@@ -325,11 +325,11 @@ fn a_motor_coefficient_and_a_lag_are_recovered_from_a_simulated_log() {
     assert!(found.coef.is_none(), "{found:?}");
 }
 
-/// The study (release, `--ignored`): 25 logs, coefficients of 0.05–1 µT/A (0.5–10 µT per 10 A) on every axis with
+/// The study (release, `--ignored`): 100 logs, coefficients of 0.05–1 µT/A (0.5–10 µT per 10 A) on every axis with
 /// every sign (the axes within a factor 1.7 of one another, so that a current keeping the field under 2 µT excites
-/// each), and lags of 5–50 ms: every coefficient within 10 % and three standard errors, at least 80 % of them within
-/// two (95 % expected: see below), every lag within 5 ms; and 200 logs without a current term, of which at most 1 %
-/// report one.
+/// each), and lags of 5–50 ms: every coefficient within 10 %, and within two standard errors as often as honest
+/// standard errors are (95 %: at least 276 of 300, which they miss once in 300 studies), every lag within 5 ms; and
+/// 200 logs without a current term, of which at most 1 % report one.
 #[test]
 #[ignore]
 fn study_motor_coefficients_lags_and_no_false_current_terms() {
@@ -338,10 +338,10 @@ fn study_motor_coefficients_lags_and_no_false_current_terms() {
     let sizes: [f64; 5] = [0.05, 0.1, 0.3, 0.6, 1.0];
     let lags = [0.005, 0.01, 0.02, 0.035, 0.05];
     let failures = Mutex::new(Vec::new());
-    // Worst relative error, worst error in standard errors, axes within two, worst lag error.
-    let worst = Mutex::new((0.0f64, 0.0f64, 0usize, 0.0f64));
-    common::for_each_seed(25, |seed| {
-        let i = (seed - 1) as usize;
+    // Worst relative error, worst error in standard errors, axes within two, Σ (error/SE)², worst lag error.
+    let worst = Mutex::new((0.0f64, 0.0f64, 0usize, 0.0f64, 0.0f64));
+    common::for_each_seed(100, |seed| {
+        let i = ((seed - 1) % 25) as usize;
         let sign = |k: u64| if (seed >> k) & 1 == 1 { -1.0 } else { 1.0 };
         let shares: [f64; 3] = [1.0, 0.6, 0.8];
         let coef: [f64; 3] = std::array::from_fn(|k| {
@@ -370,6 +370,7 @@ fn study_motor_coefficients_lags_and_no_false_current_terms() {
             w.0 = w.0.max(err / coef[k].abs());
             w.1 = w.1.max(err / se[k]);
             w.2 += usize::from(err <= 2.0 * se[k]);
+            w.3 += (err / se[k]).powi(2);
             if err > 0.1 * coef[k].abs() {
                 failures
                     .lock()
@@ -377,7 +378,7 @@ fn study_motor_coefficients_lags_and_no_false_current_terms() {
                     .push(format!("{coef:?} {lag_s}: {found:?}"));
             }
         }
-        w.3 = w.3.max((lag - lag_s).abs());
+        w.4 = w.4.max((lag - lag_s).abs());
         if (lag - lag_s).abs().is_nan() || (lag - lag_s).abs() > 0.005 {
             failures
                 .lock()
@@ -401,22 +402,21 @@ fn study_motor_coefficients_lags_and_no_false_current_terms() {
             none.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         }
     });
-    let (rel, z, within, lag) = *worst.lock().unwrap();
+    let (rel, z, within, z2, lag) = *worst.lock().unwrap();
     let false_terms = none.into_inner();
     eprintln!(
-        "worst relative error {:.1} %, worst error {z:.2} standard errors, {within} of 75 within two, worst lag error \
-         {:.2} ms; current terms reported without one injected: {false_terms} of 200",
+        "worst relative error {:.1} %, worst error {z:.2} standard errors, {within} of 300 within two, RMS error \
+         {:.2} standard errors, worst lag error {:.2} ms; current terms reported without one injected: \
+         {false_terms} of 200",
         100.0 * rel,
+        (z2 / 300.0).sqrt(),
         1000.0 * lag
     );
     let failures = failures.into_inner().unwrap();
     assert!(failures.is_empty(), "{failures:#?}");
-    // 95 % expected within two standard errors; the diagnosis' errors on these logs are about 1.3 times too small
-    // (64 of 75 through the flight path, 61 of 75 fitting the same rows against the exact attitude): every axis
-    // within three, at least 80 % within two.
     assert!(
-        z <= 3.0 && within >= 60,
-        "{within} of 75 within two standard errors, worst {z}"
+        within >= 276,
+        "{within} of 300 within two standard errors, worst {z}"
     );
     assert!(false_terms <= 2, "{false_terms} of 200");
 }

@@ -5,7 +5,8 @@
 //! errors, the bound tests/record_e2e.rs explains); `--write-to mavlink:` sets the fit in the twin, which reads back
 //! as the fit's export, and the field the twin then sends has the true field's magnitude. An injected motor-current coefficient,
 //! under a motor compensation the twin already applies (and the recorder undoes), is recovered by the fit's
-//! diagnosis. A port that speaks no MAVLink is refused, naming the port.
+//! diagnosis. A port that speaks no MAVLink is refused, naming the port. Over UDP (`mavlink:udp:HOST:PORT`), the
+//! recorder listens for a twin that sends to it (a simulator) and speaks first to a twin that listens (a router).
 
 mod pty;
 
@@ -17,7 +18,9 @@ use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
 use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
-use magcal_autopilot::{Autopilot, Connection, Telemetry, parse_param_file, read_all, telemetry};
+use magcal_autopilot::{
+    Autopilot, Connection, Telemetry, UdpPort, parse_param_file, read_all, telemetry,
+};
 use magcal_calib::Effect;
 use magcal_driver::ChipKind;
 use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig, TwinReport};
@@ -142,12 +145,17 @@ fn run(exe: &str, args: &[&str]) -> Output {
 
 /// Records `seconds` of bench time from the twin at `path` into `rec`; returns the recorder's stdout and stderr.
 fn record(path: &str, rec: &Path, seconds: f64) -> String {
+    record_from(&format!("mavlink:{path}:115200"), rec, seconds)
+}
+
+/// [`record`] from the device `device`.
+fn record_from(device: &str, rec: &Path, seconds: f64) -> String {
     let f = FIELD_NED_UT;
     let out = run(
         env!("CARGO_BIN_EXE_magcal-record"),
         &[
             "--device",
-            &format!("mavlink:{path}:115200"),
+            device,
             "--routine",
             "free",
             "--coverage",
@@ -329,13 +337,18 @@ fn each_autopilot_is_recorded_fitted_written_and_read_back_and_the_fit_recovers_
     }
 }
 
+/// Motor coefficients from 0.05 to 1 µT/A (0.5–10 µT per 10 A), each end of the range on a different axis for each
+/// autopilot, recovered within 10 % and within three standard errors (two are expected 95 % of the time:
+/// tests/flight_sim.rs's study counts them).
 #[test]
-fn an_injected_motor_coefficient_is_recovered_under_the_autopilots_own_compensation() {
+fn injected_motor_coefficients_are_recovered_under_the_autopilots_own_compensation() {
     let dir = tempfile::tempdir().unwrap();
-    let coef = [0.4, -0.2, 0.3];
-    for (i, autopilot) in [Autopilot::ArduPilot, Autopilot::Px4]
-        .into_iter()
-        .enumerate()
+    for (i, (autopilot, coef)) in [
+        (Autopilot::ArduPilot, [1.0, -0.05, 0.3]),
+        (Autopilot::Px4, [-0.05, 0.6, -1.0]),
+    ]
+    .into_iter()
+    .enumerate()
     {
         let seed = 361 + i as u64;
         let mut c = config(autopilot, seed, &before(autopilot, true));
@@ -343,9 +356,11 @@ fn an_injected_motor_coefficient_is_recovered_under_the_autopilots_own_compensat
             channel: 0,
             coef_ut_per_a: coef,
         }];
+        // The current's field up to 12 µT (larger fields the diagnosis leaves out as gross: docs/flight-logs.md).
+        let size = coef.iter().map(|v| v * v).sum::<f64>().sqrt();
         c.current = Some(CurrentProfile {
             idle_a: 2.0,
-            peak_a: 30.0,
+            peak_a: (12.0 / size).min(30.0),
             period_s: 7.0,
         });
         let twin = Twin::start(c);
@@ -366,7 +381,7 @@ fn an_injected_motor_coefficient_is_recovered_under_the_autopilots_own_compensat
         for k in 0..3 {
             let err = got[k] - coef[k];
             assert!(
-                err.abs() <= 0.1 * coef[k].abs() && err.abs() <= 2.0 * se[k].max(1e-9) + 0.02,
+                err.abs() <= 0.1 * coef[k].abs() && err.abs() <= 3.0 * se[k],
                 "{autopilot} axis {k}: {} ± {} µT/A, injected {}",
                 got[k],
                 se[k],
@@ -403,4 +418,60 @@ fn a_port_that_speaks_no_mavlink_is_refused_naming_the_port() {
     );
     assert!(stderr.contains("It sends: Raw:"), "{stderr}");
     assert!(!rec.exists(), "{stderr}");
+}
+
+#[test]
+fn a_twin_over_udp_is_recorded_whichever_side_listens() {
+    let dir = tempfile::tempdir().unwrap();
+    for (i, autopilot) in [Autopilot::Px4, Autopilot::ArduPilot]
+        .into_iter()
+        .enumerate()
+    {
+        let seed = 371 + i as u64;
+        // PX4 as a simulator sends to the recorder's port (found free first); ArduPilot as a router's server
+        // endpoint listens, and the recorder, finding the port taken, sends to it first.
+        let (port, addr) = if autopilot == Autopilot::Px4 {
+            let addr = std::net::UdpSocket::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap();
+            (UdpPort::connect(addr).unwrap(), addr)
+        } else {
+            let port = UdpPort::listen("127.0.0.1:0".parse().unwrap()).unwrap();
+            let addr = port.local_addr().unwrap();
+            (port, addr)
+        };
+        let twin =
+            AutopilotTwin::new(port, config(autopilot, seed, &before(autopilot, false))).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
+        let rec = dir.path().join(format!("udp-{}.csv", autopilot.name()));
+        let device = format!("mavlink:udp:{addr}");
+        let said = record_from(&device, &rec, 20.0);
+        stop.store(true, Ordering::Relaxed);
+        let report = thread.join().unwrap();
+        assert!(said.contains("mavlink_streams: asked 100 Hz"), "{said}");
+        let recording = Recording::read(&rec).unwrap();
+        let undone = meta(&recording, "autopilot_calibration_undone");
+        assert!(
+            undone.contains("the field recorded is the chip's own"),
+            "{undone}"
+        );
+        let got_hz = recording.meta.sample_rate_hz.unwrap();
+        assert!((got_hz - 50.0).abs() < 2.0, "{autopilot}: {got_hz} Hz");
+        let n = recording.mag_ut.len();
+        assert!(n as f64 > 0.9 * 20.0 * got_hz, "{autopilot}: {n} rows");
+        assert!(recording.quat.is_some(), "{autopilot}");
+        // The samples recorded are the twin's raw readings, its own calibration undone (to the messages' rounding).
+        for m in recording.mag_ut.iter().take(50) {
+            assert!(
+                report
+                    .sent
+                    .iter()
+                    .any(|s| (0..3).all(|k| (s.raw_ut[k] - m[k]).abs() < 0.15)),
+                "{autopilot}: {m:?} was not sent"
+            );
+        }
+    }
 }

@@ -42,7 +42,7 @@ use magcal_app::{say, tell, tellln};
 /// serial:PATH[:BAUD] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
 /// echo; i2c:/dev/i2c-N:lis2mdl[@ADDR] (or sim:lis2mdl) gets the hard-iron offset in its offset registers, read back.
 /// The other chips have no place for a calibration: that is an error, and the parameters file is the way.
-/// mavlink:PATH[:BAUD][:ardupilot|px4] is a flight controller: the --export ardupilot|px4 parameters for the
+/// mavlink:PATH[:BAUD][:ardupilot|px4] (or mavlink:udp:HOST:PORT) is a flight controller: the --export ardupilot|px4 parameters for the
 /// autopilot its heartbeat names, its previous values saved first to an undo file (--undo-out, by default next to
 /// --out), each parameter confirmed and read back; a refused one sets back what was written and exits non-zero.
 #[derive(Parser, Debug)]
@@ -79,7 +79,8 @@ struct Args {
     export_out: Option<PathBuf>,
     /// Write the calibration to this device and verify it: serial:PATH[:BAUD] (MotionCal packet,
     /// confirmed by the echo), i2c:/dev/i2c-N:lis2mdl[@ADDR] / sim:lis2mdl (offset registers, read back) or
-    /// mavlink:PATH[:BAUD][:ardupilot|px4] (a flight controller's compass parameters, set and read back).
+    /// mavlink:PATH[:BAUD][:ardupilot|px4] or mavlink:udp:HOST:PORT[:ardupilot|px4] (a flight controller's
+    /// compass parameters, set and read back).
     #[arg(long, value_name = "DEV")]
     write_to: Option<DeviceSpec>,
     /// With --write-to mavlink:…: where the autopilot's previous values go, as a parameter file it can load to undo

@@ -28,6 +28,10 @@ use magcal_app::{sayln, tellln};
 ///                                   calibration undone (the raw field, µT), its attitude, battery current
 ///                                   (i_battery) and IMU temperature, at --rate asked (the rate got is in the
 ///                                   metadata)
+///   mavlink:udp:HOST:PORT[:ardupilot|px4]
+///                                   the same over UDP (a simulator or a telemetry router): this machine's
+///                                   HOST:PORT listened on, e.g. mavlink:udp:127.0.0.1:14550; another's, or a
+///                                   port taken, sent to
 ///   CHIP is lis3mdl, lis2mdl, qmc5883l, hmc5883l or mmc5983ma.
 ///
 /// SERIAL FORMATS (the FORMAT of serial:PATH[:BAUD][:FORMAT]):
@@ -80,7 +84,7 @@ use magcal_app::{sayln, tellln};
 #[command(version, verbatim_doc_comment)]
 struct Args {
     /// The device: sim[:CHIP] | i2c:/dev/i2c-N:CHIP[@ADDR] | serial:PATH[:BAUD][:FORMAT] |
-    /// mavlink:PATH[:BAUD][:ardupilot|px4] (see above).
+    /// mavlink:PATH[:BAUD][:ardupilot|px4], mavlink:udp:HOST:PORT[:ardupilot|px4] (see above).
     #[arg(long, default_value = "sim", value_name = "DEV")]
     device: String,
     /// The routine.

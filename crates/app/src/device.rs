@@ -8,19 +8,23 @@
 //!   default), native CSV, the Adafruit Unified Sensor examples' `X: … Y: … Z: … uT`, three numbers `x,y,z`, or any
 //!   line a `pattern=REGEX` with named groups `mx`, `my`, `mz` reads (see [`magcal_driver::serial`]).
 //! - `mavlink:PATH[:BAUD][:ardupilot|px4]`: a flight controller speaking MAVLink on a serial port (default 115200
-//!   baud); which autopilot it is comes from its heartbeat unless named. `magcal-record` records its compass with
+//!   baud), or `mavlink:udp:HOST:PORT[:ardupilot|px4]` over UDP (a simulator or a telemetry router: this machine's
+//!   address listened on, another's sent to; [`magcal_autopilot::udp`]); which autopilot it is comes from its
+//!   heartbeat unless named. `magcal-record` records its compass with
 //!   the autopilot's calibration undone, its attitude, battery current and IMU temperature
 //!   ([`crate::source::mavlink`]); `magcal-fit --write-to` sets its calibration parameters
 //!   ([`crate::writeback::write_back_autopilot`]).
 
 use std::fmt;
+use std::io::{Read, Write};
 use std::str::FromStr;
 use std::time::Duration;
 
-use magcal_autopilot::Autopilot;
+use magcal_autopilot::{Autopilot, UdpPort};
 use magcal_driver::serial::{DeviceSpec as SerialSpec, PatternKind, Protocol};
 use magcal_driver::{AnyMagnetometer, ChipKind};
 pub use magcal_mockhw::Fault;
+use mavlink::dialects::common::{HEARTBEAT_DATA, MavAutopilot, MavMessage, MavType};
 
 use crate::cli::number;
 use crate::source::clock::WallClock;
@@ -33,7 +37,8 @@ pub const DEFAULT_SIM_CHIP: ChipKind = ChipKind::Lis3mdl;
 /// The device syntax, for `--help` texts.
 pub const DEVICE_HELP: &str = "sim[:CHIP] (a simulated chip, the default) | i2c:/dev/i2c-N:CHIP[@ADDR] (Linux I2C) | \
 serial:PATH[:BAUD][:FORMAT][:unit=UNIT][:scale=K] (a streaming board; FORMAT motioncal, csv, adafruit, xyz or \
-pattern=REGEX) | mavlink:PATH[:BAUD][:ardupilot|px4] (a flight controller over MAVLink); CHIP is lis3mdl, \
+pattern=REGEX) | mavlink:PATH[:BAUD][:ardupilot|px4] or mavlink:udp:HOST:PORT[:ardupilot|px4] (a flight \
+controller over MAVLink, serial or UDP); CHIP is lis3mdl, \
 lis2mdl, qmc5883l, hmc5883l or mmc5983ma";
 
 /// The baud rate of `mavlink:PATH` without one: ArduPilot's default on its telemetry ports (USB takes any).
@@ -58,15 +63,81 @@ pub enum DeviceSpec {
     },
     /// A board on a serial port.
     Serial(SerialSpec),
-    /// A flight controller speaking MAVLink on a serial port.
+    /// A flight controller speaking MAVLink.
     Mavlink {
+        /// Its serial port or UDP address.
+        link: MavlinkLink,
+        /// The autopilot, if named (otherwise its heartbeat says).
+        autopilot: Option<Autopilot>,
+    },
+}
+
+/// Where a flight controller's MAVLink comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MavlinkLink {
+    /// A serial port (USB or a telemetry radio).
+    Serial {
         /// The port, e.g. `/dev/ttyACM0`.
         path: String,
         /// Its baud rate.
         baud: u32,
-        /// The autopilot, if named (otherwise its heartbeat says).
-        autopilot: Option<Autopilot>,
     },
+    /// UDP (a simulator or a telemetry router).
+    Udp {
+        /// `HOST:PORT`: listened on if this machine's and free, else sent to.
+        host_port: String,
+    },
+}
+
+/// A byte port MAVLink goes over: a serial port or a [`UdpPort`].
+pub trait MavlinkPort: Read + Write + Send {}
+
+impl<T: Read + Write + Send> MavlinkPort for T {}
+
+impl MavlinkLink {
+    /// The port's name in messages: its path, or `udp:HOST:PORT`.
+    pub fn name(&self) -> String {
+        match self {
+            MavlinkLink::Serial { path, .. } => path.clone(),
+            MavlinkLink::Udp { host_port } => format!("udp:{host_port}"),
+        }
+    }
+
+    /// Opens the port: a serial port 8N1 with reads waiting at most 20 ms, or a UDP socket; one that sends to an
+    /// address first sends a ground station's heartbeat, so that a router answers it.
+    pub fn open(&self) -> Result<Box<dyn MavlinkPort>, String> {
+        match self {
+            MavlinkLink::Serial { path, baud } => serialport::new(path, *baud)
+                .timeout(Duration::from_millis(20))
+                .open()
+                .map(|p| Box::new(p) as Box<dyn MavlinkPort>)
+                .map_err(|e| format!("cannot open serial port {path}: {e}")),
+            MavlinkLink::Udp { host_port } => {
+                let mut port = UdpPort::open(host_port)
+                    .map_err(|e| format!("cannot open UDP {host_port}: {e}"))?;
+                if port.sends_first() {
+                    let mut hello = Vec::new();
+                    mavlink::write_v2_msg(
+                        &mut hello,
+                        mavlink::MavHeader {
+                            system_id: 255,
+                            component_id: 190,
+                            sequence: 0,
+                        },
+                        &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                            mavtype: MavType::MAV_TYPE_GCS,
+                            autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                            ..HEARTBEAT_DATA::default()
+                        }),
+                    )
+                    .expect("writing to a Vec");
+                    port.write_all(&hello)
+                        .map_err(|e| format!("cannot send to UDP {host_port}: {e}"))?;
+                }
+                Ok(Box::new(port))
+            }
+        }
+    }
 }
 
 impl DeviceSpec {
@@ -160,7 +231,7 @@ fn unknown_kind(text: &str) -> String {
     }
 }
 
-/// `PATH[:BAUD][:ardupilot|px4]` of a `mavlink:` device.
+/// `PATH[:BAUD][:ardupilot|px4]` or `udp:HOST:PORT[:ardupilot|px4]` of a `mavlink:` device.
 fn mavlink_spec(rest: &str) -> Result<DeviceSpec, String> {
     let mut parts: Vec<&str> = rest.split(':').collect();
     let autopilot = match parts.last().map(|p| p.to_ascii_lowercase()) {
@@ -170,6 +241,21 @@ fn mavlink_spec(rest: &str) -> Result<DeviceSpec, String> {
     };
     if autopilot.is_some() {
         parts.pop();
+    }
+    if parts.first() == Some(&"udp") {
+        let host_port = parts[1..].join(":");
+        let port_ok = host_port
+            .rsplit_once(':')
+            .is_some_and(|(h, p)| !h.is_empty() && p.parse::<u16>().is_ok());
+        if !port_ok {
+            return Err(format!(
+                "udp:{host_port} is not HOST:PORT, as in mavlink:udp:127.0.0.1:14550"
+            ));
+        }
+        return Ok(DeviceSpec::Mavlink {
+            link: MavlinkLink::Udp { host_port },
+            autopilot,
+        });
     }
     let baud = match parts.last() {
         Some(b) if parts.len() > 1 && !b.is_empty() && b.bytes().all(|c| c.is_ascii_digit()) => {
@@ -188,8 +274,7 @@ fn mavlink_spec(rest: &str) -> Result<DeviceSpec, String> {
         return Err("no serial port path, as in mavlink:/dev/ttyACM0:115200".to_owned());
     }
     Ok(DeviceSpec::Mavlink {
-        path,
-        baud,
+        link: MavlinkLink::Serial { path, baud },
         autopilot,
     })
 }
@@ -249,12 +334,11 @@ impl fmt::Display for DeviceSpec {
             } => write!(f, "i2c:{path}:{chip}@{a:#04x}"),
             DeviceSpec::I2c { path, chip, .. } => write!(f, "i2c:{path}:{chip}"),
             DeviceSpec::Serial(s) => write!(f, "serial:{s}"),
-            DeviceSpec::Mavlink {
-                path,
-                baud,
-                autopilot,
-            } => {
-                write!(f, "mavlink:{path}:{baud}")?;
+            DeviceSpec::Mavlink { link, autopilot } => {
+                match link {
+                    MavlinkLink::Serial { path, baud } => write!(f, "mavlink:{path}:{baud}")?,
+                    MavlinkLink::Udp { host_port } => write!(f, "mavlink:udp:{host_port}")?,
+                }
                 if let Some(a) = autopilot {
                     write!(f, ":{}", a.name())?;
                 }
@@ -445,23 +529,16 @@ pub fn open(spec: &DeviceSpec, opts: &OpenOptions) -> Result<Box<dyn Source>, So
             let idle = Duration::from_secs_f64(opts.idle_timeout_s);
             Ok(Box::new(LineSource::new(device, source, idle)))
         }
-        DeviceSpec::Mavlink {
-            path,
-            baud,
-            autopilot,
-        } => {
-            let port = serialport::new(path, *baud)
-                .timeout(Duration::from_millis(20))
-                .open()
-                .map_err(|e| SourceError::Open {
-                    device: device.clone(),
-                    error: format!("cannot open serial port {path}: {e}"),
-                })?;
+        DeviceSpec::Mavlink { link, autopilot } => {
+            let port = link.open().map_err(|error| SourceError::Open {
+                device: device.clone(),
+                error,
+            })?;
             let idle = Duration::from_secs_f64(opts.idle_timeout_s);
             Ok(Box::new(MavlinkSource::start(
                 device,
                 port,
-                path,
+                &link.name(),
                 *autopilot,
                 opts.rate_hz,
                 idle,
@@ -515,14 +592,27 @@ mod tests {
         assert_eq!(
             p("mavlink:/dev/ttyACM0"),
             Ok(DeviceSpec::Mavlink {
-                path: "/dev/ttyACM0".into(),
-                baud: 115_200,
+                link: MavlinkLink::Serial {
+                    path: "/dev/ttyACM0".into(),
+                    baud: 115_200
+                },
                 autopilot: None
+            })
+        );
+        assert_eq!(
+            p("mavlink:udp:localhost:14550:PX4"),
+            Ok(DeviceSpec::Mavlink {
+                link: MavlinkLink::Udp {
+                    host_port: "localhost:14550".into()
+                },
+                autopilot: Some(Autopilot::Px4)
             })
         );
         for text in [
             "mavlink:/dev/ttyACM0:57600",
             "mavlink:/dev/ttyUSB1:921600:px4",
+            "mavlink:udp:127.0.0.1:14550",
+            "mavlink:udp:[::1]:14550:ardupilot",
         ] {
             assert_eq!(p(text).unwrap().to_string(), text);
         }
@@ -531,6 +621,8 @@ mod tests {
             "mavlink:/dev/ttyACM0:115200:ardupilot"
         );
         assert!(p("mavlink:/dev/ttyACM0:12").is_err());
+        assert!(p("mavlink:udp:14550").is_err());
+        assert!(p("mavlink:udp:localhost:99999").is_err());
         let DeviceSpec::Serial(s) = p("serial:/dev/ttyACM0:230400:csv").unwrap() else {
             panic!("not serial");
         };

@@ -26,7 +26,7 @@ use magcal_driver::{ChipKind, Error as ChipError, HardIronOffset, Lis2mdl, Magne
 use magcal_mockhw::{SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
-use crate::device::DeviceSpec;
+use crate::device::{DeviceSpec, MavlinkPort};
 use crate::export::{ExportFormat, autopilot_params, refusal, warnings};
 use crate::fit::Calibration;
 use crate::source::sim::bench_config;
@@ -281,32 +281,25 @@ pub fn write_lis2mdl_offset<I: I2c>(
 /// How long a flight controller has to send its heartbeat (ArduPilot and PX4 send one a second).
 pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// A MAVLink connection to the flight controller `spec` names: its serial port opened (8N1, reads waiting at most
-/// 20 ms), its heartbeat awaited; returns the connection and the autopilot (the one named in the device string, or
-/// the heartbeat's).
+/// A MAVLink connection to the flight controller `spec` names: its port opened ([`MavlinkLink::open`]), its
+/// heartbeat awaited; returns the connection and the autopilot (the one named in the device string, or the
+/// heartbeat's).
 fn connect(
     spec: &DeviceSpec,
-) -> Result<(Connection<Box<dyn serialport::SerialPort>>, Autopilot), WriteBackError> {
+) -> Result<(Connection<Box<dyn MavlinkPort>>, Autopilot), WriteBackError> {
     let device = spec.to_string();
-    let DeviceSpec::Mavlink {
-        path,
-        baud,
-        autopilot,
-    } = spec
-    else {
+    let DeviceSpec::Mavlink { link, autopilot } = spec else {
         return Err(WriteBackError::Unsendable {
             device,
-            why: "not a flight controller (mavlink:PATH[:BAUD])".to_owned(),
+            why: "not a flight controller (mavlink:PATH[:BAUD] or mavlink:udp:HOST:PORT)"
+                .to_owned(),
         });
     };
-    let port = serialport::new(path, *baud)
-        .timeout(Duration::from_millis(20))
-        .open()
-        .map_err(|e| WriteBackError::Device {
-            device: device.clone(),
-            error: format!("cannot open serial port {path}: {e}"),
-        })?;
-    let mut conn = Connection::new(port, path);
+    let port = link.open().map_err(|error| WriteBackError::Device {
+        device: device.clone(),
+        error,
+    })?;
+    let mut conn = Connection::new(port, &link.name());
     let found = conn
         .wait_heartbeat(HEARTBEAT_TIMEOUT, *autopilot)
         .map_err(|e| WriteBackError::Device {

@@ -55,19 +55,19 @@ pub(crate) fn coefficient(sol: &Solution, col: usize, sigma2: f64) -> Option<(f6
 
 /// Standard errors of the linear part `A`, `b` of a solution and of its offset `c = −A⁻¹·b` (`a`, `b`: the linear
 /// part they are taken at). Of each quantity, the larger of its variance from the residual variance (allowing for
-/// autocorrelated residuals, as the effects' are) and its cluster-robust variance (allowing for residuals that vary
+/// autocorrelated residuals and axes of unequal noise, [`Problem::model_covariance`], as the effects' are) and its
+/// cluster-robust variance (allowing for residuals that vary
 /// with the regressors in stretches of the recording, as a disturbance's tail does), with the covariances of the
 /// entries it is made of. With readings centred on `raw_mean` the fitted offset is `b' = b + A·mean`, so
 /// `db = db' − dA·mean` and `dc = −A⁻¹·(db' + dA·(c − mean))`.
 pub(crate) fn linear_se(
     problem: &Problem,
     sol: &Solution,
-    rows: f64,
     vector: bool,
     (a, b): (&Mat3, [f64; 3]),
     raw_mean: [f64; 3],
 ) -> LinearSe {
-    let s2 = sol.rss / (rows - sol.columns.len() as f64).max(1.0) * problem.autocorrelation(sol);
+    let model_cov = problem.model_covariance(sol);
     let cluster = problem.cluster_covariance(sol);
     let pos = |c: usize| sol.columns.iter().position(|&x| x == c);
     // The variance of Σ g·θ over (column, g) pairs under each covariance, the larger one.
@@ -83,7 +83,7 @@ pub(crate) fn linear_se(
             }
             v
         };
-        let model = quad(&|p, q| sol.inverse[(p, q)] * s2);
+        let model = quad(&|p, q| model_cov[(p, q)]);
         let robust = cluster.as_ref().map_or(0.0, |m| quad(&|p, q| m[(p, q)]));
         model.max(robust).max(0.0).sqrt()
     };

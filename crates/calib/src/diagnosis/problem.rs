@@ -23,6 +23,8 @@ const NOISE_STEP_UT: f64 = 0.01;
 struct BatchPart {
     clean: BlockStats,
     other: BlockStats,
+    /// Every included row by row kind (the vector method's axes; none in the scalar method).
+    by_kind: Vec<BlockStats>,
     batch: Batches,
     active: Vec<usize>,
 }
@@ -46,7 +48,11 @@ pub(crate) fn accumulate(
     let mut batches = Batches::new(AUTOCORRELATION_BATCHES, dims, columns);
     let mut batch_stats = Vec::with_capacity(parts.len());
     let mut active = vec![0usize; cands.len()];
+    let mut by_kind = vec![BlockStats::new(columns); if setup.vector { 3 } else { 0 }];
     for (batch, part) in parts.iter().enumerate() {
+        for (kind, rows) in by_kind.iter_mut().zip(&part.by_kind) {
+            kind.add(rows);
+        }
         let b = batch / (AUTOCORRELATION_BATCHES / CV_BLOCKS);
         blocks[b].add(&part.clean);
         blocks[b].add(&part.other);
@@ -70,7 +76,14 @@ pub(crate) fn accumulate(
             }
         }
     }
-    Problem::new(blocks, clean_blocks, batches, batch_stats, noise_var)
+    Problem::new(
+        blocks,
+        clean_blocks,
+        batches,
+        batch_stats,
+        by_kind,
+        noise_var,
+    )
 }
 
 /// What one sample's rows are built from: its context, its candidates' regressors and its centred reading.
@@ -98,6 +111,7 @@ fn accumulate_batch(
     let mut part = BatchPart {
         clean: BlockStats::new(columns),
         other: BlockStats::new(columns),
+        by_kind: vec![BlockStats::new(columns); if setup.vector { 3 } else { 0 }],
         batch: Batches::new(1, dims, columns),
         active: vec![0; cands.len()],
     };
@@ -119,6 +133,9 @@ fn accumulate_batch(
             &mut part.other
         };
         stats.samples += 1;
+        for kind in &mut part.by_kind {
+            kind.samples += 1;
+        }
         let row = SampleRows {
             i,
             ctx,
@@ -132,6 +149,7 @@ fn accumulate_batch(
                 entries.push((4 * j + 3, 1.0));
                 push_candidates(&mut entries, cands, &mut part.active, |c, k| -regs[c][k][j]);
                 stats.add_row(&entries, s.field[i][j]);
+                part.by_kind[j].add_row(&entries, s.field[i][j]);
                 part.batch.add_row(0, j, &entries, s.field[i][j]);
             }
         } else {

@@ -4,6 +4,8 @@
 
 use std::borrow::Cow;
 
+use nalgebra::DMatrix;
+
 use crate::effects::Effect;
 use crate::frames::{self, Mat3};
 use crate::model::Model;
@@ -14,7 +16,7 @@ use super::explain::{self, Fate};
 use super::findings::{
     Ambiguity, Diagnosis, FitSummary, FoundEffect, Glitch, GrossSpan, Rejected, Residuals, Verdict,
 };
-use super::fitted::{coefficient, linear_of, linear_se, params_of};
+use super::fitted::{linear_of, linear_se, params_of};
 use super::gross::Span;
 use super::locate::{self, Components, Located, Segment};
 use super::rounds::Round;
@@ -35,11 +37,13 @@ struct Fits {
     clean_rows: f64,
     /// The final residual's autocorrelation factor.
     tau_last: f64,
-    /// Its variance per row, autocorrelation included, µT².
-    sigma2_last: f64,
     /// The base fit on the clean samples alone, and its held-out residual sum of squares there.
     base12: Solution,
     base_cv: f64,
+    /// The final solution's covariance from its residual's variance ([`Problem::model_covariance`]) and its
+    /// cluster-robust one ([`Problem::cluster_covariance`]).
+    model_cov: DMatrix<f64>,
+    cluster: Option<DMatrix<f64>>,
     /// The final linear part.
     ext_a: Mat3,
     ext_b: [f64; 3],
@@ -52,11 +56,9 @@ impl Fits {
         let clean_rows = problem.clean_total.rows.max(1) as f64;
         let last = round.sel.last.clone();
         let rows = problem.total.rows as f64;
-        let dof = (rows - last.columns.len() as f64).max(1.0);
-        // Standard errors allow for residuals that are alike from sample to sample (see `select`): the variance per
-        // row is scaled by the autocorrelation factor.
+        // The residual's autocorrelation factor, for the scanned times' errors (the coefficients' covariances allow
+        // for it themselves).
         let tau_last = problem.autocorrelation(&last);
-        let sigma2_last = last.rss / dof * tau_last;
         // The base fit on the clean samples alone, and its held-out residual there.
         let base12 = problem
             .solve_on(Rows::Clean, &linear, None, true)
@@ -65,17 +67,30 @@ impl Fits {
             .cv_rss_on(Rows::Clean, &linear)
             .unwrap_or(round.sel.base_cv);
         let (ext_a, ext_b) = final_linear(setup, &last, &base12);
+        let model_cov = problem.model_covariance(&last);
+        let cluster = problem.cluster_covariance(&last);
         Fits {
             last,
             rows,
             clean_rows,
             tau_last,
-            sigma2_last,
             base12,
             base_cv,
+            model_cov,
+            cluster,
             ext_a,
             ext_b,
         }
+    }
+
+    /// The standard error of the final solution's coefficient of `column`: the larger of its two variances, as for
+    /// the linear part ([`linear_se`]); NaN if the column is not in the solution.
+    fn se(&self, column: usize) -> f64 {
+        let Some(p) = self.last.columns.iter().position(|&c| c == column) else {
+            return f64::NAN;
+        };
+        let robust = self.cluster.as_ref().map_or(0.0, |m| m[(p, p)]);
+        self.model_cov[(p, p)].max(robust).max(0.0).sqrt()
     }
 
     /// The RMS of a residual sum of squares over the clean rows, µT.
@@ -215,7 +230,6 @@ fn summary(
     (a, b): (&Mat3, [f64; 3]),
     cv: f64,
 ) -> FitSummary {
-    let rows = problem.total.rows as f64;
     let clean_rows = problem.clean_total.rows.max(1) as f64;
     let rms = |rss: f64| (rss / clean_rows).sqrt();
     FitSummary {
@@ -224,7 +238,6 @@ fn summary(
         se: Some(linear_se(
             problem,
             sol,
-            rows,
             setup.vector,
             (a, b),
             setup.raw_mean,
@@ -259,8 +272,7 @@ fn chosen(round: &Round, steps: &[Step], fits: &Fits) -> Vec<Chosen> {
             let cand = &round.cands[c];
             let mut se = [0.0; 3];
             for (k, x) in se.iter_mut().enumerate().take(cand.n) {
-                *x = coefficient(&fits.last, cand.first + k, fits.sigma2_last)
-                    .map_or(f64::NAN, |(_, s)| s);
+                *x = fits.se(cand.first + k);
             }
             (c, round.fitted_effect(c, &fits.last), se)
         })

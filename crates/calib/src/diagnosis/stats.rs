@@ -204,6 +204,8 @@ pub(crate) struct Problem {
     /// Per autocorrelation batch, every included row: the scores of a fit batch by batch, for standard errors that
     /// see residuals correlated with the regressors over stretches of time.
     pub batch_stats: Vec<BlockStats>,
+    /// Per row kind (the vector method's calibrated axis), every included row: each axis' own residual variance.
+    pub by_kind: Vec<BlockStats>,
     /// All included rows.
     pub total: BlockStats,
     /// The clean rows.
@@ -218,6 +220,7 @@ impl Problem {
         mut clean: Vec<BlockStats>,
         batches: Batches,
         mut batch_stats: Vec<BlockStats>,
+        mut by_kind: Vec<BlockStats>,
         noise_var: DVector<f64>,
     ) -> Problem {
         let columns = noise_var.len();
@@ -231,7 +234,7 @@ impl Problem {
         };
         let total = sum(&mut blocks);
         let clean_total = sum(&mut clean);
-        for b in &mut batch_stats {
+        for b in batch_stats.iter_mut().chain(&mut by_kind) {
             b.symmetrise();
         }
         Problem {
@@ -239,6 +242,7 @@ impl Problem {
             clean,
             batches,
             batch_stats,
+            by_kind,
             total,
             clean_total,
             noise_var,
@@ -340,6 +344,36 @@ impl Problem {
     pub fn autocorrelation(&self, sol: &Solution) -> f64 {
         let sigma2 = sol.rss / self.total.rows.max(1) as f64;
         self.batches.autocorrelation(sol, sigma2).max(1.0)
+    }
+
+    /// The covariance of a solution fitted on every included row from the residual's variance, allowing for
+    /// autocorrelated residuals ([`Problem::autocorrelation`]) and for row kinds of unequal noise (a chip's axes: most
+    /// are noisier along z): `τ·(XᵀX)⁻¹·(Σ_k s_k²·X_kᵀX_k)·(XᵀX)⁻¹`, `s_k²` kind k's residual variance per row (the
+    /// degrees of freedom shared in proportion to the rows), `X_kᵀX_k` its errors-in-variables-corrected normal
+    /// matrix. With one kind, or equal variances, `τ·s²·(XᵀX)⁻¹`.
+    pub fn model_covariance(&self, sol: &Solution) -> DMatrix<f64> {
+        let rows = self.total.rows.max(1) as f64;
+        let dof = (rows - sol.columns.len() as f64).max(1.0);
+        let tau = self.autocorrelation(sol);
+        let kinds: Vec<&BlockStats> = self.by_kind.iter().filter(|b| b.rows > 0).collect();
+        if kinds.len() < 2 {
+            return &sol.inverse * (sol.rss / dof * tau);
+        }
+        let k = sol.columns.len();
+        let mut meat = DMatrix::zeros(k, k);
+        for kind in kinds {
+            let s2 = rss_of(kind, sol) / kind.rows as f64 * rows / dof;
+            for (r, &i) in sol.columns.iter().enumerate() {
+                for (c, &j) in sol.columns.iter().enumerate() {
+                    meat[(r, c)] += s2 * kind.xtx[(i, j)];
+                }
+                // The errors-in-variables correction of the columns this kind's rows hold.
+                if kind.xtx[(i, i)] > 0.0 {
+                    meat[(r, r)] -= s2 * kind.samples as f64 * self.noise_var[i];
+                }
+            }
+        }
+        &sol.inverse * meat * &sol.inverse * tau
     }
 
     /// The cluster-robust (sandwich) covariance of a solution fitted on every included row, with the batches as
@@ -459,6 +493,7 @@ mod tests {
             blocks,
             Batches::new(1, 1, 3),
             Vec::new(),
+            Vec::new(),
             DVector::zeros(3),
         )
     }
@@ -475,6 +510,36 @@ mod tests {
         assert!(cv > s.rss && cv < 2.0 * s.rss, "{cv}");
         let intercept_only = p.cv_rss(&[0]).unwrap();
         assert!(intercept_only > 100.0 * cv);
+    }
+
+    #[test]
+    fn each_row_kind_brings_its_own_noise_to_the_covariance() {
+        // Two kinds of rows, each with its own intercept: kind 0 with noise ±0.1, kind 1 with ±1.
+        let n = 100;
+        let mut kinds = vec![BlockStats::new(2); 2];
+        for i in 0..n {
+            let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+            kinds[0].add_row(&[(0, 1.0)], 1.0 + 0.1 * sign);
+            kinds[1].add_row(&[(1, 1.0)], 2.0 + sign);
+        }
+        let mut all = kinds[0].clone();
+        all.add(&kinds[1]);
+        let p = Problem::new(
+            vec![all.clone()],
+            vec![all],
+            Batches::new(1, 2, 2),
+            Vec::new(),
+            kinds,
+            DVector::zeros(2),
+        );
+        let sol = p.solve(&[0, 1], None, true).unwrap();
+        let cov = p.model_covariance(&sol);
+        // Each intercept's variance is its own kind's σ²/n (the degrees of freedom shared: 200 rows, 2 columns),
+        // where one pooled variance would give both (0.01 + 1)/2/n.
+        let dof = 200.0 / 198.0;
+        assert!((cov[(0, 0)] - 0.01 / 100.0 * dof).abs() < 1e-12, "{cov}");
+        assert!((cov[(1, 1)] - 1.0 / 100.0 * dof).abs() < 1e-12, "{cov}");
+        assert!(cov[(0, 1)].abs() < 1e-15);
     }
 
     #[test]
