@@ -267,12 +267,10 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
 
 /// 300 µT on the board for the middle 90 s of the turning (49.9–140.1 s): the robust fit took the state with most
 /// directions — the one with the magnet — and the stretches before and after, on the sensor's own offset, for
-/// spans; the calibration was 300 µT off, graded usable with a warning that the rest "sat on another offset". Then
-/// the verdict became redo, saying the recording began and ended on that offset. Now the fit of that majority
-/// looks off and the part that agrees with the reference under one calibration — the sensor's own state, before
-/// and after — calibrates, within the shared README's tolerances, with the warning.
+/// spans; the calibration was 300 µT off, graded usable with a warning that the rest "sat on another offset". The
+/// recording began and ended on that offset: the verdict is now redo, saying so.
 #[test]
-fn the_state_before_and_after_a_magnet_on_the_board_for_half_the_time_is_calibrated() {
+fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() {
     let dir = tempfile::tempdir().unwrap();
     let added = [Added::Effect(Effect::BiasWindow {
         t0_s: 49.911,
@@ -281,8 +279,7 @@ fn the_state_before_and_after_a_magnet_on_the_board_for_half_the_time_is_calibra
     })];
     let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
     let r = fit_report(&path, &[]);
-    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
-    assert!(a_err < 0.02 && o_err < 1.0, "A {a_err}, offset {o_err} µT");
+    assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
     // The readings the fit kept are in µT: the stretches on the other offset are no unit.
     let warnings = r["warnings"].as_array().expect("the report's warnings");
     assert!(

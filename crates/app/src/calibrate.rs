@@ -473,8 +473,12 @@ fn vector_base(
     let mut r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
     let mut reference =
         reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
-    if !reference.is_some() && looks_off(&r, &noise) {
-        match consistent_part(&problem, rec, field, r) {
+    // The majority's misfit would blame the reference (a good part of the field): does any part agree with it?
+    let blamed = field
+        .magnitude()
+        .is_some_and(|f| rms3(r.fit.residual_rms_ut) > crate::fit::REFERENCE_OFF_SHARE * f);
+    if !reference.is_some() && blamed {
+        match consistent_part(&problem, rec, r) {
             Consistent::Part(part, warning) => {
                 warnings.push(warning);
                 r = part;
@@ -502,16 +506,15 @@ enum Consistent {
     None(robust::Robust<VectorFit>),
 }
 
-/// The robust fit `majority` of a recording that looks off, or the consistent part of it when there is one
-/// ([`robust::consistent_part`]) whose residual's scale is at most [`CONSISTENT_PART_RATIO`] of the majority's:
-/// most of the recording disturbed, the rest agreeing with the reference. It calibrates when it holds through the
-/// recording ([`robust::holds_out`]); when it is spread through it but does not predict itself, it is said, with
-/// what it lacks; so is a part in few stretches when the majority's misfit would blame the reference, and
-/// otherwise it is none (an offset that drifts agrees with one calibration for a while).
+/// The robust fit `majority` of a recording whose misfit would blame the reference (a good part of the field), or
+/// the consistent part of it when there is one ([`robust::consistent_part`]) whose residual's scale is at most
+/// [`CONSISTENT_PART_RATIO`] of the majority's: most of the recording disturbed, the rest agreeing with the
+/// reference. It calibrates when it holds through the recording ([`robust::holds_out`]); otherwise it is said, with
+/// what it lacks, and the reference is not blamed. Smaller misfits are the diagnosis' to explain (a motor current
+/// on for most of a recording is an effect, not a disturbance).
 fn consistent_part(
     problem: &VectorProblem,
     rec: &Recording,
-    field: &ReferenceField,
     majority: robust::Robust<VectorFit>,
 ) -> Consistent {
     let t_s = rec.t_s.as_deref();
@@ -525,13 +528,6 @@ fn consistent_part(
         .collect();
     let share = inside.iter().filter(|k| **k).count() as f64 / usable.max(1) as f64;
     let check = robust::holds_out(problem, &part, t_s);
-    // A part in few stretches says the reference is not at fault where the majority's misfit would blame it.
-    let blamed = field
-        .magnitude()
-        .is_some_and(|f| rms3(majority.fit.residual_rms_ut) > crate::fit::REFERENCE_OFF_SHARE * f);
-    if check == robust::PartCheck::Brief && !blamed {
-        return Consistent::None(majority);
-    }
     if check == robust::PartCheck::Holds {
         let warning = format!(
             "most of this recording disagrees with the attitude reference: only {:.0} % of the readings with a \

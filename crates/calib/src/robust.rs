@@ -255,9 +255,9 @@ const HOLD_OUT_BLOCKS: usize = 10;
 /// most this many times its own.
 const HOLD_OUT_RATIO: f64 = 1.5;
 
-/// Whether a consistent part ([`consistent_part`]) of `problem` holds through the recording ([`PartCheck`]): the time from its
-/// first usable sample to its last (of samples, without `t_s`) cut into [`HOLD_OUT_BLOCKS`] blocks, the part has
-/// samples in at least half of them (disturbances come and go; an offset that drifts agrees with one calibration
+/// Whether a consistent part ([`consistent_part`]) of `problem` holds through the recording ([`PartCheck`]): the
+/// time from the first usable sample to the last (of samples, without `t_s`) cut into [`HOLD_OUT_BLOCKS`] blocks,
+/// the part has samples in at least half of them (disturbances come and go; an offset that drifts agrees with one calibration
 /// only for a while), and its samples fitted on the even blocks and on the odd ones, each fit's residual scale on
 /// the other blocks' samples is at most [`HOLD_OUT_RATIO`] times the part's. A calibration made up of a few
 /// stretches it happens to fit (a still stretch, a slow arc) does not.
@@ -649,9 +649,8 @@ pub fn outside(spans: &[(usize, usize)], n: usize) -> Vec<bool> {
 /// The scale of residual sizes `e` and their gross spans ([`gross_spans`], with `t_s` and `tail`), for the state
 /// most samples are in: `median_scale`, their median's. When fewer than half the usable samples lie within
 /// [`GROSS_SIGMA`] of the scale of their mode ([`mode_scale`]; `median_in_mode` is the median size of unit noise
-/// below [`MODE_WINDOW`]) —
-/// a consistent part of a mostly disturbed recording ([`consistent_part`]) — the mode's scale, and the runs without
-/// lulls merged.
+/// below [`MODE_WINDOW`]) — a consistent part of a mostly disturbed recording ([`consistent_part`]) — the mode's
+/// scale, and the runs without lulls merged.
 pub fn state_spans(
     e: &[f64],
     median_scale: f64,
@@ -1135,6 +1134,58 @@ mod tests {
             })
             .collect();
         Line { x, y }
+    }
+
+    /// 2x + 1 with a little noise, and for 80 % of the samples, in ten stretches spread through them, a field that
+    /// grows from 10 to 50 as a source comes closer, one way or the other: the majority follows the disturbances,
+    /// the consistent part is the line.
+    fn mostly_disturbed(n: usize) -> Line {
+        let mut l = line(n, 0..0);
+        for i in 0..n {
+            let stretch = i / (n / 10);
+            let within = (i % (n / 10)) as f64 / (n / 10) as f64;
+            if within >= 0.2 {
+                let u = (within - 0.2) / 0.8;
+                let sign = if stretch % 2 == 0 { 1.0 } else { -1.0 };
+                l.y[i] += sign * (10.0 + 40.0 * u);
+            }
+        }
+        l
+    }
+
+    #[test]
+    fn the_consistent_part_of_a_mostly_disturbed_line_is_found_and_holds() {
+        let l = mostly_disturbed(5000);
+        let part = consistent_part(&l, None).expect("a part");
+        assert!(
+            (part.fit.0 - 2.0).abs() < 0.01 && (part.fit.1 - 1.0).abs() < 0.05,
+            "{:?}",
+            part.fit
+        );
+        let kept = part.kept.iter().filter(|k| **k).count();
+        assert!((900..=1100).contains(&kept), "{kept}");
+        assert_eq!(holds_out(&l, &part, None), PartCheck::Holds);
+        // The diagnosis' spans of that fit's residual are the mode's: the lulls are not merged away.
+        let (scale, spans) = state_spans(
+            &part.residual_ut,
+            f64::NAN,
+            Line::MEDIAN_OF_UNIT_IN_MODE,
+            None,
+            0.0,
+        );
+        assert!(scale < 0.1 && spans.len() == 10, "{scale} {}", spans.len());
+    }
+
+    #[test]
+    fn a_clean_line_keeps_the_median_scale_and_its_spans() {
+        let clean = line(5000, 0..0);
+        let e = clean.residuals(&(2.0, 1.0));
+        let median_scale = scale::<Line>(&e);
+        let (s, spans) = state_spans(&e, median_scale, Line::MEDIAN_OF_UNIT_IN_MODE, None, 0.0);
+        assert_eq!(
+            (s, spans),
+            (median_scale, gross_spans(&e, median_scale, None, 0.0))
+        );
     }
 
     #[test]
