@@ -1146,7 +1146,7 @@ mod tests {
             let within = (i % (n / 10)) as f64 / (n / 10) as f64;
             if within >= 0.2 {
                 let u = (within - 0.2) / 0.8;
-                let sign = if stretch % 2 == 0 { 1.0 } else { -1.0 };
+                let sign = if stretch.is_multiple_of(2) { 1.0 } else { -1.0 };
                 l.y[i] += sign * (10.0 + 40.0 * u);
             }
         }
