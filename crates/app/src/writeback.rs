@@ -281,9 +281,9 @@ pub fn write_lis2mdl_offset<I: I2c>(
 /// How long a flight controller has to send its heartbeat (ArduPilot and PX4 send one a second).
 pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// A MAVLink connection to the flight controller `spec` names: its port opened ([`MavlinkLink::open`]), its
-/// heartbeat awaited; returns the connection and the autopilot (the one named in the device string, or the
-/// heartbeat's).
+/// A MAVLink connection to the flight controller `spec` names: its port opened
+/// ([`crate::device::MavlinkLink::open`]), its heartbeat awaited; returns the connection and the autopilot (the one
+/// named in the device string, or the heartbeat's).
 fn connect(
     spec: &DeviceSpec,
 ) -> Result<(Connection<Box<dyn MavlinkPort>>, Autopilot), WriteBackError> {
