@@ -7,9 +7,6 @@
 use crate::FitError;
 use crate::effects::Effect;
 use crate::model::Model;
-use crate::robust::{self, RobustProblem};
-use crate::scalar::ScalarProblem;
-use crate::vector::VectorProblem;
 
 use super::explain::Fate;
 use super::findings::{Glitch, GrossSpan};
@@ -49,21 +46,7 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
     let setup = Setup::new(input, &samples, model);
     let corrections: Vec<Effect> = model.corrections().copied().collect();
     let residual = setup.residual(&model.a, model.b_ut, &corrections);
-    let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
-    let times = samples.has_time.then_some(&samples.t[..]);
-    let tail = if setup.vector {
-        VectorProblem::RAMP_TAIL
-    } else {
-        ScalarProblem::RAMP_TAIL
-    };
-    let (scale, spans) = robust::state_spans(
-        &sizes,
-        setup.scale(&residual),
-        setup.median_of_unit_in_mode(),
-        times,
-        tail,
-    );
-    let kept = robust::outside(&spans, sizes.len());
+    let (scale, kept) = setup.state_kept(&residual);
     let stage = gross::stage(&setup, &residual, &kept, scale, &[]);
     let mut left_out = vec![false; input.raw_ut.len()];
     for (k, &row) in samples.rows.iter().enumerate() {

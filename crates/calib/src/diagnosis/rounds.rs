@@ -8,7 +8,7 @@ use std::borrow::Cow;
 
 use crate::FitError;
 use crate::effects::Effect;
-use crate::robust::{self, RobustProblem};
+use crate::robust;
 
 use super::candidates::{self, Candidate, Untestable};
 use super::findings::Rejected;
@@ -153,17 +153,7 @@ impl<'s> Search<'s> {
         let (a, b) = linear_of(&round.sel.last, setup.vector, &setup.base, setup.raw_mean);
         let effects = round.catalogue_effects();
         let residual = setup.residual(&a, b, &effects);
-        let sizes: Vec<f64> = residual.iter().map(|e| setup.size(e)).collect();
-        let times = setup.samples.has_time.then_some(&setup.samples.t[..]);
-        let tail = crate::vector::VectorProblem::RAMP_TAIL;
-        let (scale, spans) = robust::state_spans(
-            &sizes,
-            setup.scale(&residual),
-            setup.median_of_unit_in_mode(),
-            times,
-            tail,
-        );
-        let kept = robust::outside(&spans, sizes.len());
+        let (scale, kept) = setup.state_kept(&residual);
         if kept == self.kept {
             return false;
         }

@@ -124,6 +124,26 @@ impl<'a> Setup<'a> {
         }
     }
 
+    /// The scale of `residual` and, per sample, whether it lies outside the gross spans of the state most samples
+    /// are in ([`crate::robust::state_spans`], with this method's ramp tail).
+    pub fn state_kept(&self, residual: &[[f64; 3]]) -> (f64, Vec<bool>) {
+        let sizes: Vec<f64> = residual.iter().map(|e| self.size(e)).collect();
+        let times = self.samples.has_time.then_some(&self.samples.t[..]);
+        let tail = if self.vector {
+            <crate::vector::VectorProblem<'_> as RobustProblem>::RAMP_TAIL
+        } else {
+            <crate::scalar::ScalarProblem<'_> as RobustProblem>::RAMP_TAIL
+        };
+        let (scale, spans) = crate::robust::state_spans(
+            &sizes,
+            self.scale(residual),
+            self.median_of_unit_in_mode(),
+            times,
+            tail,
+        );
+        (scale, crate::robust::outside(&spans, sizes.len()))
+    }
+
     /// The same median among sizes below [`crate::robust::MODE_WINDOW`], for this method.
     pub fn median_of_unit_in_mode(&self) -> f64 {
         if self.vector {
