@@ -37,6 +37,50 @@ fn broad_vector_fit_is_near_identity_with_a_small_offset() {
     assert_eq!(r["samples"]["missing_reference"].as_u64(), Some(853));
 }
 
+/// Issue 37, acceptance 5: the shared BROAD trials (one sensor, one lab; in 29 and 33 a magnet's spans left out) agree
+/// pairwise within three combined standard errors in every entry of `A` and of the offset, fitted as `magcal-fit`
+/// fits them. Before the halves' disagreement entered the standard errors, 02 and 29 differed by 5.2 of them.
+#[test]
+fn repeated_broad_recordings_agree_within_what_each_claims() {
+    let names = [
+        "broad/broad_02_undisturbed_slow_rotation.csv",
+        "broad/broad_29_disturbed_stationary_magnet_B.csv",
+        "broad/broad_33_disturbed_attached_magnet_2cm.csv",
+    ];
+    let reports: Vec<serde_json::Value> = std::thread::scope(|s| {
+        let runs: Vec<_> = names
+            .iter()
+            .map(|n| s.spawn(move || fit_report(&real(n), &[])))
+            .collect();
+        runs.into_iter().map(|r| r.join().unwrap()).collect()
+    });
+    let parts = |r: &serde_json::Value| {
+        let c = &r["calibration"];
+        let (a, a_se) = (matrix(&c["A"]), matrix(&c["A_se"]));
+        let (o, o_se) = (floats(&c["offset_ut"]), floats(&c["offset_se_ut"]));
+        let mut values: Vec<(f64, f64)> = (0..9)
+            .map(|k| (a[k / 3][k % 3], a_se[k / 3][k % 3]))
+            .collect();
+        values.extend(o.into_iter().zip(o_se));
+        values
+    };
+    for i in 0..3 {
+        for j in i + 1..3 {
+            let worst = parts(&reports[i])
+                .iter()
+                .zip(parts(&reports[j]))
+                .map(|((x, sx), (y, sy))| (x - y).abs() / sx.hypot(sy))
+                .fold(0.0, f64::max);
+            assert!(
+                worst <= 3.0,
+                "{} and {}: {worst:.2} combined standard errors apart",
+                names[i],
+                names[j]
+            );
+        }
+    }
+}
+
 fn nexus_vector_offset() -> [f64; 3] {
     let r = fit_report(
         &real("inria-nexus5/nexus5_nodist_AR.csv"),
@@ -245,12 +289,15 @@ fn reordered_rows_do_not_pass_the_references_error_off_as_noise() {
     assert_eq!(after["verdict"]["grade"], "usable", "{}", after["verdict"]);
     let reason = after["verdict"]["reason"].as_str().unwrap();
     assert!(reason.contains("could not be measured"), "{reason}");
-    // The whole residual counts: no less heading error left than with the noise measured.
-    let left = |r: &serde_json::Value| r["heading"]["left_worst_deg"].as_f64().unwrap();
+    // The whole residual counts: no less heading error left than the whole residual stands for across the horizontal
+    // field, and more than the residual the original's measured noise leaves unexplained. (Not against the original's
+    // figure: without time, the rows' halves cannot show how the original's two halves in time disagree.)
+    let left = after["heading"]["left_worst_deg"].as_f64().unwrap();
+    let h = after["heading"]["horizontal_ut"].as_f64().unwrap();
+    let whole = after["residual"]["rms_ut"].as_f64().unwrap();
+    let unexplained = before["heading"]["unexplained_ut"].as_f64().unwrap();
     assert!(
-        left(&after) >= left(&before),
-        "{} < {}",
-        left(&after),
-        left(&before)
+        left >= (whole / h).atan().to_degrees() && whole > unexplained,
+        "{left}° left; residual {whole} µT, the original's unexplained {unexplained} µT, horizontal field {h} µT"
     );
 }

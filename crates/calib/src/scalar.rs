@@ -369,11 +369,13 @@ struct Pass {
 }
 
 /// The sums [`Problem::covariance`] needs, made in the same pass: per cell of direction the score (`JᵀWr` less the
-/// noise's share) and the upper triangle of the information `JᵀWJ`, per block of time (after the cells) the score;
-/// and per axis `Σw·(A·u)ₖ²`, which says how much of the raw noise reaches the magnitude ([`Problem::bounded_noise`]).
+/// noise's share) and the upper triangle of the information `JᵀWJ`, per block of time (after the cells) the score
+/// and the information; and per axis `Σw·(A·u)ₖ²`, which says how much of the raw noise reaches the magnitude
+/// ([`Problem::bounded_noise`]).
 struct Groups {
     scores: Vec<[f64; P]>,
     info: Vec<[f64; TRIANGLE]>,
+    block_info: Vec<[f64; TRIANGLE]>,
     radial: [f64; 3],
 }
 
@@ -712,6 +714,7 @@ impl Problem<'_> {
             let mut g = Groups {
                 scores: vec![[0.0; P]; ncell + blocks],
                 info: vec![[0.0; TRIANGLE]; ncell],
+                block_info: vec![[0.0; TRIANGLE]; blocks],
                 radial: [0.0; 3],
             };
             let mut rss = 0.0;
@@ -729,13 +732,16 @@ impl Problem<'_> {
                         (0..P).for_each(|x| s[x] = wk * (j[x] * r - n[x]));
                     }
                 }
-                for group in [self.cell[k], ncell + k * blocks / n] {
+                let block = k * blocks / n;
+                for group in [self.cell[k], ncell + block] {
                     g.scores[group]
                         .iter_mut()
                         .zip(&s)
                         .for_each(|(a, b)| *a += b);
                 }
-                add_upper(&mut g.info[self.cell[k]], &j.map(|v| wk * v), &j);
+                let wj = j.map(|v| wk * v);
+                add_upper(&mut g.info[self.cell[k]], &wj, &j);
+                add_upper(&mut g.block_info[block], &wj, &j);
                 // The gradient in the centre is −A·u.
                 (0..3).for_each(|x| g.radial[x] += wk * j[x] * j[x]);
                 rss += wk * r * r;
@@ -747,6 +753,9 @@ impl Problem<'_> {
                 a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
             }
             for (a, b) in x.0.info.iter_mut().zip(&y.0.info) {
+                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+            }
+            for (a, b) in x.0.block_info.iter_mut().zip(&y.0.block_info) {
                 a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
             }
             (0..3).for_each(|k| x.0.radial[k] += y.0.radial[k]);
@@ -896,8 +905,9 @@ impl Problem<'_> {
     /// The parameters' covariance from the groups of `sol`'s last pass: the largest, in every direction, of the
     /// model-based one, the delete-one-cell jackknife over the cells of direction (each cell's score through the
     /// information without that cell) and the sandwich over [`TIME_BLOCKS`] blocks of time. Also returns how much of
-    /// the shape the prior informs.
-    fn covariance(&self, sol: &Solution) -> Option<(SMatrix<f64, P, P>, f64)> {
+    /// the shape the prior informs, and how much more the recording's two halves disagree than they claim
+    /// ([`Problem::split_dispersion`]), which the claims are scaled by (not what the coverage determines).
+    fn covariance(&self, sol: &Solution) -> Option<(SMatrix<f64, P, P>, f64, f64)> {
         let at = &sol.at;
         let g = at.groups.as_ref().expect("a full fit's pass");
         let scores: Vec<SVector<f64, P>> = g.scores.iter().copied().map(SVector::from).collect();
@@ -946,10 +956,63 @@ impl Problem<'_> {
                 &DMatrix::from_column_slice(P, P, sandwich.as_slice()),
             );
         }
+        let dispersion = self.split_dispersion(sol, &scores, &blocks_used, &g.block_info, ncell);
         let cov = SMatrix::<f64, P, P>::from_column_slice(larger.as_slice());
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
-        Some((cov, share))
+        Some((cov, share, dispersion))
+    }
+
+    /// How much more the fits of the recording's two halves in time disagree than their own covariances say (as
+    /// the vector fit's, see [`crate::vector`]): `κ = dᵀ·(V₁ + V₂)⁻¹·d / P`, each half's fit one Gauss–Newton step from
+    /// the whole one on its blocks' sums (`θ_h − θ = −H_h⁻¹·g_h`, the prior in each half), `V_h` the larger of its
+    /// model-based covariance and its sandwich over its blocks. At least 1; 1 when a half cannot determine the fit.
+    fn split_dispersion(
+        &self,
+        sol: &Solution,
+        scores: &[SVector<f64, P>],
+        blocks_used: &[usize],
+        block_info: &[[f64; TRIANGLE]],
+        ncell: usize,
+    ) -> f64 {
+        if blocks_used.len() < 8 {
+            return 1.0;
+        }
+        let prior = self.q * sol.sigma2;
+        let prior_score = self.q * sol.p * sol.sigma2;
+        let half = |blocks: &[usize]| -> Option<(SVector<f64, P>, SMatrix<f64, P, P>)> {
+            let h = blocks
+                .iter()
+                .map(|&k| mirror(&block_info[k - ncell]))
+                .sum::<SMatrix<f64, P, P>>()
+                + prior;
+            let h_inv = h.cholesky()?.inverse();
+            let score: SVector<f64, P> = blocks.iter().map(|&k| scores[k]).sum();
+            let mean = score / blocks.len() as f64;
+            let g = blocks.len() as f64;
+            let meat = blocks
+                .iter()
+                .map(|&k| (scores[k] - mean) * (scores[k] - mean).transpose())
+                .sum::<SMatrix<f64, P, P>>()
+                * (g / (g - 1.0));
+            let covariance = crate::vector::loewner_max(
+                &DMatrix::from_column_slice(P, P, (h_inv * sol.sigma2).as_slice()),
+                &DMatrix::from_column_slice(P, P, (h_inv * meat * h_inv).as_slice()),
+            );
+            Some((
+                -(h_inv * (score + prior_score)),
+                SMatrix::from_column_slice(covariance.as_slice()),
+            ))
+        };
+        let (first, second) = blocks_used.split_at(blocks_used.len() / 2);
+        let (Some((shift_1, v_1)), Some((shift_2, v_2))) = (half(first), half(second)) else {
+            return 1.0;
+        };
+        let d = shift_1 - shift_2;
+        let Some(v) = (v_1 + v_2).cholesky() else {
+            return 1.0;
+        };
+        (d.dot(&v.solve(&d)) / P as f64).max(1.0)
     }
 
     /// From the plain fit: refuse what the coverage cannot determine, remove the noise's share of the score, and
@@ -964,7 +1027,8 @@ impl Problem<'_> {
             || FitError::Singular("the magnitude residual's normal matrix has no inverse");
         // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful
         // where the fit is.
-        let (plain_cov, plain_share) = self.covariance(sol).ok_or_else(singular)?;
+        let (plain_cov, plain_share, plain_dispersion) =
+            self.covariance(sol).ok_or_else(singular)?;
         check_determined(
             weakest(&plain_cov),
             sol.p.fixed_rows::<3>(3).sum() / 3.0,
@@ -976,7 +1040,7 @@ impl Problem<'_> {
             .any(|v| *v > 0.0)
             .then(|| self.bounded_noise(sol, noise))
         else {
-            return Ok((plain_cov, plain_share));
+            return Ok((plain_cov * plain_dispersion, plain_share));
         };
         let plain = sol.p;
         let converged = self.correct(sol, &s2);
@@ -998,8 +1062,8 @@ impl Problem<'_> {
                 advice: rotate_advice(direction),
             });
         }
-        let (cov, share) = self.covariance(sol).ok_or_else(singular)?;
-        Ok((cov, share))
+        let (cov, share, dispersion) = self.covariance(sol).ok_or_else(singular)?;
+        Ok((cov * dispersion, share))
     }
 }
 
