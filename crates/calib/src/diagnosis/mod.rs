@@ -48,6 +48,7 @@ mod fitted;
 mod gross;
 mod guard;
 mod locate;
+mod motors;
 mod problem;
 mod refit;
 mod report;
@@ -67,6 +68,7 @@ pub use findings::{
 pub use gross::SpanKind;
 pub use guard::NOTICEABLE_GAIN;
 pub use locate::{Components, Located, Orientation, Segment};
+pub use motors::{CurrentTerm, Lag, MotorFit, MotorInput, fit_motors, heading_error_deg};
 pub use refit::diagnose_around_spans;
 
 use crate::FitError;
