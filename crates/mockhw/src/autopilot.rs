@@ -99,11 +99,14 @@ pub struct TwinConfig {
     pub values: Vec<(String, f64)>,
     /// Parameter ranges other than the defaults, by name: (min, max).
     pub ranges: Vec<(String, f64, f64)>,
+    /// The vehicle held down (a bench motor test): the hand holds it still at its first attitude instead of
+    /// turning it.
+    pub held: bool,
 }
 
 impl TwinConfig {
     /// `autopilot` on `bench`, no current, streaming at 50 Hz, 10 times faster than real time, its calibration
-    /// parameters at their defaults (no correction).
+    /// parameters at their defaults (no correction), turned by the hand.
     pub fn new(autopilot: Autopilot, bench: BenchConfig) -> TwinConfig {
         TwinConfig {
             autopilot,
@@ -115,6 +118,7 @@ impl TwinConfig {
             await_request: false,
             values: Vec::new(),
             ranges: Vec::new(),
+            held: false,
         }
     }
 }
@@ -310,7 +314,9 @@ impl<P: Read + Write> AutopilotTwin<P> {
     /// than the battery current, and parameter values or ranges of names it does not have.
     pub fn new(port: P, config: TwinConfig) -> Result<AutopilotTwin<P>, TwinError> {
         let mut bench = Bench::with_currents(config.bench.clone(), 1)?;
-        bench.hand_mut().tumble(0.0, 1.0);
+        if !config.held {
+            bench.hand_mut().tumble(0.0, 1.0);
+        }
         let mut params = default_params(config.autopilot);
         for (name, value) in &config.values {
             let p =

@@ -103,7 +103,9 @@ pub struct MotorFit {
 /// Fits the current term of a motors recording; see the [module docs](self).
 pub fn fit_motors(input: &MotorInput<'_>) -> Result<MotorFit, FitError> {
     let rows: Vec<usize> = (0..input.t_s.len())
-        .filter(|&i| input.current_a[i].is_finite() && input.field_ut[i].iter().all(|v| v.is_finite()))
+        .filter(|&i| {
+            input.current_a[i].is_finite() && input.field_ut[i].iter().all(|v| v.is_finite())
+        })
         .collect();
     if rows.len() < MIN_SAMPLES {
         return Err(FitError::TooFewSamples {
@@ -135,10 +137,14 @@ pub fn fit_motors(input: &MotorInput<'_>) -> Result<MotorFit, FitError> {
         floor2,
         MIN_EXCESS_SHARE,
     )
-    .ok_or(FitError::Singular("the motor test's constant field has no solution"))?;
+    .ok_or(FitError::Singular(
+        "the motor test's constant field has no solution",
+    ))?;
     let untestable = selection.set_aside.first().map(|(_, why)| match why {
         SetAside::NotExcited => EffectId::CurrentBias.descriptor().not_excited,
-        SetAside::Absorbed { .. } => "the current barely varied against its mean during the recording",
+        SetAside::Absorbed { .. } => {
+            "the current barely varied against its mean during the recording"
+        }
     });
     let rms = |p: &Problem, sol: &Solution| (sol.rss / p.total.rows.max(1) as f64).sqrt();
     let constant_rms_ut = rms(&problem, &selection.base);
@@ -160,7 +166,9 @@ pub fn fit_motors(input: &MotorInput<'_>) -> Result<MotorFit, FitError> {
             let p = problem_at(input, &rows, l.lag_s, &mut cand);
             let sol = p
                 .solve(&(0..COLUMNS).collect::<Vec<_>>(), None, false)
-                .ok_or(FitError::Singular("the motor test's current term has no solution"))?;
+                .ok_or(FitError::Singular(
+                    "the motor test's current term has no solution",
+                ))?;
             (p, sol)
         }
         None => (problem, selection.last.clone()),
@@ -242,10 +250,15 @@ fn problem_at(input: &MotorInput<'_>, rows: &[usize], lag_s: f64, cand: &mut Can
         for &i in &rows[first..end] {
             let t_s = input.t_s[i];
             let current = [current_at(input, rows, t_s - lag_s)];
-            let regs = probes.regressors(&Context::body(t_s, f64::NAN, &current, input.field_ut[i]));
+            let regs =
+                probes.regressors(&Context::body(t_s, f64::NAN, &current, input.field_ut[i]));
             for j in 0..3 {
                 let mut entries = vec![(j, 1.0)];
-                entries.extend((0..3).filter(|&k| regs[k][j] != 0.0).map(|k| (BASE.len() + k, regs[k][j])));
+                entries.extend(
+                    (0..3)
+                        .filter(|&k| regs[k][j] != 0.0)
+                        .map(|k| (BASE.len() + k, regs[k][j])),
+                );
                 active += usize::from(entries.len() > 1);
                 let y = input.field_ut[i][j];
                 blocks[block].add_row(&entries, y);
@@ -270,8 +283,10 @@ fn problem_at(input: &MotorInput<'_>, rows: &[usize], lag_s: f64, cand: &mut Can
     )
 }
 
-/// The lag, scanned over whole sample intervals up to `max_lag_s` either way, when its profile interval lies inside
-/// the grid; `None` otherwise (the lag is then taken as zero).
+/// The lag, scanned over whole sample intervals up to `max_lag_s` either way and refined between the grid's points
+/// by the parabola through the least residual and its neighbours, when its profile interval lies inside the grid;
+/// `None` otherwise (the lag is then taken as zero). The interval is where the parabola stays within one
+/// autocorrelation-scaled residual variance of its minimum.
 fn scan_lag(input: &MotorInput<'_>, rows: &[usize], cand: &mut Candidate) -> Option<Lag> {
     let t = input.t_s;
     let (first, last) = (t[rows[0]], t[rows[rows.len() - 1]]);
@@ -284,7 +299,9 @@ fn scan_lag(input: &MotorInput<'_>, rows: &[usize], cand: &mut Candidate) -> Opt
         return None;
     }
     let all: Vec<usize> = (0..COLUMNS).collect();
-    let lags: Vec<f64> = (0..=2 * steps).map(|m| (m as f64 - steps as f64) * dt).collect();
+    let lags: Vec<f64> = (0..=2 * steps)
+        .map(|m| (m as f64 - steps as f64) * dt)
+        .collect();
     let fits: Vec<(f64, f64)> = lags
         .iter()
         .map(|&lag| {
@@ -295,14 +312,35 @@ fn scan_lag(input: &MotorInput<'_>, rows: &[usize], cand: &mut Candidate) -> Opt
         })
         .collect();
     let best = (0..fits.len()).min_by(|&a, &b| fits[a].0.total_cmp(&fits[b].0))?;
+    if best == 0 || best == fits.len() - 1 {
+        return None;
+    }
     let (rss, tau) = fits[best];
     let dof = (3 * rows.len() - COLUMNS) as f64;
-    let within = rss + tau * rss / dof;
-    let lo = (0..=best).rev().take_while(|&m| fits[m].0 <= within).last()?;
-    let hi = (best..fits.len()).take_while(|&m| fits[m].0 <= within).last()?;
-    (lo > 0 && hi < fits.len() - 1).then(|| Lag {
-        lag_s: lags[best],
-        interval_s: (lags[lo], lags[hi]),
+    let within = tau * rss / dof;
+    let lo = (0..=best)
+        .rev()
+        .take_while(|&m| fits[m].0 <= rss + within)
+        .last()?;
+    let hi = (best..fits.len())
+        .take_while(|&m| fits[m].0 <= rss + within)
+        .last()?;
+    if lo == 0 || hi == fits.len() - 1 {
+        return None;
+    }
+    // The parabola r(x) = r0 + c·(x − x0)² through the minimum and its neighbours (x in steps from the minimum).
+    let (before, after) = (fits[best - 1].0, fits[best + 1].0);
+    let curvature = (before + after - 2.0 * rss) / 2.0;
+    if !(curvature > 0.0) {
+        return None;
+    }
+    let x0 = (before - after) / (4.0 * curvature);
+    let r0 = rss - curvature * x0 * x0;
+    let half = ((rss + within - r0) / curvature).sqrt();
+    let lag_s = lags[best] + x0 * dt;
+    Some(Lag {
+        lag_s,
+        interval_s: (lag_s - half * dt, lag_s + half * dt),
     })
 }
 
@@ -335,10 +373,19 @@ mod tests {
     /// A still recording: a current ramping up and down, a constant field plus `coef·I`, white noise from a
     /// fixed-seed generator.
     fn recording(coef: [f64; 3], lag_s: f64, noise_ut: f64) -> (Vec<f64>, Vec<[f64; 3]>, Vec<f64>) {
+        recording_seeded(coef, lag_s, noise_ut, 0)
+    }
+
+    fn recording_seeded(
+        coef: [f64; 3],
+        lag_s: f64,
+        noise_ut: f64,
+        seed: u64,
+    ) -> (Vec<f64>, Vec<[f64; 3]>, Vec<f64>) {
         let n = 3000;
         let t: Vec<f64> = (0..n).map(|i| i as f64 * 0.02).collect();
         let current = |t: f64| 2.0 + 14.0 * (1.0 - (std::f64::consts::TAU * t / 7.0).cos());
-        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut state = 0x2545_f491_4f6c_dd1du64 ^ seed.wrapping_mul(0x9e37_79b9_7f4a_7c15);
         let mut gauss = || {
             // Box–Muller from a xorshift stream.
             let mut u = || {
@@ -353,7 +400,9 @@ mod tests {
         let b0 = [20.0, -5.0, 40.0];
         let field = t
             .iter()
-            .map(|&t| std::array::from_fn(|j| b0[j] + coef[j] * current(t - lag_s) + noise_ut * gauss()))
+            .map(|&t| {
+                std::array::from_fn(|j| b0[j] + coef[j] * current(t - lag_s) + noise_ut * gauss())
+            })
             .collect();
         let i = t.iter().map(|&t| current(t)).collect();
         (t, field, i)
@@ -381,11 +430,53 @@ mod tests {
             assert!((got[k] - coef[k]).abs() <= 3.0 * se[k], "{got:?} ± {se:?}");
         }
         let lag = term.lag.expect("the lag is identified");
-        assert!(lag.interval_s.0 <= 0.1 + 1e-9 && lag.interval_s.1 >= 0.1 - 1e-9, "{lag:?}");
-        assert!((f.residual_rms_ut - 0.1).abs() < 0.01, "{}", f.residual_rms_ut);
+        assert!(
+            lag.interval_s.0 < 0.1
+                && lag.interval_s.1 > 0.1
+                && lag.interval_s.1 - lag.interval_s.0 < 0.02,
+            "{lag:?}"
+        );
+        assert!(
+            (f.residual_rms_ut - 0.1).abs() < 0.01,
+            "{}",
+            f.residual_rms_ut
+        );
         for j in 0..3 {
             assert!((f.offset_ut[j] - [20.0, -5.0, 40.0][j]).abs() < 0.05);
         }
+    }
+
+    /// How often the true coefficient lies within two standard errors, over 200 simulated tests with a lag: about
+    /// 95 % if the errors are honest.
+    #[test]
+    #[ignore = "a study: cargo test --release -- --ignored"]
+    fn two_standard_errors_hold_the_truth_95_times_in_100() {
+        let coef = [0.05, -1.0, 0.3];
+        let (mut within, mut all) = (0, 0);
+        for seed in 1..=200 {
+            let (t, field, i) = recording_seeded(coef, 0.013, 0.3, seed);
+            let f = fit_motors(&MotorInput {
+                t_s: &t,
+                field_ut: &field,
+                current_a: &i,
+                noise_floor_ut: [0.3; 3],
+                max_lag_s: 0.5,
+            })
+            .unwrap();
+            let term = f.current.unwrap();
+            for k in 0..3 {
+                all += 1;
+                within += usize::from(
+                    (term.coef_ut_per_a()[k] - coef[k]).abs() <= 2.0 * term.coef_se_ut_per_a[k],
+                );
+            }
+        }
+        let share = within as f64 / all as f64;
+        println!(
+            "within two standard errors: {within} of {all} ({:.1} %)",
+            100.0 * share
+        );
+        assert!(share > 0.92, "{share}");
     }
 
     #[test]
@@ -414,7 +505,10 @@ mod tests {
         };
         let level = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let got = heading_error_deg(&effect, 10.0, &level, [20.0, 0.0, 45.0]);
-        assert!((got - (3.0f64 / 20.0).atan().to_degrees()).abs() < 1e-12, "{got}");
+        assert!(
+            (got - (3.0f64 / 20.0).atan().to_degrees()).abs() < 1e-12,
+            "{got}"
+        );
         assert!(heading_error_deg(&effect, 10.0, &level, [0.0, 0.0, 45.0]).is_nan());
     }
 }
