@@ -3,7 +3,8 @@
 //!
 //! Its compass is the simulator's [`Bench`]: a sensor with hard and soft iron ([`BenchConfig::sensor`]) and any
 //! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`]), a time
-//! lag — computed by the same function the fitter's regressors use. Like the real firmware it applies its own
+//! lag — computed by the same function the fitter's regressors use. The hand turns it, or holds it still for a bench
+//! motor test ([`TwinConfig::held`]). Like the real firmware it applies its own
 //! calibration to what it sends, with its parameters as they are at that moment:
 //!
 //! - ArduPilot: `RAW_IMU` (compass in mGauss) = `M·(raw + COMPASS_OFS) + COMPASS_MOT·I` (the last with
