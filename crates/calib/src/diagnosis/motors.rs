@@ -291,7 +291,8 @@ fn scan_lag(input: &MotorInput<'_>, rows: &[usize], cand: &mut Candidate) -> Opt
     let t = input.t_s;
     let (first, last) = (t[rows[0]], t[rows[rows.len() - 1]]);
     let dt = (last - first) / (rows.len() - 1) as f64;
-    if !(dt > 0.0) || !(input.max_lag_s > 0.0) {
+    // NaN is no positive number either.
+    if dt.is_nan() || dt <= 0.0 || input.max_lag_s.is_nan() || input.max_lag_s <= 0.0 {
         return None;
     }
     let steps = ((input.max_lag_s / dt).round() as usize).min(MAX_LAG_STEPS);
@@ -331,7 +332,7 @@ fn scan_lag(input: &MotorInput<'_>, rows: &[usize], cand: &mut Candidate) -> Opt
     // The parabola r(x) = r0 + c·(x − x0)² through the minimum and its neighbours (x in steps from the minimum).
     let (before, after) = (fits[best - 1].0, fits[best + 1].0);
     let curvature = (before + after - 2.0 * rss) / 2.0;
-    if !(curvature > 0.0) {
+    if curvature.is_nan() || curvature <= 0.0 {
         return None;
     }
     let x0 = (before - after) / (4.0 * curvature);
