@@ -297,6 +297,54 @@ fn no_current_term_is_reported_when_none_was_injected() {
         "{}",
         text(&refused)
     );
+    // A calibration's options are refused for a motor test, and `--params` for any other recording.
+    let out = dir.path().join("params.toml");
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[rec.to_str().unwrap(), "--out", out.to_str().unwrap()],
+    );
+    assert!(!refused.status.success() && !out.exists());
+    assert!(
+        text(&refused).contains("--out does not apply to")
+            && text(&refused).contains("bench motor test"),
+        "{}",
+        text(&refused)
+    );
+    let free = dir.path().join("free.csv");
+    std::fs::write(
+        &free,
+        std::fs::read_to_string(&rec)
+            .unwrap()
+            .replace("routine: motors", "routine: free"),
+    )
+    .unwrap();
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[free.to_str().unwrap(), "--params", out.to_str().unwrap()],
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused).contains("--params is for a bench motor test"),
+        "{}",
+        text(&refused)
+    );
+    // magcal records and fits a calibration: it refuses the routine before opening anything.
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal"),
+        &[
+            "--routine",
+            "motors",
+            "--out-dir",
+            dir.path().join("magcal-out").to_str().unwrap(),
+        ],
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused)
+            .contains("--routine motors: a bench motor test gives the current term alone"),
+        "{}",
+        text(&refused)
+    );
 }
 
 #[test]

@@ -1020,6 +1020,36 @@ mod tests {
         assert!(busy.contains("choose another --out-dir (nothing"), "{busy}");
     }
 
+    /// A motors recording stopped before its two ramps says so, and what to do.
+    #[test]
+    fn a_motor_test_stopped_short_says_how_many_ramps_it_made() {
+        let opts = RecordOptions::new(Routine::Motors, "m.csv".into());
+        let mut summary = RecordSummary {
+            path: "m.csv".into(),
+            samples: 500,
+            duration_s: 10.0,
+            coverage: 0.0,
+            poses: 0,
+            ramps: 1,
+            saturated: 0,
+            disturbed: 0,
+            clock_restarts: Vec::new(),
+            garbage: None,
+            untouched: false,
+            stop: Stop::MaxDuration,
+        };
+        let short = summary.shortfall(&opts).unwrap();
+        assert!(
+            short.contains("1 of the 2 throttle ramps made")
+                && short.contains("to full and back, twice"),
+            "{short}"
+        );
+        summary.stop = Stop::Ramps;
+        assert_eq!(summary.shortfall(&opts), None);
+        assert_eq!(Routine::Motors.name(), "motors");
+        assert_eq!(Routine::Motors.what_the_other_adds(), None);
+    }
+
     #[test]
     fn prompts_name_the_face_and_the_heading() {
         let poses = cube24_poses();
