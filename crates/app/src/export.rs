@@ -97,13 +97,14 @@ fn why_not(e: &FoundEffect, holder: Holder) -> String {
         }
         (EffectId::CurrentBias, Holder::Format(ExportFormat::Ardupilot)) => format!(
             "not written: COMPASS_MOT_X/Y/Z with COMPASS_MOTCT 2 hold a field per amp of the battery monitor's \
-             current (if {channel} is that current), but {fitted_without} (ArduPilot's compassmot measures it on the \
-             vehicle); the parameters file (--out) keeps it"
+             current (if {channel} is that current), but {fitted_without} (ArduPilot's compassmot, or magcal-record \
+             --routine motors and its magcal-fit --export, measures it on the vehicle); the parameters file (--out) \
+             keeps it"
         ),
         (EffectId::CurrentBias, Holder::Format(ExportFormat::Px4)) => format!(
             "not written: CAL_MAG0_XCOMP/YCOMP/ZCOMP with CAL_MAG_COMP_TYP current-based hold a field per kA of a \
-             battery's current (if {channel} is that current), but {fitted_without}; the parameters file (--out) \
-             keeps it"
+             battery's current (if {channel} is that current), but {fitted_without} (magcal-record --routine motors \
+             and its magcal-fit --export measure it on the vehicle); the parameters file (--out) keeps it"
         ),
         (EffectId::CurrentBias, Holder::Autopilot) => format!(
             "not written: the autopilot's current compensation holds a field per amp of the battery monitor's current \
