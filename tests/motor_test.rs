@@ -188,9 +188,10 @@ fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
         let out = record(&twin.path, &rec);
         twin.finish();
         let said = text(&out);
+        println!("{said}");
         assert!(out.status.success(), "{said}");
         assert!(
-            said.contains("motor test: hold the vehicle still")
+            said.contains("motor test: hold the vehicle still (props off or held down); raise the throttle slowly to full and back, twice")
                 && said.contains("throttle ramps made"),
             "{said}"
         );

@@ -147,9 +147,12 @@ impl<'o> Session<'o> {
             Routine::Cube24 => prompt_pose(source, self.opts, ui, 0, &self.jig.poses[0]),
             Routine::Motors => ui.message(&format!(
                 "motor test: hold the vehicle still (props off or held down); raise the throttle slowly to full and \
-                 back, {} times (magcal only reads: it never arms the vehicle or commands its motors; Ctrl-C stops \
-                 early, the file keeps everything)",
-                motors::RAMPS
+                 back, {} (magcal only reads: it never arms the vehicle or commands its motors; Ctrl-C stops early, \
+                 the file keeps everything)",
+                match motors::RAMPS {
+                    2 => "twice".to_owned(),
+                    n => format!("{n} times"),
+                }
             )),
         }
     }
