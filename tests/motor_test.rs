@@ -407,3 +407,39 @@ fn the_recovery_holds_over_seeds() {
     println!("within two standard errors: {within} of {all}");
     assert!(within as f64 >= 0.85 * all as f64, "{within} of {all}");
 }
+
+#[test]
+fn a_motors_recording_without_a_current_is_refused_by_the_fit_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim.csv");
+    let out = run(
+        env!("CARGO_BIN_EXE_magcal-sim"),
+        &[
+            "--out",
+            sim.to_str().unwrap(),
+            "--seed",
+            "1",
+            "--duration",
+            "5",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out));
+    let rec = dir.path().join("motors-without-current.csv");
+    std::fs::write(
+        &rec,
+        std::fs::read_to_string(&sim)
+            .unwrap()
+            .replace("# routine: free", "# routine: motors"),
+    )
+    .unwrap();
+    let refused = run(env!("CARGO_BIN_EXE_magcal-fit"), &[rec.to_str().unwrap()]);
+    assert!(!refused.status.success());
+    let said = text(&refused);
+    assert!(
+        said.contains(&format!(
+            "{}: no current channel (an i_<name> column)",
+            rec.display()
+        )),
+        "{said}"
+    );
+}
