@@ -186,7 +186,6 @@ fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
         let twin = Twin::start(held_twin(autopilot, seed, coef, true));
         let rec = dir.path().join(format!("motors-{}.csv", autopilot.name()));
         let out = record(&twin.path, &rec);
-        twin.finish();
         let said = text(&out);
         println!("{said}");
         assert!(out.status.success(), "{said}");
@@ -205,11 +204,27 @@ fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
             Autopilot::ArduPilot => "ardupilot",
             Autopilot::Px4 => "px4",
         };
+        // Fitted, exported, and written to the twin (still running), its previous values saved first.
+        let undo = dir
+            .path()
+            .join(format!("motors-{}.undo.param", autopilot.name()));
+        let device = format!("mavlink:{}", twin.path);
         let (report, summary) = fit(
             &rec,
             seed,
-            &["--export", format, "--export-out", export.to_str().unwrap()],
+            &[
+                "--export",
+                format,
+                "--export-out",
+                export.to_str().unwrap(),
+                "--write-to",
+                &device,
+                "--undo-out",
+                undo.to_str().unwrap(),
+            ],
         );
+        let held = twin.finish().params;
+        let value = |name: &str| held.iter().find(|(n, _)| n == name).unwrap().1;
         println!("{summary}");
         let term = &report["current_bias"];
         let got = vector(&term["params"]["coef_ut_per_a"]);
@@ -273,6 +288,43 @@ fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
                 );
             }
         }
+        // The twin holds the compensation written back: ArduPilot's −10·k mGauss/A after its matrix, PX4's
+        // −10·A⁻¹·k gauss/kA on the raw readings (A the true one given as --params); the old values in the undo file.
+        let expected: Vec<(String, f64)> = match autopilot {
+            Autopilot::ArduPilot => ["X", "Y", "Z"]
+                .iter()
+                .enumerate()
+                .map(|(k, axis)| (format!("COMPASS_MOT_{axis}"), -10.0 * got[k]))
+                .chain([("COMPASS_MOTCT".to_owned(), 2.0)])
+                .collect(),
+            Autopilot::Px4 => {
+                let a = TruthFile::of(ChipKind::Lis3mdl, seed).a;
+                let a = nalgebra::Matrix3::from_fn(|j, c| a[j][c]);
+                let comp = -10.0 * a.try_inverse().unwrap() * nalgebra::Vector3::from(got);
+                ["X", "Y", "Z"]
+                    .iter()
+                    .enumerate()
+                    .map(|(k, axis)| (format!("CAL_MAG0_{axis}COMP"), comp[k]))
+                    .chain([("CAL_MAG_COMP_TYP".to_owned(), 2.0)])
+                    .collect()
+            }
+        };
+        for (name, want) in &expected {
+            // The report's coefficients are printed to full precision; the twin holds floats.
+            assert!(
+                (value(name) - want).abs() <= 1e-4 * want.abs().max(1.0),
+                "{autopilot}: {name} = {} after the write-back, want {want}",
+                value(name)
+            );
+        }
+        let before = std::fs::read_to_string(&undo).unwrap();
+        assert!(
+            before.contains(match autopilot {
+                Autopilot::ArduPilot => "COMPASS_MOT_X,3",
+                Autopilot::Px4 => "CAL_MAG0_XCOMP\t3",
+            }),
+            "{before}"
+        );
     }
 }
 

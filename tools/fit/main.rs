@@ -44,7 +44,8 @@ use magcal_app::{say, tell, tellln};
 /// battery current on each axis (current_bias, µT/A, with standard errors), the lag if the data identify one, and
 /// the heading error it makes at hover and at full current — with --params PARAMS.toml (a rotation recording's fit)
 /// applied first for calibrated µT/A. --report writes it as JSON; --export ardupilot|px4 writes the motor
-/// compensation (COMPASS_MOT_* with COMPASS_MOTCT 2; CAL_MAG0_*COMP with CAL_MAG_COMP_TYP 2).
+/// compensation (COMPASS_MOT_* with COMPASS_MOTCT 2; CAL_MAG0_*COMP with CAL_MAG_COMP_TYP 2), and --write-to
+/// mavlink:… with --undo-out UNDO.param sets it in the flight controller, as a calibration's write-back does.
 ///
 /// With --write-to DEV the fitted parameters also go to the device, after the files are written, and are verified:
 /// serial:PATH[:BAUD] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
@@ -167,7 +168,6 @@ fn run_motors(args: &Args) -> anyhow::Result<()> {
     for (given, option) in [
         (args.out.is_some(), "--out"),
         (args.plots.is_some(), "--plots"),
-        (args.write_to.is_some(), "--write-to"),
         (args.require.is_some(), "--require"),
         (args.chip.is_some(), "--chip"),
         (args.mag.is_some(), "--mag"),
@@ -178,10 +178,26 @@ fn run_motors(args: &Args) -> anyhow::Result<()> {
         if given {
             bail!(
                 "{option} does not apply to {name}: it is a bench motor test (routine: motors), whose fit is the \
-                 current term alone, not a calibration (--report and --export ardupilot|px4 carry it)"
+                 current term alone, not a calibration (--report, --export ardupilot|px4 and --write-to mavlink:… \
+                 carry it)"
             );
         }
     }
+    let undo = match (&args.write_to, &args.undo_out) {
+        (Some(DeviceSpec::Mavlink { .. }), Some(path)) => Some(path.as_path()),
+        (Some(DeviceSpec::Mavlink { .. }), None) => bail!(
+            "--write-to mavlink:… saves the autopilot's previous values to an undo file first: give --undo-out \
+             UNDO.param; nothing was read or written"
+        ),
+        (Some(device), _) => bail!(
+            "--write-to {device}: a bench motor test's current term goes to a flight controller only \
+             (mavlink:PATH[:BAUD] or mavlink:udp:HOST:PORT); nothing was read or written"
+        ),
+        (None, Some(_)) => bail!(
+            "--undo-out is for --write-to mavlink:…, whose previous parameter values it holds"
+        ),
+        (None, None) => None,
+    };
     let mut guard = Guard::new("magcal-fit").input("<RECORDING>", &args.recording);
     if let Some(params) = &args.params {
         guard = guard.input("--params", params);
@@ -193,7 +209,9 @@ fn run_motors(args: &Args) -> anyhow::Result<()> {
             args.export_out.as_deref(),
             Replace::Products,
         )
+        .file("--undo-out", undo, Replace::Products)
         .check()?;
+    undo_is_new(undo)?;
     let field_args = args.field.field_args(None);
     let fitted = fit_motors_file(
         &args.recording,
@@ -223,6 +241,11 @@ fn run_motors(args: &Args) -> anyhow::Result<()> {
             Some(path) => write_atomic(path, text.as_bytes())
                 .with_context(|| format!("writing {}", path.display()))?,
             None => std::io::stdout().write_all(text.as_bytes())?,
+        }
+    }
+    if let (Some(device), Some(undo)) = (&args.write_to, undo) {
+        for line in fitted.write_back(device, undo)? {
+            tellln!("{line}");
         }
     }
     Ok(())

@@ -16,6 +16,9 @@
 //! the world field (`--field-ned`, `--location`/`--date`, or the recording's metadata): at hover current, the median
 //! of the currents above idle (the lowest current plus [`IDLE_SHARE`] of the range), and at full current, the
 //! highest recorded ([`magcal_calib::diagnosis::heading_error_deg`]).
+//!
+//! The term goes to an autopilot as its motor compensation: exported ([`MotorsFitted::export`]) or written to the
+//! flight controller ([`MotorsFitted::write_back`]).
 
 use std::path::Path;
 
@@ -24,10 +27,12 @@ use magcal_calib::diagnosis::{MotorFit, MotorInput, fit_motors, heading_error_de
 use magcal_calib::frames::{self, Mat3};
 use magcal_recording::Recording;
 
+use crate::device::DeviceSpec;
 use crate::export::{ExportFormat, current_export};
 use crate::field::{FieldArgs, resolve};
 use crate::params::ParamsFile;
 use crate::record::Routine;
+use crate::writeback::write_back_current;
 
 /// Currents up to this share of the range above the lowest are idle: the hover current is the median of the rest.
 pub const IDLE_SHARE: f64 = 0.1;
@@ -344,6 +349,18 @@ impl MotorsFitted {
         )?;
         let a = self.calibration.as_ref().map_or(IDENTITY, |(_, a)| *a);
         current_export(format, term.coef_ut_per_a(), &a)
+    }
+
+    /// Writes the current term to the flight controller `spec` names ([`write_back_current`]), its previous values
+    /// saved first to `undo`; an error when there is no term.
+    pub fn write_back(&self, spec: &DeviceSpec, undo: &Path) -> anyhow::Result<Vec<String>> {
+        let Some(term) = self.fit.current.as_ref() else {
+            bail!(
+                "not written to {spec}: no current term was found (the compensation would be zero)"
+            );
+        };
+        let a = self.calibration.as_ref().map_or(IDENTITY, |(_, a)| *a);
+        Ok(write_back_current(spec, term.coef_ut_per_a(), &a, undo)?)
     }
 }
 
