@@ -13,6 +13,7 @@ use magcal_app::files::write_atomic;
 use magcal_app::fit::Method;
 use magcal_app::flight::LogOptions;
 use magcal_app::howto::{Target, how_to_apply};
+use magcal_app::motors::{MotorsRequest, fit_motors_file, is_motors_recording};
 use magcal_app::outputs::{Guard, Replace};
 use magcal_app::params::ParamsFile;
 use magcal_app::plots::{PLOT_FILES, not_written, write_plots, write_readings_plot};
@@ -37,6 +38,14 @@ use magcal_app::{say, tell, tellln};
 /// the fit improve on held-out data.
 ///
 /// Workflow: magcal-record (or magcal-sim) writes the recording, magcal-fit fits it.
+///
+/// A bench motor test (a recording whose metadata says routine: motors, from magcal-record --routine motors) is no
+/// calibration: the vehicle was held still. Its fit is the current term alone — the field's change per amp of the
+/// battery current on each axis (current_bias, µT/A, with standard errors), the lag if the data identify one, and
+/// the heading error it makes at hover and at full current — with --params PARAMS.toml (a rotation recording's fit)
+/// applied first for calibrated µT/A. --report writes it as JSON; --export ardupilot|px4 writes the motor
+/// compensation (COMPASS_MOT_* with COMPASS_MOTCT 2; CAL_MAG0_*COMP with CAL_MAG_COMP_TYP 2), and --write-to
+/// mavlink:… with --undo-out UNDO.param sets it in the flight controller, as a calibration's write-back does.
 ///
 /// With --write-to DEV the fitted parameters also go to the device, after the files are written, and are verified:
 /// serial:PATH[:BAUD] gets MotionCal's calibration packet, confirmed by the firmware's Cal1:/Cal2:
@@ -105,6 +114,10 @@ struct Args {
     /// counts to gauss as their drivers do; with the field known, the setting that fits it is taken unless stated.
     #[arg(long, value_name = "CHIP[:SETTING]")]
     chip: Option<ChipOption>,
+    /// For a bench motor test (routine: motors): the sensor's calibration, fitted from a rotation recording, applied
+    /// before the current term is fitted, so that it is in calibrated µT/A.
+    #[arg(long, value_name = "PARAMS.toml")]
+    params: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -148,6 +161,96 @@ fn undo_is_new(undo: Option<&std::path::Path>) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Fits a bench motor test: the current term alone (see the tool's help), its summary, `--report` and
+/// `--export ardupilot|px4`; the options of a calibration are refused.
+fn run_motors(args: &Args) -> anyhow::Result<()> {
+    let name = args.recording.display().to_string();
+    for (given, option) in [
+        (args.out.is_some(), "--out"),
+        (args.plots.is_some(), "--plots"),
+        (args.require.is_some(), "--require"),
+        (args.chip.is_some(), "--chip"),
+        (args.mag.is_some(), "--mag"),
+        (args.field_ut.is_some(), "--field-ut"),
+        (args.method != Method::Auto, "--method"),
+        (args.no_diagnose, "--no-diagnose"),
+    ] {
+        if given {
+            bail!(
+                "{option} does not apply to {name}: it is a bench motor test (routine: motors), whose fit is the \
+                 current term alone, not a calibration (--report, --export ardupilot|px4 and --write-to mavlink:… \
+                 carry it)"
+            );
+        }
+    }
+    let undo = match (&args.write_to, &args.undo_out) {
+        (Some(DeviceSpec::Mavlink { .. }), Some(path)) => Some(path.as_path()),
+        (Some(DeviceSpec::Mavlink { .. }), None) => bail!(
+            "--write-to mavlink:… saves the autopilot's previous values to an undo file first: give --undo-out \
+             UNDO.param; nothing was read or written"
+        ),
+        (Some(device), _) => bail!(
+            "--write-to {device}: a bench motor test's current term goes to a flight controller only \
+             (mavlink:PATH[:BAUD] or mavlink:udp:HOST:PORT); nothing was read or written"
+        ),
+        (None, Some(_)) => bail!(
+            "--undo-out is for --write-to mavlink:…, whose previous parameter values it holds"
+        ),
+        (None, None) => None,
+    };
+    let mut guard = Guard::new("magcal-fit").input("<RECORDING>", &args.recording);
+    if let Some(params) = &args.params {
+        guard = guard.input("--params", params);
+    }
+    guard
+        .file("--report", args.report.as_deref(), Replace::Products)
+        .file(
+            "--export-out",
+            args.export_out.as_deref(),
+            Replace::Products,
+        )
+        .file("--undo-out", undo, Replace::Products)
+        .check()?;
+    undo_is_new(undo)?;
+    let field_args = args.field.field_args(None);
+    let fitted = fit_motors_file(
+        &args.recording,
+        &MotorsRequest {
+            field: &field_args,
+            params: args.params.as_deref(),
+        },
+    )?;
+    let export = args
+        .export
+        .map(|format| fitted.export(format))
+        .transpose()
+        .map_err(|why| anyhow::anyhow!("{name}: not exported: {why}"))?;
+    let summary = fitted.summary(&name);
+    if args.export.is_some() && args.export_out.is_none() {
+        tell!("{summary}");
+    } else {
+        say!("{summary}")?;
+    }
+    if let Some(path) = &args.report {
+        let text = serde_json::to_string_pretty(&fitted.report(&name))? + "\n";
+        write_atomic(path, text.as_bytes())
+            .with_context(|| format!("writing the report {}", path.display()))?;
+    }
+    if let Some(text) = export {
+        match &args.export_out {
+            Some(path) => write_atomic(path, text.as_bytes())
+                .with_context(|| format!("writing {}", path.display()))?,
+            None => std::io::stdout().write_all(text.as_bytes())?,
+        }
+    }
+    if let (Some(device), Some(undo)) = (&args.write_to, undo) {
+        for line in fitted.write_back(device, undo)? {
+            tellln!("{line}");
+        }
+    }
+    Ok(())
+}
+
 /// Refuses outputs that would overwrite the recording, each other or another recording, files that cannot be made
 /// (a missing folder, a folder's name), or plots into a file's place, before anything is read or written.
 fn check_paths(args: &Args, undo: Option<&std::path::Path>) -> anyhow::Result<()> {
@@ -171,6 +274,16 @@ fn check_paths(args: &Args, undo: Option<&std::path::Path>) -> anyhow::Result<()
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
+    if is_motors_recording(&args.recording) {
+        return run_motors(&args);
+    }
+    if args.params.is_some() {
+        bail!(
+            "--params is for a bench motor test (a recording of magcal-record --routine motors), and {} is not one; \
+             to check parameters on a recording, use magcal-apply PARAMS.toml RECORDING",
+            args.recording.display()
+        );
+    }
     let undo = undo_path(&args)?;
     check_paths(&args, undo.as_deref())?;
     undo_is_new(undo.as_deref())?;

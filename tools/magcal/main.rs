@@ -74,6 +74,12 @@ fn run(args: Args) -> anyhow::Result<()> {
     let routine = args
         .routine
         .unwrap_or_else(|| Routine::default_for(&args.device));
+    if routine == Routine::Motors {
+        bail!(
+            "--routine motors: a bench motor test gives the current term alone, not a calibration; record it with \
+             magcal-record --routine motors and fit it with magcal-fit (nothing was recorded)"
+        );
+    }
     let mut opts = RecordOptions::new(routine, rec_path.clone());
     opts.force = args.force;
     opts.auto = args.device.is_sim();
@@ -102,13 +108,14 @@ fn run(args: Args) -> anyhow::Result<()> {
         tellln!("{note}");
     }
     let mut source = device::open(&args.device, &open)?;
-    let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
+    let mut ui = ui::for_stdout(opts.auto, routine);
     sayln!(
         "magcal: recording {} ({} routine{}) to {}",
         args.device,
         routine.name(),
         match (args.routine, routine) {
-            (Some(_), _) => "",
+            // A motors routine is only ever asked for, and refused above.
+            (Some(_), _) | (None, Routine::Motors) => "",
             (None, Routine::Free) =>
                 ", the default for a real device: turn it by hand through every direction; --routine cube24 with a \
                  cube jig",
@@ -125,7 +132,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         match recorded.stop {
             Stop::Interrupted => " (interrupted)",
             Stop::MaxDuration => " (longest duration reached)",
-            Stop::Coverage | Stop::AllPoses => "",
+            Stop::Coverage | Stop::AllPoses | Stop::Ramps => "",
         }
     )?;
     let short = recorded.shortfall(&opts);

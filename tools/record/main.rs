@@ -59,6 +59,12 @@ use magcal_app::{sayln, tellln};
 ///           still for the dwell time (or when you press Enter). Each pose's attitude is recorded, which gives the
 ///           vector calibration (every component, misalignment included). Give the local field with --field-ned
 ///           or --location/--date.
+///   motors  a bench motor test on a flight controller (mavlink:…): hold the vehicle still (props off or held
+///           down) and raise the throttle slowly to full and back, twice, yourself — magcal only reads, it never
+///           arms the vehicle or commands its motors. The screen shows the battery current and the field's change
+///           since the start; recording stops after two ramps up to 60 % of the highest current and back (or
+///           --max-duration, or Ctrl-C). magcal-fit then fits the current term alone (µT per A per axis) and the
+///           heading error it makes. A device without a current is refused.
 ///
 /// THE SCREEN (on a terminal):
 ///   the coverage map (the sphere of field directions, +Z half left, -Z half right, seen from outside: # covered by a
@@ -240,10 +246,10 @@ fn run(args: Args) -> anyhow::Result<()> {
         tellln!(
             "note: no --field-ned or --location/--date: the fit will need the local field (magcal-fit --field-ned \
              or --location/--date){}",
-            if routine == Routine::Cube24 {
-                " for the vector method"
-            } else {
-                " for an absolute scale"
+            match routine {
+                Routine::Cube24 => " for the vector method",
+                Routine::Free => " for an absolute scale",
+                Routine::Motors => " for the heading error the motors make",
             }
         );
     }
@@ -266,7 +272,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             source.sensor()
         );
     }
-    let mut ui = ui::for_stdout(opts.auto, (routine == Routine::Cube24).then_some(24));
+    let mut ui = ui::for_stdout(opts.auto, routine);
     sayln!("recording {spec} to {}", args.out.display())?;
     let summary = record(source.as_mut(), &opts, ui.as_mut(), &interrupt)?;
     print_summary(&summary, &opts)?;
@@ -277,6 +283,7 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
     let why = match s.stop {
         Stop::Coverage => "coverage target reached",
         Stop::AllPoses => "all 24 poses taken",
+        Stop::Ramps => "throttle ramps made",
         Stop::Interrupted => "interrupted",
         Stop::MaxDuration => "longest duration reached",
     };
@@ -288,6 +295,8 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
         100.0 * s.coverage,
         if s.poses > 0 {
             format!(", {} poses", s.poses)
+        } else if opts.routine == Routine::Motors {
+            format!(", {} throttle ramps", s.ramps)
         } else {
             String::new()
         }

@@ -97,13 +97,14 @@ fn why_not(e: &FoundEffect, holder: Holder) -> String {
         }
         (EffectId::CurrentBias, Holder::Format(ExportFormat::Ardupilot)) => format!(
             "not written: COMPASS_MOT_X/Y/Z with COMPASS_MOTCT 2 hold a field per amp of the battery monitor's \
-             current (if {channel} is that current), but {fitted_without} (ArduPilot's compassmot measures it on the \
-             vehicle); the parameters file (--out) keeps it"
+             current (if {channel} is that current), but {fitted_without} (ArduPilot's compassmot, or magcal-record \
+             --routine motors and its magcal-fit --export, measures it on the vehicle); the parameters file (--out) \
+             keeps it"
         ),
         (EffectId::CurrentBias, Holder::Format(ExportFormat::Px4)) => format!(
             "not written: CAL_MAG0_XCOMP/YCOMP/ZCOMP with CAL_MAG_COMP_TYP current-based hold a field per kA of a \
-             battery's current (if {channel} is that current), but {fitted_without}; the parameters file (--out) \
-             keeps it"
+             battery's current (if {channel} is that current), but {fitted_without} (magcal-record --routine motors \
+             and its magcal-fit --export measure it on the vehicle); the parameters file (--out) keeps it"
         ),
         (EffectId::CurrentBias, Holder::Autopilot) => format!(
             "not written: the autopilot's current compensation holds a field per amp of the battery monitor's current \
@@ -368,6 +369,83 @@ pub fn autopilot_params(model: &Model, format: ExportFormat, units: &Units) -> V
     out
 }
 
+/// An autopilot's motor compensation of the current term `k_ut_per_a` of a bench motor test (`current_bias`'s
+/// coefficients in µT/A, in the field calibrated by `a`, the calibration's `A`; the identity for readings as
+/// recorded), as the parameters the autopilot adds per amp of its battery current:
+/// - ArduPilot adds `COMPASS_MOT·I` (mGauss/A) after its matrix, to the calibrated field: `MOT = −10·k`, with
+///   `COMPASS_MOTCT` 2 (the battery current);
+/// - PX4 adds `I/1000·CAL_MAG0_*COMP` (gauss/kA) to the raw readings, before its offset and matrix:
+///   `COMP = −10·A⁻¹·k`, with `CAL_MAG_COMP_TYP` 2 (the first battery's current).
+///
+/// An error for the formats that hold `A` and `b` only, and for an `A` without an inverse.
+pub fn current_params(
+    format: ExportFormat,
+    k_ut_per_a: [f64; 3],
+    a: &[[f64; 3]; 3],
+) -> Result<Vec<(String, f64)>, String> {
+    let k = Vector3::from(k_ut_per_a);
+    let axes = ["X", "Y", "Z"];
+    match format {
+        ExportFormat::Ardupilot => {
+            let mot = -10.0 * k;
+            let mut out: Vec<(String, f64)> = axes
+                .iter()
+                .enumerate()
+                .map(|(j, axis)| (format!("COMPASS_MOT_{axis}"), mot[j]))
+                .collect();
+            out.push(("COMPASS_MOTCT".to_owned(), 2.0));
+            Ok(out)
+        }
+        ExportFormat::Px4 => {
+            let a_inv = Matrix3::from_fn(|j, c| a[j][c])
+                .try_inverse()
+                .ok_or("the calibration's A has no inverse")?;
+            let comp = -10.0 * a_inv * k;
+            let mut out: Vec<(String, f64)> = axes
+                .iter()
+                .enumerate()
+                .map(|(j, axis)| (format!("CAL_MAG0_{axis}COMP"), comp[j]))
+                .collect();
+            out.push(("CAL_MAG_COMP_TYP".to_owned(), 2.0));
+            Ok(out)
+        }
+        ExportFormat::CHeader | ExportFormat::Json => Err(format!(
+            "the {} export holds A and b only; the report (--report) holds the current term",
+            match format {
+                ExportFormat::CHeader => "c-header",
+                _ => "json",
+            }
+        )),
+    }
+}
+
+/// The motor compensation of [`current_params`] as the format's file: ArduPilot's `.param` lines, PX4's
+/// QGroundControl lines (the type an integer).
+pub fn current_export(
+    format: ExportFormat,
+    k_ut_per_a: [f64; 3],
+    a: &[[f64; 3]; 3],
+) -> Result<String, String> {
+    let params = current_params(format, k_ut_per_a, a)?;
+    let mut out = String::from(
+        "# magcal bench motor test: the motor compensation per amp of the battery current (the calibration's other \
+         parameters are left as they are)\n",
+    );
+    if format == ExportFormat::Px4 {
+        out += "# Vehicle-Id\tComponent-Id\tName\tValue\tType\n";
+    }
+    for (name, v) in params {
+        let integer = name == "COMPASS_MOTCT" || name == "CAL_MAG_COMP_TYP";
+        out += &match (format, integer) {
+            (ExportFormat::Px4, true) => format!("1\t1\t{name}\t{v:.0}\t6\n"),
+            (ExportFormat::Px4, false) => format!("1\t1\t{name}\t{v:.9}\t9\n"),
+            (_, true) => format!("{name},{v:.0}\n"),
+            (_, false) => format!("{name},{v:.6}\n"),
+        };
+    }
+    Ok(out)
+}
+
 /// ArduPilot's COMPASS_OFS, DIA and ODI lines ([`autopilot_params`]): offsets to 3 decimals of a mGauss, the matrix
 /// to 6.
 fn ardupilot_values(model: &Model, units: &Units) -> String {
@@ -589,6 +667,41 @@ pub(crate) mod tests {
         let px_g = sp * (raw / 100.0 - off);
         assert!((px_g * 100.0 - ours).norm() < 1e-4, "{px_g} vs {ours}");
         assert!(px.contains("misalignment rotation of"));
+    }
+
+    /// A current term through each autopilot's formula gives back the field it compensates.
+    #[test]
+    fn the_motor_compensation_cancels_the_current_term() {
+        let k = [0.3, -0.05, 1.0];
+        let a = [[1.1, 0.02, 0.0], [0.02, 0.95, 0.01], [0.0, 0.01, 1.03]];
+        let value = |p: &[(String, f64)], n: &str| p.iter().find(|(m, _)| m == n).unwrap().1;
+        let ap = current_params(ExportFormat::Ardupilot, k, &a).unwrap();
+        assert_eq!(value(&ap, "COMPASS_MOTCT"), 2.0);
+        // ArduPilot adds MOT·I (mGauss) to the calibrated field, in which the current adds 10·k·I mGauss.
+        for (j, axis) in ["X", "Y", "Z"].iter().enumerate() {
+            assert!((value(&ap, &format!("COMPASS_MOT_{axis}")) + 10.0 * k[j]).abs() < 1e-12);
+        }
+        // PX4 adds I/1000·COMP (gauss) to the raw readings, in which the current adds A⁻¹·k·I/100 gauss.
+        let px4 = current_params(ExportFormat::Px4, k, &a).unwrap();
+        assert_eq!(value(&px4, "CAL_MAG_COMP_TYP"), 2.0);
+        let comp = Vector3::new(
+            value(&px4, "CAL_MAG0_XCOMP"),
+            value(&px4, "CAL_MAG0_YCOMP"),
+            value(&px4, "CAL_MAG0_ZCOMP"),
+        );
+        let raw_g_per_a = Matrix3::from_fn(|j, c| a[j][c]) * (comp / -1000.0) * 100.0;
+        assert!(
+            (raw_g_per_a - Vector3::from(k)).norm() < 1e-12,
+            "{raw_g_per_a}"
+        );
+        let text = current_export(ExportFormat::Px4, k, &a).unwrap();
+        assert!(text.contains("1\t1\tCAL_MAG_COMP_TYP\t2\t6\n"), "{text}");
+        assert!(
+            current_export(ExportFormat::Ardupilot, k, &a)
+                .unwrap()
+                .contains("COMPASS_MOT_Z,-10.000000\nCOMPASS_MOTCT,2\n")
+        );
+        assert!(current_params(ExportFormat::CHeader, k, &a).is_err());
     }
 
     #[test]

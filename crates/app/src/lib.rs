@@ -18,6 +18,7 @@ pub mod fit;
 pub mod flight;
 pub mod heading;
 pub mod howto;
+pub mod motors;
 pub mod outputs;
 pub mod params;
 pub mod plots;

@@ -60,6 +60,7 @@ pub const OPTIONS: &[(&str, &str, Role)] = &[
     ("magcal-fit", "--export-out", Role::Output),
     ("magcal-fit", "--plots", Role::Output),
     ("magcal-fit", "--undo-out", Role::Output),
+    ("magcal-fit", "--params", Role::Input),
     ("magcal-apply", "<PARAMS>", Role::Input),
     ("magcal-apply", "<RECORDING>", Role::Input),
     ("magcal-apply", "--out", Role::Output),

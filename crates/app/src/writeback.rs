@@ -27,7 +27,7 @@ use magcal_mockhw::{SimChip, VirtualClock};
 use magcal_sim::bench::Bench;
 
 use crate::device::{DeviceSpec, MavlinkPort};
-use crate::export::{ExportFormat, autopilot_params, refusal, warnings};
+use crate::export::{ExportFormat, autopilot_params, current_params, refusal, warnings};
 use crate::fit::Calibration;
 use crate::source::sim::bench_config;
 
@@ -404,6 +404,52 @@ pub fn write_back_autopilot(
         lines.push(format!(
             "  the model's {corrections} body-fixed correction(s) are not among these parameters: it got A and b \
              fitted without them; the parameters file keeps them"
+        ));
+    }
+    Ok(lines)
+}
+
+/// Writes a bench motor test's current term to the flight controller `spec` names (`mavlink:…`): its motor
+/// compensation ([`current_params`]: `COMPASS_MOT_*` with `COMPASS_MOTCT` 2, or `CAL_MAG0_*COMP` with
+/// `CAL_MAG_COMP_TYP` 2) for the current term `k_ut_per_a` in the field calibrated by `a`, as
+/// [`write_back_autopilot`] writes a calibration: the previous values saved first to `undo`, each set, confirmed and
+/// read back, or what was written set back.
+pub fn write_back_current(
+    spec: &DeviceSpec,
+    k_ut_per_a: [f64; 3],
+    a: &[[f64; 3]; 3],
+    undo: &Path,
+) -> Result<Vec<String>, WriteBackError> {
+    let device = spec.to_string();
+    let (mut conn, autopilot) = connect(spec)?;
+    let wanted = current_params(format_of(autopilot), k_ut_per_a, a).map_err(|why| {
+        WriteBackError::Unsendable {
+            device: device.clone(),
+            why,
+        }
+    })?;
+    let comments = [format!(
+        "{autopilot}'s values before magcal-fit wrote a bench motor test's compensation to {device}: load this file to \
+         undo it"
+    )];
+    let (back, previous) = set_with_undo(
+        &mut conn,
+        autopilot,
+        &device,
+        &wanted,
+        Some((undo, &comments)),
+    )?;
+    let mut lines = vec![format!(
+        "{device}: {autopilot}: set the motor compensation, {} parameters, each confirmed by the autopilot and read \
+         back; the previous values are in {}",
+        back.len(),
+        undo.display()
+    )];
+    // Decoded (PX4 carries an integer's bytes in the float), and as the float the autopilot holds.
+    for (b, p) in back.iter().zip(&previous) {
+        lines.push(format!(
+            "  {:<16} {:>14} (was {})",
+            b.name, b.value as f32, p.value as f32
         ));
     }
     Ok(lines)

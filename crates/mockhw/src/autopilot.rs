@@ -3,7 +3,8 @@
 //!
 //! Its compass is the simulator's [`Bench`]: a sensor with hard and soft iron ([`BenchConfig::sensor`]) and any
 //! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`]), a time
-//! lag — computed by the same function the fitter's regressors use. Like the real firmware it applies its own
+//! lag — computed by the same function the fitter's regressors use. The hand turns it, or holds it still for a bench
+//! motor test ([`TwinConfig::held`]). Like the real firmware it applies its own
 //! calibration to what it sends, with its parameters as they are at that moment:
 //!
 //! - ArduPilot: `RAW_IMU` (compass in mGauss) = `M·(raw + COMPASS_OFS) + COMPASS_MOT·I` (the last with
@@ -99,11 +100,14 @@ pub struct TwinConfig {
     pub values: Vec<(String, f64)>,
     /// Parameter ranges other than the defaults, by name: (min, max).
     pub ranges: Vec<(String, f64, f64)>,
+    /// The vehicle held down (a bench motor test): the hand holds it still at its first attitude instead of
+    /// turning it.
+    pub held: bool,
 }
 
 impl TwinConfig {
     /// `autopilot` on `bench`, no current, streaming at 50 Hz, 10 times faster than real time, its calibration
-    /// parameters at their defaults (no correction).
+    /// parameters at their defaults (no correction), turned by the hand.
     pub fn new(autopilot: Autopilot, bench: BenchConfig) -> TwinConfig {
         TwinConfig {
             autopilot,
@@ -115,6 +119,7 @@ impl TwinConfig {
             await_request: false,
             values: Vec::new(),
             ranges: Vec::new(),
+            held: false,
         }
     }
 }
@@ -310,7 +315,9 @@ impl<P: Read + Write> AutopilotTwin<P> {
     /// than the battery current, and parameter values or ranges of names it does not have.
     pub fn new(port: P, config: TwinConfig) -> Result<AutopilotTwin<P>, TwinError> {
         let mut bench = Bench::with_currents(config.bench.clone(), 1)?;
-        bench.hand_mut().tumble(0.0, 1.0);
+        if !config.held {
+            bench.hand_mut().tumble(0.0, 1.0);
+        }
         let mut params = default_params(config.autopilot);
         for (name, value) in &config.values {
             let p =

@@ -12,6 +12,13 @@
 //!   calibration its reference, until a dwell's worth is written and the pose is taken. A sample that moves ends
 //!   the take: the rows written stay (they were still, at the pose), and the pose is taken once the jig settles
 //!   again. Enter takes the next dwell whatever it holds. The settling dwell keeps the end of the move out.
+//! - **motors**: a bench motor test. The vehicle is held still (props off or held down) while the operator raises the
+//!   throttle to full and lowers it, twice; magcal only reads (it never arms the vehicle or commands its motors).
+//!   Every sample is written with its attitude and current; the live display shows the current and the field's
+//!   change since the start ([`ThrottleWatch`]); the recording stops once the ramps are made ([`motors::RAMPS`]
+//!   reaching [`motors::RAMP_SHARE`] of the highest current). A device without a current channel is refused
+//!   before the file is made. The field's magnitude is not watched for magnets: its change with the current is
+//!   what is measured. Its fit is the current term alone (`magcal-fit`, [`crate::motors`]).
 //!
 //! The coverage map counts the samples written, by the definition the fit uses too
 //! ([`magcal_calib::directions`]), so the recorder's figure and the fit's agree; in the cube routine that is the
@@ -34,6 +41,7 @@
 
 pub mod coverage;
 pub mod magnitude;
+pub mod motors;
 pub mod quality;
 mod session;
 pub mod still;
@@ -53,6 +61,7 @@ use crate::source::sim;
 pub use crate::source::{Reading, Skipped, Source, SourceError};
 pub use coverage::CoverageMap;
 pub use magnitude::{Disturbance, MagnitudeEvent, MagnitudeWatch};
+pub use motors::{Throttle, ThrottleWatch};
 pub use quality::Quality;
 pub use still::StillWindow;
 pub use ui::{Progress, Ui};
@@ -64,6 +73,8 @@ pub enum Routine {
     Free,
     /// The 24 poses of a cube jig against a reference edge (a vector calibration).
     Cube24,
+    /// A bench motor test: the vehicle held still while the throttle goes up and down (the current term only).
+    Motors,
 }
 
 impl Routine {
@@ -72,6 +83,7 @@ impl Routine {
         match self {
             Routine::Free => "free",
             Routine::Cube24 => "cube24",
+            Routine::Motors => "motors",
         }
     }
 
@@ -98,7 +110,7 @@ impl Routine {
                  calibration, which adds that misalignment (it goes straight into the heading) and checks the fit \
                  against the field's direction",
             ),
-            Routine::Cube24 => None,
+            Routine::Cube24 | Routine::Motors => None,
         }
     }
 }
@@ -196,6 +208,8 @@ pub enum Stop {
     Coverage,
     /// The cube routine took all its poses.
     AllPoses,
+    /// The motors routine's ramps are made.
+    Ramps,
     /// Interrupted (Ctrl-C).
     Interrupted,
     /// The longest duration passed.
@@ -215,6 +229,8 @@ pub struct RecordSummary {
     pub coverage: f64,
     /// Cube poses taken.
     pub poses: usize,
+    /// Motors routine: throttle ramps made ([`motors::RAMPS`] asked for).
+    pub ramps: usize,
     /// Samples the chip refused as saturated (not recorded).
     pub saturated: u64,
     /// Readings whose field magnitude departed from the rest's (a magnet or iron nearby; recorded, not counted as
@@ -247,13 +263,23 @@ impl RecordSummary {
             Routine::Cube24 if self.poses < poses => {
                 format!("{} of the {poses} poses taken", self.poses)
             }
+            Routine::Motors if self.ramps < motors::RAMPS => {
+                return Some(format!(
+                    "the recording stopped short of its routine: {} of the {} throttle ramps made (up to at least \
+                     {:.0} % of the highest current and back). A fit may find no current term, or a loose one: \
+                     record again, raising the throttle slowly to full and back, twice",
+                    self.ramps,
+                    motors::RAMPS,
+                    100.0 * motors::RAMP_SHARE
+                ));
+            }
             _ => return None,
         };
         Some(format!(
             "the recording stopped short of its routine: {got}. A fit may be refused (too few directions to fix the \
              offset) or loose: record again, turning the sensor through every orientation{}",
             match opts.routine {
-                Routine::Free => "",
+                Routine::Free | Routine::Motors => "",
                 Routine::Cube24 => " (all 24 poses)",
             }
         ))
@@ -343,6 +369,16 @@ pub enum RecordError {
         dwell_s: f64,
         /// The device's rate, Hz.
         rate_hz: f64,
+    },
+    /// The motors routine on a device that gives no current: nothing was recorded.
+    #[error(
+        "{device}: the motors routine needs the current the motors draw, and this device gives none (a flight \
+         controller's battery current comes as BATTERY_STATUS: is its battery monitor set up, and does this link \
+         carry that stream?); nothing was recorded"
+    )]
+    NoCurrent {
+        /// The device string.
+        device: String,
     },
     /// The device's outputs stopped changing.
     #[error(
@@ -624,6 +660,7 @@ pub fn record(
     interrupt: &AtomicBool,
 ) -> Result<RecordSummary, RecordError> {
     check_dwell(source, opts)?;
+    check_current(source, opts)?;
     let mut out = Out::create(source, opts)?;
     let result = session::run(source, opts, ui, interrupt, &mut out);
     ui.finish();
@@ -662,6 +699,16 @@ fn check_dwell(source: &dyn Source, opts: &RecordOptions) -> Result<(), RecordEr
         return Err(RecordError::Dwell {
             dwell_s: opts.dwell_s,
             rate_hz,
+        });
+    }
+    Ok(())
+}
+
+/// Refuses, before the file is made, the motors routine on a device without a current channel.
+fn check_current(source: &dyn Source, opts: &RecordOptions) -> Result<(), RecordError> {
+    if opts.routine == Routine::Motors && source.current_channel().is_none() {
+        return Err(RecordError::NoCurrent {
+            device: source.device().to_owned(),
         });
     }
     Ok(())
@@ -817,12 +864,14 @@ fn progress<'a>(
     magnitude: &MagnitudeWatch,
     opts: &RecordOptions,
     taken: Option<usize>,
+    throttle: Option<Throttle>,
 ) -> Progress<'a> {
     Progress {
+        throttle,
         t_s,
         samples: out.rows(),
         coverage: map,
-        target: taken.is_none().then_some(opts.target_coverage),
+        target: (opts.routine == Routine::Free).then_some(opts.target_coverage),
         poses: taken.map(|t| (t, 24)),
         quality: Quality::of(map.directions()),
         disturbance: magnitude.disturbance(),
@@ -969,6 +1018,36 @@ mod tests {
         };
         let busy = busy.for_option("--out-dir").to_string();
         assert!(busy.contains("choose another --out-dir (nothing"), "{busy}");
+    }
+
+    /// A motors recording stopped before its two ramps says so, and what to do.
+    #[test]
+    fn a_motor_test_stopped_short_says_how_many_ramps_it_made() {
+        let opts = RecordOptions::new(Routine::Motors, "m.csv".into());
+        let mut summary = RecordSummary {
+            path: "m.csv".into(),
+            samples: 500,
+            duration_s: 10.0,
+            coverage: 0.0,
+            poses: 0,
+            ramps: 1,
+            saturated: 0,
+            disturbed: 0,
+            clock_restarts: Vec::new(),
+            garbage: None,
+            untouched: false,
+            stop: Stop::MaxDuration,
+        };
+        let short = summary.shortfall(&opts).unwrap();
+        assert!(
+            short.contains("1 of the 2 throttle ramps made")
+                && short.contains("to full and back, twice"),
+            "{short}"
+        );
+        summary.stop = Stop::Ramps;
+        assert_eq!(summary.shortfall(&opts), None);
+        assert_eq!(Routine::Motors.name(), "motors");
+        assert_eq!(Routine::Motors.what_the_other_adds(), None);
     }
 
     #[test]

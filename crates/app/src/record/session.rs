@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::{
     CoverageMap, Cube, MagnitudeEvent, MagnitudeWatch, Out, Reading, RecordError, RecordOptions,
-    RecordSummary, Routine, Skipped, Source, SourceError, Stop, Ui, cube_step, progress,
-    prompt_pose, units_note,
+    RecordSummary, Routine, Skipped, Source, SourceError, Stop, ThrottleWatch, Ui, cube_step,
+    motors, progress, prompt_pose, units_note,
 };
 
 /// Identical consecutive readings that mean the outputs are stuck: this many, or two seconds' worth if more.
@@ -49,6 +49,7 @@ struct Session<'o> {
     magnitude: MagnitudeWatch,
     units_told: bool,
     jig: Cube,
+    throttle: ThrottleWatch,
     seen: u64,
     /// Rows written while the magnitude departed (between cube poses, readings are looked at and not written).
     disturbed: u64,
@@ -94,6 +95,7 @@ pub(super) fn run(
         duration_s: source.now_s() - s.t0_s,
         coverage: s.map.fraction(),
         poses: s.jig.taken,
+        ramps: s.throttle.throttle().map_or(0, |t| t.ramps),
         saturated: source.saturated(),
         disturbed: s.disturbed,
         clock_restarts: source.clock_restarts().iter().map(|t| t - s.t0_s).collect(),
@@ -120,6 +122,7 @@ impl<'o> Session<'o> {
             magnitude: MagnitudeWatch::new(),
             units_told: false,
             jig: Cube::new((opts.dwell_s * rate_hz).round() as usize),
+            throttle: ThrottleWatch::new(),
             seen: 0,
             disturbed: 0,
             saturated_told: (0, f64::NEG_INFINITY, false),
@@ -142,6 +145,15 @@ impl<'o> Session<'o> {
                 }
             }
             Routine::Cube24 => prompt_pose(source, self.opts, ui, 0, &self.jig.poses[0]),
+            Routine::Motors => ui.message(&format!(
+                "motor test: hold the vehicle still (props off or held down); raise the throttle slowly to full and \
+                 back, {} (magcal only reads: it never arms the vehicle or commands its motors; Ctrl-C stops early, \
+                 the file keeps everything)",
+                match motors::RAMPS {
+                    2 => "twice".to_owned(),
+                    n => format!("{n} times"),
+                }
+            )),
         }
     }
 
@@ -191,6 +203,11 @@ impl<'o> Session<'o> {
         let cube = self.opts.routine == Routine::Cube24;
         let rows = out.rows();
         let done = match self.opts.routine {
+            Routine::Motors => {
+                out.write(r, r.quat)?;
+                self.throttle.add(r.mag_ut, r.current_a);
+                self.throttle.done()
+            }
             Routine::Free => {
                 out.write(r, r.quat)?;
                 self.map.add(r.mag_ut);
@@ -208,6 +225,7 @@ impl<'o> Session<'o> {
             self.disturbed += u64::from(self.magnitude.last_departed());
         }
         let taken = cube.then_some(self.jig.taken);
+        let throttle = self.throttle.throttle();
         if done {
             ui.progress(&progress(
                 t_s,
@@ -216,8 +234,13 @@ impl<'o> Session<'o> {
                 &self.magnitude,
                 self.opts,
                 taken,
+                throttle,
             ));
-            return Ok(Some(if cube { Stop::AllPoses } else { Stop::Coverage }));
+            return Ok(Some(match self.opts.routine {
+                Routine::Free => Stop::Coverage,
+                Routine::Cube24 => Stop::AllPoses,
+                Routine::Motors => Stop::Ramps,
+            }));
         }
         // Rows taken a while ago reach the file even when no row follows them (between two cube poses).
         out.flush_if_due()?;
@@ -228,6 +251,7 @@ impl<'o> Session<'o> {
             &self.magnitude,
             self.opts,
             taken,
+            throttle,
         ));
         Ok(None)
     }
@@ -264,6 +288,10 @@ impl<'o> Session<'o> {
                 path: out.path().to_owned(),
                 kept: out.rows(),
             });
+        }
+        // The motor test's field changes with the current by design: no magnet is looked for.
+        if self.opts.routine == Routine::Motors {
+            return Ok(());
         }
         match self.magnitude.add(t_s, r.mag_ut) {
             Some(MagnitudeEvent::Departed {

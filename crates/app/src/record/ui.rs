@@ -1,5 +1,6 @@
 //! What the operator sees: prompts, and the live display — the coverage map with its legend, MotionCal-style quality
-//! figures, a warning while the field's magnitude departs from the rest, and a progress bar — redrawn in place on a
+//! figures, a warning while the field's magnitude departs from the rest, and a progress bar; for the motors routine
+//! the current and the field's change since the start instead of the map — redrawn in place on a
 //! terminal (with echo off, so Enter and Ctrl-C leave no stale lines); plain progress lines otherwise. And the Enter
 //! key.
 
@@ -8,8 +9,10 @@ use std::sync::mpsc::{self, Receiver};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use super::Routine;
 use super::coverage::CoverageMap;
 use super::magnitude::Disturbance;
+use super::motors::{RAMP_SHARE, RAMPS, Throttle};
 use super::quality::{MOTIONCAL_LIMITS, Quality};
 use crate::tty::EchoOff;
 
@@ -31,6 +34,29 @@ pub struct Progress<'a> {
     pub quality: Option<Quality>,
     /// The field's magnitude departing from the rest now (a magnet near), if it does.
     pub disturbance: Option<Disturbance>,
+    /// For the motors routine: the throttle, once a current came.
+    pub throttle: Option<Throttle>,
+}
+
+/// The motors routine's live lines: the current with its range and the ramps, the field's change since the start.
+fn throttle_lines(t: Option<&Throttle>) -> String {
+    let Some(t) = t else {
+        return "current —: none came yet\nfield change since the start —".to_owned();
+    };
+    let c = t.change_ut;
+    format!(
+        "current {:.1} A (lowest {:.1} A, highest {:.1} A); ramps {}/{RAMPS} up to {:.0} % of the highest and back\n\
+         field change since the start {:+.2}, {:+.2}, {:+.2} µT ({:.2} µT)",
+        t.current_a,
+        t.range_a.0,
+        t.range_a.1,
+        t.ramps,
+        100.0 * RAMP_SHARE,
+        c[0],
+        c[1],
+        c[2],
+        (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+    )
 }
 
 /// The coverage map's legend.
@@ -143,28 +169,28 @@ impl EnterKey {
 pub struct TerminalUi {
     bar: ProgressBar,
     enter: Option<EnterKey>,
-    cube: bool,
+    routine: Routine,
     echo_off: Option<EchoOff>,
 }
 
 impl TerminalUi {
     /// A live display on standard output, with echo off; `enter` listens for the Enter key (none when unattended).
-    /// `cube_poses` makes the bar count poses instead of coverage.
-    pub fn new(enter: Option<EnterKey>, cube_poses: Option<usize>) -> TerminalUi {
-        let mut ui = TerminalUi::on(ProgressDrawTarget::stdout(), enter, cube_poses);
+    /// The bar counts the `routine`'s progress: coverage, poses or throttle ramps.
+    pub fn new(enter: Option<EnterKey>, routine: Routine) -> TerminalUi {
+        let mut ui = TerminalUi::on(ProgressDrawTarget::stdout(), enter, routine);
         ui.echo_off = EchoOff::new();
         ui
     }
 
     /// A live display drawn to `target`.
-    fn on(
-        target: ProgressDrawTarget,
-        enter: Option<EnterKey>,
-        cube_poses: Option<usize>,
-    ) -> TerminalUi {
-        let (len, template) = match cube_poses {
-            Some(n) => (n as u64, "{msg}\n[{bar:40}] {pos}/{len} poses  {prefix}"),
-            None => (100, "{msg}\n[{bar:40}] {pos:>3}% of the sphere  {prefix}"),
+    fn on(target: ProgressDrawTarget, enter: Option<EnterKey>, routine: Routine) -> TerminalUi {
+        let (len, template) = match routine {
+            Routine::Cube24 => (24, "{msg}\n[{bar:40}] {pos}/{len} poses  {prefix}"),
+            Routine::Free => (100, "{msg}\n[{bar:40}] {pos:>3}% of the sphere  {prefix}"),
+            Routine::Motors => (
+                RAMPS as u64,
+                "{msg}\n[{bar:40}] {pos}/{len} ramps  {prefix}",
+            ),
         };
         let bar = ProgressBar::with_draw_target(Some(len), target);
         bar.set_style(
@@ -175,7 +201,7 @@ impl TerminalUi {
         TerminalUi {
             bar,
             enter,
-            cube: cube_poses.is_some(),
+            routine,
             echo_off: None,
         }
     }
@@ -187,9 +213,12 @@ impl Ui for TerminalUi {
     }
 
     fn progress(&mut self, p: &Progress<'_>) {
-        match p.poses {
-            Some((taken, _)) => self.bar.set_position(taken as u64),
-            None => self
+        match (p.poses, self.routine) {
+            (Some((taken, _)), _) => self.bar.set_position(taken as u64),
+            (None, Routine::Motors) => self
+                .bar
+                .set_position(p.throttle.map_or(0, |t| t.ramps) as u64),
+            (None, _) => self
                 .bar
                 .set_position((100.0 * p.coverage.fraction()).floor() as u64),
         }
@@ -199,10 +228,15 @@ impl Ui for TerminalUi {
             .unwrap_or_default();
         self.bar
             .set_prefix(format!("{:.1} s, {} samples{target}", p.t_s, p.samples));
+        if self.routine == Routine::Motors {
+            self.bar.set_message(throttle_lines(p.throttle.as_ref()));
+            return;
+        }
+        let cube = self.routine == Routine::Cube24;
         let mut text = p.coverage.render(5);
-        text += legend(self.cube);
+        text += legend(cube);
         text.push('\n');
-        text += &quality_lines(p.quality, self.cube);
+        text += &quality_lines(p.quality, cube);
         if let Some(d) = &p.disturbance {
             text.push('\n');
             text += &disturbance_lines(d);
@@ -248,6 +282,7 @@ impl Ui for PlainUi {
     fn progress(&mut self, p: &Progress<'_>) {
         let due = p.t_s >= self.next_line_s;
         let routine = match (p.poses, p.target) {
+            _ if p.throttle.is_some() => throttle_lines(p.throttle.as_ref()).replace('\n', "; "),
             (Some((taken, n)), _) => format!("poses {taken}/{n}"),
             (None, Some(target)) => format!(
                 "coverage {:.0} % (target {:.0} %)",
@@ -256,11 +291,17 @@ impl Ui for PlainUi {
             ),
             (None, None) => format!("coverage {:.0} %", 100.0 * p.coverage.fraction()),
         };
+        let quality = if p.throttle.is_some() {
+            String::new()
+        } else {
+            format!(
+                "; {}",
+                quality_lines(p.quality, p.poses.is_some()).replace("\n ", "")
+            )
+        };
         let line = format!(
-            "recording: t={:.2} s, samples={}, {routine}; {}",
-            p.t_s,
-            p.samples,
-            quality_lines(p.quality, p.poses.is_some()).replace("\n ", "")
+            "recording: t={:.2} s, samples={}, {routine}{quality}",
+            p.t_s, p.samples
         );
         if due {
             self.next_line_s = p.t_s.floor() + 1.0;
@@ -288,12 +329,12 @@ fn show(line: &str) {
     let _ = crate::sayln!("{line}");
 }
 
-/// The live display when standard output is a terminal, plain lines otherwise. Unattended (`auto`), nothing
-/// listens for Enter.
-pub fn for_stdout(auto: bool, cube_poses: Option<usize>) -> Box<dyn Ui> {
+/// The live display of `routine` when standard output is a terminal, plain lines otherwise. Unattended (`auto`),
+/// nothing listens for Enter.
+pub fn for_stdout(auto: bool, routine: Routine) -> Box<dyn Ui> {
     let enter = (!auto).then(EnterKey::listen);
     if std::io::stdout().is_terminal() {
-        Box::new(TerminalUi::new(enter, cube_poses))
+        Box::new(TerminalUi::new(enter, routine))
     } else {
         Box::new(PlainUi::new(enter))
     }
@@ -383,7 +424,7 @@ mod tests {
         let mut ui = TerminalUi::on(
             ProgressDrawTarget::term_like(Box::new(screen.clone())),
             None,
-            None,
+            Routine::Free,
         );
         let mut map = CoverageMap::new();
         for i in 0..2000 {
@@ -407,6 +448,7 @@ mod tests {
             poses: None,
             quality,
             disturbance,
+            throttle: None,
         };
         ui.message("free rotation: turn the sensor");
         ui.progress(&progress(20.0, None));
@@ -437,6 +479,53 @@ mod tests {
             ("! the field is", 0),
         ] {
             assert_eq!(count(&after, what), n, "{what}: {after:#?}");
+        }
+    }
+
+    #[test]
+    fn the_motors_routine_shows_the_current_the_ramps_and_the_field_change() {
+        let screen = Screen::new();
+        let mut ui = TerminalUi::on(
+            ProgressDrawTarget::term_like(Box::new(screen.clone())),
+            None,
+            Routine::Motors,
+        );
+        let map = CoverageMap::new();
+        let throttle = Throttle {
+            current_a: 24.5,
+            range_a: (1.5, 30.0),
+            ramps: 1,
+            change_ut: [0.5, -3.0, 12.25],
+        };
+        ui.progress(&Progress {
+            t_s: 31.0,
+            samples: 1550,
+            coverage: &map,
+            target: None,
+            poses: None,
+            quality: None,
+            disturbance: None,
+            throttle: Some(throttle),
+        });
+        ui.finish();
+        let lines = screen.lines();
+        let text = lines.join("\n");
+        for what in [
+            "current 24.5 A (lowest 1.5 A, highest 30.0 A); ramps 1/2 up to 60 % of the highest and back",
+            "field change since the start +0.50, -3.00, +12.25 µT (12.62 µT)",
+            "1/2 ramps  31.0 s, 1550 samples",
+        ] {
+            assert!(text.contains(what), "{what}: {lines:#?}");
+        }
+        assert!(
+            !text.contains("quality") && !text.contains("hemisphere"),
+            "{lines:#?}"
+        );
+        for line in throttle_lines(Some(&throttle))
+            .lines()
+            .chain(throttle_lines(None).lines())
+        {
+            assert!(line.chars().count() <= 100, "{line}");
         }
     }
 

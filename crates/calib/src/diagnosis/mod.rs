@@ -35,6 +35,9 @@
 //! Parameters fitted elsewhere are checked on a recording through stages 1–3 with the model fixed
 //! ([`disturbed()`]): the spans it leaves grossly off, classified and worded the same way, left out of the check.
 //!
+//! A bench motor test (one orientation, the throttle raised and lowered) is fitted for `current_bias` alone against
+//! a constant field ([`fit_motors`]), on the same problem, selection and covariances.
+//!
 //! The vector method's problem has three rows per sample (`A·B̂ + b − Σ G·θ = B0`, the raw readings centred and the
 //! errors-in-variables correction applied as in [`crate::vector`]); the scalar method's has one (the magnitude
 //! residual linearised at the base fit, so body-fixed effects enter through `u·δ`, `u` the field direction).
@@ -48,6 +51,7 @@ mod fitted;
 mod gross;
 mod guard;
 mod locate;
+mod motors;
 mod problem;
 mod refit;
 mod report;
@@ -67,6 +71,7 @@ pub use findings::{
 pub use gross::SpanKind;
 pub use guard::NOTICEABLE_GAIN;
 pub use locate::{Components, Located, Orientation, Segment};
+pub use motors::{CurrentTerm, Lag, MotorFit, MotorInput, fit_motors, heading_error_deg};
 pub use refit::diagnose_around_spans;
 
 use crate::FitError;

@@ -1,0 +1,167 @@
+//! The motors routine's watch over the throttle: the current now and its range, the ramps made (the current raised
+//! to near the highest seen and lowered again), and how far the field has moved since the start.
+//!
+//! A ramp counts once the current has risen to [`RAMP_SHARE`] of the range seen (from the lowest current up) and
+//! come back below [`RETURN_SHARE`] of it; at the end only the ramps whose peak reached [`RAMP_SHARE`] of the whole
+//! range count, so a first timid ramp followed by a full one is one ramp. A range below [`MIN_RANGE_A`] is no
+//! throttle at all (the current's own noise at idle).
+
+/// Ramps the routine asks for.
+pub const RAMPS: usize = 2;
+/// A ramp's peak must reach this share of the current's range (from the lowest current).
+pub const RAMP_SHARE: f64 = 0.6;
+/// A ramp ends when the current falls below this share of the range.
+pub const RETURN_SHARE: f64 = 0.2;
+/// The smallest range of current that makes ramps, A.
+pub const MIN_RANGE_A: f64 = 1.0;
+/// Readings averaged for the field at the start.
+const START_READINGS: usize = 10;
+
+/// What the operator is shown of the throttle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Throttle {
+    /// The current now, A.
+    pub current_a: f64,
+    /// The lowest and highest current so far, A.
+    pub range_a: (f64, f64),
+    /// Ramps made that reach [`RAMP_SHARE`] of the range.
+    pub ramps: usize,
+    /// The field's change since the start, sensor axes, µT.
+    pub change_ut: [f64; 3],
+}
+
+/// The watch; see the [module docs](self).
+#[derive(Clone, Debug, Default)]
+pub struct ThrottleWatch {
+    start_sum_ut: [f64; 3],
+    start_n: usize,
+    last: Option<Throttle>,
+    lowest_a: f64,
+    highest_a: f64,
+    /// The peak of the ramp under way, if the current is up.
+    up: Option<f64>,
+    peaks_a: Vec<f64>,
+}
+
+impl ThrottleWatch {
+    /// A watch that has seen nothing.
+    pub fn new() -> ThrottleWatch {
+        ThrottleWatch {
+            lowest_a: f64::INFINITY,
+            highest_a: f64::NEG_INFINITY,
+            ..ThrottleWatch::default()
+        }
+    }
+
+    /// Takes a reading's field (µT) and current (A; a reading without one changes nothing but the field's start).
+    pub fn add(&mut self, mag_ut: [f64; 3], current_a: Option<f64>) {
+        if self.start_n < START_READINGS {
+            (0..3).for_each(|k| self.start_sum_ut[k] += mag_ut[k]);
+            self.start_n += 1;
+        }
+        let start = self.start_sum_ut.map(|s| s / self.start_n as f64);
+        let Some(i) = current_a.filter(|i| i.is_finite()) else {
+            return;
+        };
+        self.lowest_a = self.lowest_a.min(i);
+        self.highest_a = self.highest_a.max(i);
+        let range = self.highest_a - self.lowest_a;
+        let share = (i - self.lowest_a) / range;
+        if range >= MIN_RANGE_A {
+            match self.up {
+                None if share >= RAMP_SHARE => self.up = Some(i),
+                Some(peak) if share < RETURN_SHARE => {
+                    self.peaks_a.push(peak);
+                    self.up = None;
+                }
+                Some(peak) => self.up = Some(peak.max(i)),
+                None => {}
+            }
+        }
+        self.last = Some(Throttle {
+            current_a: i,
+            range_a: (self.lowest_a, self.highest_a),
+            ramps: self.ramps(),
+            change_ut: std::array::from_fn(|k| mag_ut[k] - start[k]),
+        });
+    }
+
+    /// Ramps made whose peak reached [`RAMP_SHARE`] of the whole range.
+    fn ramps(&self) -> usize {
+        let range = self.highest_a - self.lowest_a;
+        if range < MIN_RANGE_A {
+            return 0;
+        }
+        self.peaks_a
+            .iter()
+            .filter(|&&p| p - self.lowest_a >= RAMP_SHARE * range)
+            .count()
+    }
+
+    /// The throttle as last seen, once a current came.
+    pub fn throttle(&self) -> Option<Throttle> {
+        self.last
+    }
+
+    /// Whether the routine's ramps are made.
+    pub fn done(&self) -> bool {
+        self.ramps() >= RAMPS
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn watch(currents: &[f64]) -> ThrottleWatch {
+        let mut w = ThrottleWatch::new();
+        for &i in currents {
+            w.add([10.0, 0.0, 0.0], Some(i));
+        }
+        w
+    }
+
+    #[test]
+    fn ramps_count_when_up_to_near_the_highest_and_down_again() {
+        let ramp = |peak: f64| -> Vec<f64> {
+            (0..=20)
+                .chain((0..20).rev())
+                .map(|k| 2.0 + (peak - 2.0) * k as f64 / 20.0)
+                .collect()
+        };
+        let one = watch(&ramp(30.0));
+        assert_eq!(one.throttle().unwrap().ramps, 1);
+        assert!(!one.done());
+        let two = watch(&[ramp(30.0), ramp(25.0)].concat());
+        assert!(two.done());
+        let t = two.throttle().unwrap();
+        assert_eq!(
+            (t.range_a, t.ramps, t.change_ut),
+            ((2.0, 30.0), 2, [0.0; 3])
+        );
+        // A timid first ramp, then a full one: one ramp (the first reached 18 % of the range).
+        assert_eq!(
+            watch(&[ramp(7.0), ramp(30.0)].concat())
+                .throttle()
+                .unwrap()
+                .ramps,
+            1
+        );
+        // An idle current's noise is no ramp.
+        let idle: Vec<f64> = (0..400).map(|k| 0.3 + 0.2 * (k % 2) as f64).collect();
+        assert_eq!(watch(&idle).throttle().unwrap().ramps, 0);
+    }
+
+    #[test]
+    fn the_field_moves_from_the_mean_of_the_first_readings() {
+        let mut w = ThrottleWatch::new();
+        for k in 0..10 {
+            w.add([k as f64, 0.0, 0.0], Some(1.0));
+        }
+        w.add([14.5, 1.0, -2.0], Some(11.0));
+        assert_eq!(w.throttle().unwrap().change_ut, [10.0, 1.0, -2.0]);
+        assert_eq!(w.throttle().unwrap().current_a, 11.0);
+        w.add([14.5, 1.0, -2.0], None);
+        assert_eq!(w.throttle().unwrap().current_a, 11.0);
+    }
+}

@@ -1,0 +1,497 @@
+//! Acceptance (issue 35, item 2): the bench motor test on the autopilot twin over a pseudo-terminal, for ArduPilot
+//! and PX4. The twin's vehicle is held still while its battery current follows a throttle profile;
+//! `magcal-record --routine motors` records until two ramps are made, and `magcal-fit` of that recording (with the
+//! twin's true calibration as `--params`) recovers the injected motor coefficients — 0.05 to 1 µT/A (0.5–10 µT per
+//! 10 A), each end of the range on a different axis — within 10 % and within two standard errors; reports no current
+//! term when none was injected; its heading figures match a hand computation; and its exports hold the
+//! compensation. A device without a current is refused before anything is recorded.
+
+mod pty;
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::{self, JoinHandle};
+
+use magcal_app::params::ParamsFile;
+use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
+use magcal_autopilot::Autopilot;
+use magcal_calib::{Effect, Model};
+use magcal_driver::ChipKind;
+use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig, TwinReport};
+use magcal_recording::Recording;
+
+struct Twin {
+    path: String,
+    _pty: pty::Pty,
+    stop: Arc<AtomicBool>,
+    thread: JoinHandle<TwinReport>,
+}
+
+impl Twin {
+    fn start(config: TwinConfig) -> Twin {
+        let pty = pty::open();
+        let master = pty.master.try_clone().unwrap();
+        let twin = AutopilotTwin::new(master, config).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
+        Twin {
+            path: pty.slave_path.clone(),
+            _pty: pty,
+            stop,
+            thread,
+        }
+    }
+
+    fn finish(self) -> TwinReport {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.join().unwrap()
+    }
+}
+
+/// The twin of `autopilot` on the bench of `sim:lis3mdl` with `seed`, held still, its battery current ramping
+/// from 2 to 30 A every 7 s, a motor compensation of its own (which the recorder undoes), `coef` injected.
+fn held_twin(autopilot: Autopilot, seed: u64, coef: [f64; 3], current: bool) -> TwinConfig {
+    let mut c = TwinConfig::new(autopilot, bench_config(ChipKind::Lis3mdl, seed));
+    c.speed = 10.0;
+    c.await_request = true;
+    c.held = true;
+    c.values = match autopilot {
+        Autopilot::ArduPilot => vec![("COMPASS_MOT_X", 3.0), ("COMPASS_MOTCT", 2.0)],
+        Autopilot::Px4 => vec![("CAL_MAG0_XCOMP", 3.0), ("CAL_MAG_COMP_TYP", 2.0)],
+    }
+    .into_iter()
+    .map(|(n, v)| (n.to_owned(), v))
+    .collect();
+    if coef != [0.0; 3] {
+        c.bench.effects = vec![Effect::CurrentBias {
+            channel: 0,
+            coef_ut_per_a: coef,
+        }];
+    }
+    c.current = current.then_some(CurrentProfile {
+        idle_a: 2.0,
+        peak_a: 30.0,
+        period_s: 7.0,
+    });
+    c
+}
+
+fn run(exe: &str, args: &[&str]) -> Output {
+    Command::new(exe).args(args).output().unwrap()
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// Records the motor test from the twin at `path` into `rec` (at most 60 s of bench time).
+fn record(path: &str, rec: &Path) -> Output {
+    let f = FIELD_NED_UT;
+    run(
+        env!("CARGO_BIN_EXE_magcal-record"),
+        &[
+            "--device",
+            &format!("mavlink:{path}"),
+            "--routine",
+            "motors",
+            "--max-duration",
+            "60",
+            "--field-ned",
+            &format!("{},{},{}", f[0], f[1], f[2]),
+            "--out",
+            rec.to_str().unwrap(),
+        ],
+    )
+}
+
+/// Fits `rec` with the twin's true calibration; returns the report and the summary.
+fn fit(rec: &Path, seed: u64, extra: &[&str]) -> (serde_json::Value, String) {
+    let dir = rec.parent().unwrap();
+    let stem = rec.file_stem().unwrap().to_str().unwrap();
+    let truth = TruthFile::of(ChipKind::Lis3mdl, seed);
+    let params = dir.join(format!("{stem}-truth.toml"));
+    ParamsFile::new("vector", &Model::linear(truth.a, truth.b_ut), &[])
+        .write(&params)
+        .unwrap();
+    let report = dir.join(format!("{stem}.json"));
+    let mut args = vec![
+        rec.to_str().unwrap(),
+        "--params",
+        params.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let out = run(env!("CARGO_BIN_EXE_magcal-fit"), &args);
+    assert!(out.status.success(), "{}", text(&out));
+    let json = serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    (json, text(&out))
+}
+
+fn vector(v: &serde_json::Value) -> [f64; 3] {
+    std::array::from_fn(|k| v[k].as_f64().unwrap())
+}
+
+/// The heading error of a field `delta_sensor_ut` in sensor axes, the sensor at `q` (sensor → NED) in the field
+/// `field_ned_ut`, by hand: the turn of the horizontal field, degrees.
+fn heading_by_hand(q: [f64; 4], delta_sensor_ut: [f64; 3], field_ned_ut: [f64; 3]) -> f64 {
+    let [w, x, y, z] = q;
+    let r = [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ];
+    let d: [f64; 3] = std::array::from_fn(|j| (0..3).map(|k| r[j][k] * delta_sensor_ut[k]).sum());
+    let before = field_ned_ut[1].atan2(field_ned_ut[0]);
+    let after = (field_ned_ut[1] + d[1]).atan2(field_ned_ut[0] + d[0]);
+    let mut turn = (after - before).to_degrees().abs();
+    if turn > 180.0 {
+        turn = 360.0 - turn;
+    }
+    turn
+}
+
+#[test]
+fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
+    let dir = tempfile::tempdir().unwrap();
+    for (i, (autopilot, coef)) in [
+        (Autopilot::ArduPilot, [1.0, -0.05, 0.3]),
+        (Autopilot::Px4, [-0.05, 0.6, -1.0]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        // Seeds 351–358 are the study below's; this one's coefficients are all within two standard errors (of the
+        // study's 48, 47 were).
+        let seed = 352 + i as u64;
+        let twin = Twin::start(held_twin(autopilot, seed, coef, true));
+        let rec = dir.path().join(format!("motors-{}.csv", autopilot.name()));
+        let out = record(&twin.path, &rec);
+        let said = text(&out);
+        println!("{said}");
+        assert!(out.status.success(), "{said}");
+        assert!(
+            said.contains("motor test: hold the vehicle still (props off or held down); raise the throttle slowly to full and back, twice")
+                && said.contains("throttle ramps made"),
+            "{said}"
+        );
+        let recording = Recording::read(&rec).unwrap();
+        assert_eq!(recording.meta.routine.as_deref(), Some("motors"));
+        assert_eq!(recording.currents[0].name, "i_battery");
+        let export = dir
+            .path()
+            .join(format!("motors-{}.param", autopilot.name()));
+        let format = match autopilot {
+            Autopilot::ArduPilot => "ardupilot",
+            Autopilot::Px4 => "px4",
+        };
+        // Fitted, exported, and written to the twin (still running), its previous values saved first.
+        let undo = dir
+            .path()
+            .join(format!("motors-{}.undo.param", autopilot.name()));
+        let device = format!("mavlink:{}", twin.path);
+        let (report, summary) = fit(
+            &rec,
+            seed,
+            &[
+                "--export",
+                format,
+                "--export-out",
+                export.to_str().unwrap(),
+                "--write-to",
+                &device,
+                "--undo-out",
+                undo.to_str().unwrap(),
+            ],
+        );
+        let held = twin.finish().params;
+        let value = |name: &str| held.iter().find(|(n, _)| n == name).unwrap().1;
+        println!("{summary}");
+        let term = &report["current_bias"];
+        let got = vector(&term["params"]["coef_ut_per_a"]);
+        let se = vector(&term["params"]["coef_ut_per_a_se"]);
+        println!(
+            "{autopilot}: {} samples, coefficient {got:.4?} ± {se:.4?} µT/A, injected {coef:?}",
+            report["samples"]
+        );
+        for k in 0..3 {
+            let err = got[k] - coef[k];
+            assert!(
+                err.abs() <= 0.1 * coef[k].abs() && err.abs() <= 2.0 * se[k],
+                "{autopilot} axis {k}: {} ± {} µT/A, injected {}",
+                got[k],
+                se[k],
+                coef[k]
+            );
+        }
+        // The heading figures, by hand from the recording's attitude (held: its first row's) and the fitted term.
+        let h = &report["heading_error"];
+        let q = recording.quat.as_ref().unwrap()[0];
+        for (current, deg) in [
+            ("hover_current_a", "hover_deg"),
+            ("full_current_a", "full_deg"),
+        ] {
+            let i = h[current].as_f64().unwrap();
+            let want = heading_by_hand(q, got.map(|k| k * i), FIELD_NED_UT);
+            let reported = h[deg].as_f64().unwrap();
+            assert!(
+                (reported - want).abs() < 1e-3,
+                "{deg}: {reported} against {want} by hand"
+            );
+        }
+        assert_eq!(
+            h["full_current_a"].as_f64().unwrap(),
+            recording.currents[0]
+                .values
+                .iter()
+                .copied()
+                .fold(f64::MIN, f64::max)
+        );
+        assert!(summary.contains("heading error this removes:"), "{summary}");
+        // The export holds the compensation: −10·k mGauss/A for ArduPilot; PX4's in raw axes, checked in
+        // export.rs's own test.
+        let exported = std::fs::read_to_string(&export).unwrap();
+        match autopilot {
+            Autopilot::ArduPilot => {
+                for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+                    assert!(
+                        exported.contains(&format!("COMPASS_MOT_{axis},{:.6}\n", -10.0 * got[k])),
+                        "{exported}"
+                    );
+                }
+                assert!(exported.contains("COMPASS_MOTCT,2\n"), "{exported}");
+            }
+            Autopilot::Px4 => {
+                assert!(
+                    exported.contains("\tCAL_MAG0_ZCOMP\t")
+                        && exported.contains("\tCAL_MAG_COMP_TYP\t2\t6\n"),
+                    "{exported}"
+                );
+            }
+        }
+        // The twin holds the compensation written back: ArduPilot's −10·k mGauss/A after its matrix, PX4's
+        // −10·A⁻¹·k gauss/kA on the raw readings (A the true one given as --params); the old values in the undo file.
+        let expected: Vec<(String, f64)> = match autopilot {
+            Autopilot::ArduPilot => ["X", "Y", "Z"]
+                .iter()
+                .enumerate()
+                .map(|(k, axis)| (format!("COMPASS_MOT_{axis}"), -10.0 * got[k]))
+                .chain([("COMPASS_MOTCT".to_owned(), 2.0)])
+                .collect(),
+            Autopilot::Px4 => {
+                let a = TruthFile::of(ChipKind::Lis3mdl, seed).a;
+                let a = nalgebra::Matrix3::from_fn(|j, c| a[j][c]);
+                let comp = -10.0 * a.try_inverse().unwrap() * nalgebra::Vector3::from(got);
+                ["X", "Y", "Z"]
+                    .iter()
+                    .enumerate()
+                    .map(|(k, axis)| (format!("CAL_MAG0_{axis}COMP"), comp[k]))
+                    .chain([("CAL_MAG_COMP_TYP".to_owned(), 2.0)])
+                    .collect()
+            }
+        };
+        for (name, want) in &expected {
+            // The report's coefficients are printed to full precision; the twin holds floats.
+            assert!(
+                (value(name) - want).abs() <= 1e-4 * want.abs().max(1.0),
+                "{autopilot}: {name} = {} after the write-back, want {want}",
+                value(name)
+            );
+        }
+        let before = std::fs::read_to_string(&undo).unwrap();
+        assert!(
+            before.contains(match autopilot {
+                Autopilot::ArduPilot => "COMPASS_MOT_X,3",
+                Autopilot::Px4 => "CAL_MAG0_XCOMP\t3",
+            }),
+            "{before}"
+        );
+    }
+}
+
+#[test]
+fn no_current_term_is_reported_when_none_was_injected() {
+    let dir = tempfile::tempdir().unwrap();
+    let seed = 355;
+    let twin = Twin::start(held_twin(Autopilot::ArduPilot, seed, [0.0; 3], true));
+    let rec = dir.path().join("motors-none.csv");
+    let out = record(&twin.path, &rec);
+    twin.finish();
+    assert!(out.status.success(), "{}", text(&out));
+    let (report, summary) = fit(&rec, seed, &[]);
+    assert!(report["current_bias"].is_null(), "{report:#}");
+    assert!(summary.contains("no current term"), "{summary}");
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[rec.to_str().unwrap(), "--export", "ardupilot"],
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused).contains("not exported: no current term"),
+        "{}",
+        text(&refused)
+    );
+    // A calibration's options are refused for a motor test, and `--params` for any other recording.
+    let out = dir.path().join("params.toml");
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[rec.to_str().unwrap(), "--out", out.to_str().unwrap()],
+    );
+    assert!(!refused.status.success() && !out.exists());
+    assert!(
+        text(&refused).contains("--out does not apply to")
+            && text(&refused).contains("bench motor test"),
+        "{}",
+        text(&refused)
+    );
+    let free = dir.path().join("free.csv");
+    std::fs::write(
+        &free,
+        std::fs::read_to_string(&rec)
+            .unwrap()
+            .replace("routine: motors", "routine: free"),
+    )
+    .unwrap();
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal-fit"),
+        &[free.to_str().unwrap(), "--params", out.to_str().unwrap()],
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused).contains("--params is for a bench motor test"),
+        "{}",
+        text(&refused)
+    );
+    // magcal records and fits a calibration: it refuses the routine before opening anything.
+    let refused = run(
+        env!("CARGO_BIN_EXE_magcal"),
+        &[
+            "--routine",
+            "motors",
+            "--out-dir",
+            dir.path().join("magcal-out").to_str().unwrap(),
+        ],
+    );
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused)
+            .contains("--routine motors: a bench motor test gives the current term alone"),
+        "{}",
+        text(&refused)
+    );
+}
+
+#[test]
+fn a_device_without_a_current_is_refused_before_anything_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let twin = Twin::start(held_twin(Autopilot::Px4, 356, [0.0; 3], false));
+    let rec = dir.path().join("motors-no-current.csv");
+    let out = record(&twin.path, &rec);
+    twin.finish();
+    let said = text(&out);
+    assert!(!out.status.success(), "{said}");
+    assert!(
+        said.contains(
+            "the motors routine needs the current the motors draw, and this device gives none"
+        ) && said.contains("nothing was recorded"),
+        "{said}"
+    );
+    assert!(!rec.exists());
+}
+
+/// The recovery over eight seeds of each autopilot (ignored: about a minute in a debug build; `cargo test --test
+/// motor_test -- --ignored`), the coefficients turned from axis to axis with the seed so that each axis has each end
+/// of the range: every coefficient within 10 %, and about 95 % within two standard errors.
+#[test]
+#[ignore = "a study of 16 recordings"]
+fn the_recovery_holds_over_seeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut within, mut all) = (0, 0);
+    for seed in 351..359u64 {
+        let turn =
+            |c: [f64; 3]| -> [f64; 3] { std::array::from_fn(|k| c[(k + seed as usize) % 3]) };
+        for (autopilot, coef) in [
+            (Autopilot::ArduPilot, turn([1.0, -0.05, 0.3])),
+            (Autopilot::Px4, turn([-0.05, 0.6, -1.0])),
+        ] {
+            let twin = Twin::start(held_twin(autopilot, seed, coef, true));
+            let rec = dir
+                .path()
+                .join(format!("study-{seed}-{}.csv", autopilot.name()));
+            let out = record(&twin.path, &rec);
+            twin.finish();
+            assert!(out.status.success(), "{}", text(&out));
+            let (report, _) = fit(&rec, seed, &[]);
+            let term = &report["current_bias"];
+            let got = vector(&term["params"]["coef_ut_per_a"]);
+            let se = vector(&term["params"]["coef_ut_per_a_se"]);
+            let z: Vec<f64> = (0..3).map(|k| (got[k] - coef[k]) / se[k]).collect();
+            println!("seed {seed} {autopilot}: {got:.4?} ± {se:.4?} µT/A, z {z:.2?}");
+            for k in 0..3 {
+                assert!(
+                    (got[k] - coef[k]).abs() <= 0.1 * coef[k].abs(),
+                    "seed {seed} {autopilot} axis {k}"
+                );
+                within += usize::from(z[k].abs() <= 2.0);
+                all += 1;
+            }
+        }
+    }
+    println!("within two standard errors: {within} of {all}");
+    assert!(within as f64 >= 0.85 * all as f64, "{within} of {all}");
+}
+
+#[test]
+fn a_motors_recording_without_a_current_is_refused_by_the_fit_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim.csv");
+    let out = run(
+        env!("CARGO_BIN_EXE_magcal-sim"),
+        &[
+            "--out",
+            sim.to_str().unwrap(),
+            "--seed",
+            "1",
+            "--duration",
+            "5",
+        ],
+    );
+    assert!(out.status.success(), "{}", text(&out));
+    let rec = dir.path().join("motors-without-current.csv");
+    std::fs::write(
+        &rec,
+        std::fs::read_to_string(&sim)
+            .unwrap()
+            .replace("# routine: free", "# routine: motors"),
+    )
+    .unwrap();
+    let refused = run(env!("CARGO_BIN_EXE_magcal-fit"), &[rec.to_str().unwrap()]);
+    assert!(!refused.status.success());
+    let said = text(&refused);
+    assert!(
+        said.contains(&format!(
+            "{}: no current channel (an i_<name> column)",
+            rec.display()
+        )),
+        "{said}"
+    );
+}
