@@ -129,7 +129,7 @@ pub struct ScalarFit {
     /// on a small cap.
     pub shape_prior_share: f64,
     /// The direction (sensor axes) along which the centre is least certain, and the centre's standard error there
-    /// (raw units, µT).
+    /// (raw units, µT) as the coverage determines it (before the halves' disagreement scales the claims).
     pub weakest: ([f64; 3], f64),
 }
 
@@ -377,6 +377,16 @@ struct Groups {
     info: Vec<[f64; TRIANGLE]>,
     block_info: Vec<[f64; TRIANGLE]>,
     radial: [f64; 3],
+}
+
+/// The parameters' covariance ([`Problem::covariance`]).
+struct Covariance {
+    /// What the fit claims: scaled by the halves' disagreement.
+    claimed: SMatrix<f64, P, P>,
+    /// What the coverage determines: not scaled (the refusals' covariance).
+    determined: SMatrix<f64, P, P>,
+    /// How much the prior informs the shape.
+    prior_share: f64,
 }
 
 /// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
@@ -904,10 +914,10 @@ impl Problem<'_> {
 
     /// The parameters' covariance from the groups of `sol`'s last pass: the largest, in every direction, of the
     /// model-based one, the delete-one-cell jackknife over the cells of direction (each cell's score through the
-    /// information without that cell) and the sandwich over [`TIME_BLOCKS`] blocks of time. Also returns how much of
-    /// the shape the prior informs, and how much more the recording's two halves disagree than they claim
-    /// ([`Problem::split_dispersion`]), which the claims are scaled by (not what the coverage determines).
-    fn covariance(&self, sol: &Solution) -> Option<(SMatrix<f64, P, P>, f64, f64)> {
+    /// information without that cell) and the sandwich over [`TIME_BLOCKS`] blocks of time; for the claims, the first
+    /// two scaled by how much more the recording's two halves disagree than they claim
+    /// ([`Problem::split_dispersion`]) before the sandwich over time counts.
+    fn covariance(&self, sol: &Solution) -> Option<Covariance> {
         let at = &sol.at;
         let g = at.groups.as_ref().expect("a full fit's pass");
         let scores: Vec<SVector<f64, P>> = g.scores.iter().copied().map(SVector::from).collect();
@@ -939,10 +949,14 @@ impl Problem<'_> {
                 &DMatrix::from_column_slice(P, P, jack.as_slice()),
             );
         }
+        // The halves' disagreement scales the claims, not what the coverage determines.
+        let blocks_used = used(ncell..ncell + blocks);
+        let dispersion = self.split_dispersion(sol, &scores, &blocks_used, &g.block_info, ncell);
+        let mut claimed = &larger * dispersion.max(1.0);
         // The cluster-robust sandwich over blocks of time: residuals alike for a while (a field that drifts, a magnet's
         // tail as the sensor moves) share a block. Not the jackknife: a block can hold directions no other block
-        // has, and the fit without it is then barely determined.
-        let blocks_used = used(ncell..ncell + blocks);
+        // has, and the fit without it is then barely determined. It sees some of the halves' disagreement already,
+        // so it is not scaled again.
         if blocks_used.len() > P {
             let g = blocks_used.len() as f64;
             let meat: SMatrix<f64, P, P> = blocks_used
@@ -951,16 +965,18 @@ impl Problem<'_> {
                 .sum();
             let sandwich =
                 h_inv * (meat * (g / (g - 1.0)) + self.q * (sol.sigma2 * sol.sigma2)) * h_inv;
-            larger = crate::vector::loewner_max(
-                &larger,
-                &DMatrix::from_column_slice(P, P, sandwich.as_slice()),
-            );
+            let sandwich = DMatrix::from_column_slice(P, P, sandwich.as_slice());
+            larger = crate::vector::loewner_max(&larger, &sandwich);
+            claimed = crate::vector::loewner_max(&claimed, &sandwich);
         }
-        let dispersion = self.split_dispersion(sol, &scores, &blocks_used, &g.block_info, ncell);
-        let cov = SMatrix::<f64, P, P>::from_column_slice(larger.as_slice());
+        let matrix = |m: DMatrix<f64>| SMatrix::<f64, P, P>::from_column_slice(m.as_slice());
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
-        Some((cov, share, dispersion))
+        Some(Covariance {
+            claimed: matrix(claimed),
+            determined: matrix(larger),
+            prior_share: share,
+        })
     }
 
     /// How much more the fits of the recording's two halves in time disagree than their own covariances say (as
@@ -1022,13 +1038,13 @@ impl Problem<'_> {
         sol: &mut Solution,
         opts: &ScalarOptions<'_>,
         target: f64,
-    ) -> Result<(SMatrix<f64, P, P>, f64), FitError> {
+    ) -> Result<Covariance, FitError> {
         let singular =
             || FitError::Singular("the magnitude residual's normal matrix has no inverse");
         // Refuse what the coverage cannot determine before refining it: the noise correction is only meaningful
         // where the fit is.
-        let (plain_cov, plain_share, plain_dispersion) =
-            self.covariance(sol).ok_or_else(singular)?;
+        let first = self.covariance(sol).ok_or_else(singular)?;
+        let plain_cov = first.determined;
         check_determined(
             weakest(&plain_cov),
             sol.p.fixed_rows::<3>(3).sum() / 3.0,
@@ -1040,7 +1056,7 @@ impl Problem<'_> {
             .any(|v| *v > 0.0)
             .then(|| self.bounded_noise(sol, noise))
         else {
-            return Ok((plain_cov * plain_dispersion, plain_share));
+            return Ok(first);
         };
         let plain = sol.p;
         let converged = self.correct(sol, &s2);
@@ -1062,8 +1078,7 @@ impl Problem<'_> {
                 advice: rotate_advice(direction),
             });
         }
-        let (cov, share, dispersion) = self.covariance(sol).ok_or_else(singular)?;
-        Ok((cov * dispersion, share))
+        self.covariance(sol).ok_or_else(singular)
     }
 }
 
@@ -1280,13 +1295,18 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
     let problem = Problem::new(readings, &c0, target, gain, !opts.quick);
     let p0 = start_parameters(opts.start, &c0, gain, target);
     let mut sol = problem.settle(p0, if opts.quick { 1 } else { MAX_ROUNDS });
-    let (cov, shape_prior_share) = if opts.quick {
-        (SMatrix::<f64, P, P>::zeros(), 0.0)
+    let covariance = if opts.quick {
+        Covariance {
+            claimed: SMatrix::zeros(),
+            determined: SMatrix::zeros(),
+            prior_share: 0.0,
+        }
     } else {
         problem.refine(&mut sol, opts, target)?
     };
+    let (cov, shape_prior_share) = (covariance.claimed, covariance.prior_share);
     let (c, a) = unpack(&sol.p);
-    let weakest = checked_weakest(&a, &cov, target, opts.quick)?;
+    let weakest = checked_weakest(&a, &covariance.determined, target, opts.quick)?;
     let scaled = Scaled::new(&problem, &sol, a, &c, opts.field_ut.is_some())?;
     let cov_b = scaled.b_covariance(&c, &cov);
     let cov_c: Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();

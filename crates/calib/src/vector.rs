@@ -82,6 +82,9 @@ pub struct VectorFit {
     pub noise_bound: f64,
     /// Cells of field direction the samples fell in (the clusters of the robust standard errors).
     pub direction_cells: usize,
+    /// How much more the fits of the recording's two halves in time disagree than their covariances say (about 1 when
+    /// they agree; 1 when not measured); the covariance is scaled by it when above 1 (see the module docs).
+    pub dispersion: f64,
 }
 
 impl VectorFit {
@@ -515,6 +518,7 @@ fn estimates_only_fit(
         coverage,
         noise_bound: est.noise_bound,
         direction_cells: 0,
+        dispersion: 1.0,
     }
 }
 
@@ -614,14 +618,14 @@ fn residual_scores(samples: &Samples<'_>, est: &Estimates, m_mean_ut: Vector3<f6
 }
 
 /// Per calibrated axis `j`, the covariance of `(a_j1, a_j2, a_j3, b_j)`: the largest, in every direction, of the
-/// model-based one and the cluster-robust ones over the cells of direction `clusters` and the blocks of time
-/// `time_blocks`, scaled by the halves' disagreement (see the module docs).
+/// model-based one and the cluster-robust ones over the cells of direction and the blocks of time (`groups`), scaled
+/// by the halves' `dispersion` when above 1 (see the module docs).
 fn covariances(
     moments: &Moments,
     est: &Estimates,
     scores: &Scores,
-    clusters: &[usize],
-    time_blocks: &[usize],
+    groups: [&[usize]; 2],
+    dispersion: f64,
 ) -> [[[f64; 4]; 4]; 3] {
     // Bread: the corrected normal matrix in centred coordinates (the intercept decoupled).
     let mut bread_inv = Matrix4::zeros();
@@ -632,11 +636,10 @@ fn covariances(
     for k in 0..3 {
         to_b[(3, k)] = -moments.m_mean[k];
     }
-    let dispersion = split_dispersion(moments, est, scores, time_blocks);
     let mut covariance = [[[0.0; 4]; 4]; 3];
     for j in 0..3 {
-        let centred = axis_covariance(j, moments, est, scores, bread_inv, [clusters, time_blocks]);
-        let c = to_b * centred * to_b.transpose() * dispersion;
+        let centred = axis_covariance(j, moments, est, scores, bread_inv, groups, dispersion);
+        let c = to_b * centred * to_b.transpose();
         covariance[j] = std::array::from_fn(|r| std::array::from_fn(|s| c[(r, s)]));
     }
     covariance
@@ -658,8 +661,9 @@ fn row(est: &Estimates, j: usize) -> Vector4<f64> {
 }
 
 /// Axis `j`'s covariance in centred coordinates: the model-based one from `bread_inv` (the inverse of the corrected
-/// normal matrix), enlarged to the cluster-robust sandwiches over the cells of direction and the blocks of time
-/// (`groups`) and to the delete-one-cell jackknife.
+/// normal matrix), enlarged to the cluster-robust sandwich and the delete-one-cell jackknife over the cells of
+/// direction, scaled by the halves' `dispersion` when above 1, then enlarged to the sandwich over the blocks of time
+/// (`groups`: the cells, the blocks).
 fn axis_covariance(
     j: usize,
     moments: &Moments,
@@ -667,6 +671,7 @@ fn axis_covariance(
     scores: &Scores,
     bread_inv: Matrix4<f64>,
     groups: [&[usize]; 2],
+    dispersion: f64,
 ) -> Matrix4<f64> {
     let sigma2 = scores.rss_ut2[j] / est.dof;
     let model_based = bread_inv * sigma2;
@@ -674,15 +679,25 @@ fn axis_covariance(
     let eiv = correction_per_weight * row(est, j);
     let mut larger = DMatrix::from_column_slice(4, 4, model_based.as_slice());
     let [cells, blocks] = groups;
-    let robust = [
+    for robust in [
         sandwich(j, scores, eiv, cells, bread_inv, moments.n),
-        sandwich(j, scores, eiv, blocks, bread_inv, moments.n),
         jackknife(j, scores, (eiv, correction_per_weight), cells, bread_inv),
-    ];
-    for robust in robust.into_iter().flatten() {
+    ]
+    .into_iter()
+    .flatten()
+    {
         larger = loewner_max(
             &larger,
             &DMatrix::from_column_slice(4, 4, robust.as_slice()),
+        );
+    }
+    // The halves' disagreement scales what does not look along time; the sandwich over blocks of time sees some of
+    // the same disagreement already, so it is not scaled again.
+    larger *= dispersion.max(1.0);
+    if let Some(over_time) = sandwich(j, scores, eiv, blocks, bread_inv, moments.n) {
+        larger = loewner_max(
+            &larger,
+            &DMatrix::from_column_slice(4, 4, over_time.as_slice()),
         );
     }
     Matrix4::from_column_slice(larger.as_slice())
@@ -694,7 +709,7 @@ fn axis_covariance(
 /// `V_hj` the larger of the half's model-based covariance and its sandwich over its blocks. A claim must hold on the
 /// next recording of the sensor: where structure the model does not explain (a field that changes along the path, a
 /// reference whose error drifts) makes a fit depend on which stretch of the path it saw, the halves disagree by more
-/// than they claim, and the whole fit's covariance is scaled by `κ`. At least 1; 1 when a half cannot determine the
+/// than they claim, and the whole fit's covariance is scaled by `κ` when above 1. 1 when a half cannot determine the
 /// fit.
 fn split_dispersion(
     moments: &Moments,
@@ -749,7 +764,7 @@ fn split_dispersion(
         };
         statistic += d.dot(&v.solve(&d));
     }
-    (statistic / 12.0).max(1.0)
+    statistic / 12.0
 }
 
 /// The cluster-robust sandwich covariance of axis `j` over `groups` (cells of direction, or blocks of time), each
@@ -826,7 +841,14 @@ pub fn fit(
     }
     let scores = residual_scores(&samples, &est, moments.m_mean);
     let (clusters, time_blocks) = (scores.used_cells(), scores.used_blocks());
-    let covariance = covariances(&moments, &est, &scores, &clusters, &time_blocks);
+    let dispersion = split_dispersion(&moments, &est, &scores, &time_blocks);
+    let covariance = covariances(
+        &moments,
+        &est,
+        &scores,
+        [&clusters, &time_blocks],
+        dispersion,
+    );
     let (n, b) = (moments.n, est.b_ut);
     Ok(VectorFit {
         a: rows(&est.a),
@@ -841,6 +863,7 @@ pub fn fit(
         coverage,
         noise_bound: est.noise_bound,
         direction_cells: clusters.len(),
+        dispersion,
     })
 }
 
@@ -900,6 +923,49 @@ mod tests {
             }
             assert!(fit.residual_rms_ut[j] < 1e-9);
         }
+    }
+
+    /// A recording of a sensor turned through every direction, whose offset moves by `step_ut` along x halfway
+    /// through: raw readings and expected fields, 0.3 µT of noise.
+    fn stepped(step_ut: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 0.3).unwrap();
+        let n = 4000;
+        let expected: Vec<[f64; 3]> = (0..n)
+            .map(|_| frames::scale(UnitSphere.sample(&mut rng), 50.0))
+            .collect();
+        let raw = expected
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let offset = if i < n / 2 { 0.0 } else { step_ut };
+                [
+                    r[0] + offset + noise.sample(&mut rng),
+                    r[1] + noise.sample(&mut rng),
+                    r[2] + noise.sample(&mut rng),
+                ]
+            })
+            .collect();
+        (raw, expected)
+    }
+
+    #[test]
+    fn halves_that_disagree_widen_the_claims_and_halves_that_agree_do_not() {
+        // Clean: the halves agree as their covariances say (κ about 1, χ² of 12 over 12).
+        let (raw, expected) = stepped(0.0, 5);
+        let clean = fit(&raw, &expected, &VectorOptions::default()).unwrap();
+        assert!(clean.dispersion < 2.5, "κ {}", clean.dispersion);
+        // An offset that moves by 2 µT halfway: the whole fit's offset is the mean, 1 µT from either half's, and its
+        // standard error now says so; without the halves it claimed about 0.02 µT.
+        let (raw, expected) = stepped(2.0, 5);
+        let moved = fit(&raw, &expected, &VectorOptions::default()).unwrap();
+        assert!(moved.dispersion > 100.0, "κ {}", moved.dispersion);
+        assert!(
+            moved.b_se_ut[0] > 0.25 && moved.b_se_ut[0] > 10.0 * clean.b_se_ut[0],
+            "{} against {}",
+            moved.b_se_ut[0],
+            clean.b_se_ut[0]
+        );
     }
 
     #[test]
