@@ -8,48 +8,18 @@
 
 mod pty;
 
+use pty::Twin;
+
 use std::path::Path;
 use std::process::{Command, Output};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::{self, JoinHandle};
 
 use magcal_app::params::ParamsFile;
 use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
 use magcal_autopilot::Autopilot;
 use magcal_calib::{Effect, Model};
 use magcal_driver::ChipKind;
-use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig, TwinReport};
+use magcal_mockhw::autopilot::{CurrentProfile, TwinConfig};
 use magcal_recording::Recording;
-
-struct Twin {
-    path: String,
-    _pty: pty::Pty,
-    stop: Arc<AtomicBool>,
-    thread: JoinHandle<TwinReport>,
-}
-
-impl Twin {
-    fn start(config: TwinConfig) -> Twin {
-        let pty = pty::open();
-        let master = pty.master.try_clone().unwrap();
-        let twin = AutopilotTwin::new(master, config).unwrap();
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
-        Twin {
-            path: pty.slave_path.clone(),
-            _pty: pty,
-            stop,
-            thread,
-        }
-    }
-
-    fn finish(self) -> TwinReport {
-        self.stop.store(true, Ordering::Relaxed);
-        self.thread.join().unwrap()
-    }
-}
 
 /// The twin of `autopilot` on the bench of `sim:lis3mdl` with `seed`, held still, its battery current ramping
 /// from 2 to 30 A every 7 s, a motor compensation of its own (which the recorder undoes), `coef` injected.

@@ -10,20 +10,20 @@
 
 mod pty;
 
+use pty::Twin;
+
 use std::path::Path;
 use std::process::{Command, Output};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::{self, JoinHandle};
+use std::thread::{self};
 use std::time::Duration;
 
 use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
-use magcal_autopilot::{
-    Autopilot, Connection, Telemetry, UdpPort, parse_param_file, read_all, telemetry,
-};
+use magcal_autopilot::{Autopilot, Telemetry, UdpPort, parse_param_file, telemetry};
 use magcal_calib::Effect;
 use magcal_driver::ChipKind;
-use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig, TwinReport};
+use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig};
 use magcal_mockhw::firmware::FirmwareConfig;
 use magcal_recording::Recording;
 use nalgebra::Matrix3;
@@ -33,55 +33,11 @@ const SPEED: f64 = 10.0;
 /// The largest error of a fitted parameter, in its standard errors.
 const MAX_Z: f64 = 4.0;
 
-struct Twin {
-    path: String,
-    _pty: pty::Pty,
-    stop: Arc<AtomicBool>,
-    thread: JoinHandle<TwinReport>,
-}
-
 impl Twin {
-    /// The twin of `autopilot` on the bench of `sim:lis3mdl` with `seed`, awaiting stream requests, holding
-    /// `values` (its calibration before).
-    fn start(config: TwinConfig) -> Twin {
-        let pty = pty::open();
-        let master = pty.master.try_clone().unwrap();
-        let twin = AutopilotTwin::new(master, config).unwrap();
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
-        Twin {
-            path: pty.slave_path.clone(),
-            _pty: pty,
-            stop,
-            thread,
-        }
-    }
-
-    fn read(&self, names: &[&str]) -> Vec<(String, f64)> {
-        let port = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&self.path)
-            .unwrap();
-        let mut conn = Connection::new(port, &self.path);
-        conn.wait_heartbeat(Duration::from_secs(5), None).unwrap();
-        read_all(&mut conn, names)
-            .unwrap()
-            .into_iter()
-            .map(|p| (p.name, p.value))
-            .collect()
-    }
-
     /// Listens to the twin for `wall` (so it never waits on a full port) and returns the bench time of the first
     /// compass message heard: every compass message from then on was sent after now.
     fn listen(&self, wall: Duration) -> f64 {
-        let port = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&self.path)
-            .unwrap();
-        let mut conn = Connection::new(port, &self.path);
+        let mut conn = self.connect();
         let deadline = std::time::Instant::now() + wall;
         let mut first = None;
         while let Some((_, msg)) = conn.next_message(deadline).unwrap() {
@@ -90,11 +46,6 @@ impl Twin {
             }
         }
         first.expect("compass messages after the write-back")
-    }
-
-    fn finish(self) -> TwinReport {
-        self.stop.store(true, Ordering::Relaxed);
-        self.thread.join().unwrap()
     }
 }
 

@@ -6,19 +6,19 @@
 
 mod pty;
 
+use pty::Twin;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::{self, JoinHandle};
-use std::time::Duration;
 
 use magcal_app::device::DeviceSpec;
 use magcal_app::source::sim::bench_config;
 use magcal_app::writeback::load_param_file;
-use magcal_autopilot::{Autopilot, Connection, parse_param_file, read_all};
+use magcal_autopilot::{Autopilot, parse_param_file};
 use magcal_driver::ChipKind;
-use magcal_mockhw::autopilot::{AutopilotTwin, TwinConfig, TwinReport};
+use magcal_mockhw::autopilot::TwinConfig;
 use magcal_mockhw::firmware::FirmwareConfig;
 
 /// A simulated recording (a tumble with an attitude reference), made once per test.
@@ -44,69 +44,28 @@ fn fit(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// The twin of `autopilot` with non-default calibration parameters (what the vehicle held before), on a
-/// pseudo-terminal; returns its port's path, the pty (held open), the stop flag and the thread.
-struct Twin {
-    path: String,
-    _pty: pty::Pty,
-    stop: Arc<AtomicBool>,
-    thread: JoinHandle<TwinReport>,
+/// The twin of `autopilot` with non-default calibration parameters (what the vehicle held before) and the parameter
+/// `ranges` it refuses values outside of, on a pseudo-terminal.
+fn start_twin(autopilot: Autopilot, ranges: Vec<(String, f64, f64)>) -> Twin {
+    let mut config = TwinConfig::new(autopilot, bench_config(ChipKind::Lis3mdl, 3));
+    config.speed = 1.0;
+    config.values = match autopilot {
+        Autopilot::ArduPilot => vec![
+            ("COMPASS_OFS_X".into(), -35.0),
+            ("COMPASS_OFS_Z".into(), 12.5),
+            ("COMPASS_DIA_Y".into(), 1.02),
+        ],
+        Autopilot::Px4 => vec![
+            ("CAL_MAG0_XOFF".into(), 0.035),
+            ("CAL_MAG0_ZOFF".into(), -0.0125),
+            ("CAL_MAG0_YSCALE".into(), 1.02),
+        ],
+    };
+    config.ranges = ranges;
+    Twin::start(config)
 }
 
-impl Twin {
-    fn start(autopilot: Autopilot, ranges: Vec<(String, f64, f64)>) -> Twin {
-        let pty = pty::open();
-        let mut config = TwinConfig::new(autopilot, bench_config(ChipKind::Lis3mdl, 3));
-        config.speed = 1.0;
-        config.values = match autopilot {
-            Autopilot::ArduPilot => vec![
-                ("COMPASS_OFS_X".into(), -35.0),
-                ("COMPASS_OFS_Z".into(), 12.5),
-                ("COMPASS_DIA_Y".into(), 1.02),
-            ],
-            Autopilot::Px4 => vec![
-                ("CAL_MAG0_XOFF".into(), 0.035),
-                ("CAL_MAG0_ZOFF".into(), -0.0125),
-                ("CAL_MAG0_YSCALE".into(), 1.02),
-            ],
-        };
-        config.ranges = ranges;
-        let master = pty.master.try_clone().unwrap();
-        let twin = AutopilotTwin::new(master, config).unwrap();
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
-        Twin {
-            path: pty.slave_path.clone(),
-            _pty: pty,
-            stop,
-            thread,
-        }
-    }
-
-    /// Reads parameters as a ground station does, on the twin's port (the twin streams, so reads never wait long).
-    fn read(&self, names: &[&str]) -> Vec<(String, f64)> {
-        let port = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&self.path)
-            .unwrap();
-        let mut conn = Connection::new(port, &self.path);
-        conn.wait_heartbeat(Duration::from_secs(5), None).unwrap();
-        read_all(&mut conn, names)
-            .unwrap()
-            .into_iter()
-            .map(|p| (p.name, p.value))
-            .collect()
-    }
-
-    fn finish(self) -> TwinReport {
-        self.stop.store(true, Ordering::Relaxed);
-        self.thread.join().unwrap()
-    }
-}
-
-/// What [`Twin::start`] gives a parameter before any write-back.
+/// What [`start_twin`] gives a parameter before any write-back.
 fn twin_default(name: &str) -> f64 {
     let set = [
         ("COMPASS_OFS_X", -35.0),
@@ -166,7 +125,7 @@ fn a_fit_written_to_each_autopilot_reads_back_as_its_export_and_the_undo_file_re
     for (autopilot, format) in [(Autopilot::ArduPilot, "ardupilot"), (Autopilot::Px4, "px4")] {
         let want = exported(&rec, dir.path(), format);
         assert_eq!(want.len(), 9);
-        let twin = Twin::start(autopilot, Vec::new());
+        let twin = start_twin(autopilot, Vec::new());
         let params = dir.path().join(format!("{format}.toml"));
         let device = format!("mavlink:{}:115200", twin.path);
         let out = fit(&[
@@ -245,7 +204,7 @@ fn a_refused_parameter_stops_the_write_back_names_it_and_leaves_the_previous_val
         (Autopilot::Px4, "CAL_MAG0_YSCALE"),
     ] {
         // Its range excludes whatever the fit gives.
-        let twin = Twin::start(autopilot, vec![(refused.to_owned(), 5.0, 6.0)]);
+        let twin = start_twin(autopilot, vec![(refused.to_owned(), 5.0, 6.0)]);
         let device = format!("mavlink:{}", twin.path);
         let undo = dir.path().join(format!("{}.undo.param", autopilot.name()));
         let out = fit(&[

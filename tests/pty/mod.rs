@@ -9,7 +9,10 @@ use std::os::fd::OwnedFd;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::{self, JoinHandle};
+use std::time::Duration;
 
+use magcal_autopilot::{Connection, read_all};
+use magcal_mockhw::autopilot::{AutopilotTwin, TwinConfig, TwinReport};
 use magcal_mockhw::firmware::{FirmwareConfig, FirmwareReport, MotionCalFirmware};
 use nix::fcntl::{FcntlArg, FdFlag, OFlag, fcntl};
 use nix::pty::openpty;
@@ -60,4 +63,58 @@ pub fn firmware(
             .expect("a valid bench")
             .run(|| stop.load(Ordering::Relaxed))
     })
+}
+
+/// A flight-controller twin running on a pseudo-terminal: the tools open `path` as they would `/dev/ttyACM0`.
+pub struct Twin {
+    /// The port's path.
+    pub path: String,
+    _pty: Pty,
+    stop: Arc<AtomicBool>,
+    thread: JoinHandle<TwinReport>,
+}
+
+impl Twin {
+    /// Starts the twin of `config` in a thread.
+    pub fn start(config: TwinConfig) -> Twin {
+        let pty = open();
+        let master = pty.master.try_clone().unwrap();
+        let twin = AutopilotTwin::new(master, config).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
+        Twin {
+            path: pty.slave_path.clone(),
+            _pty: pty,
+            stop,
+            thread,
+        }
+    }
+
+    /// A ground station's connection on the twin's port.
+    pub fn connect(&self) -> Connection<File> {
+        let port = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&self.path)
+            .unwrap();
+        Connection::new(port, &self.path)
+    }
+
+    /// Reads parameters as a ground station does, on the twin's port (the twin streams, so reads never wait long).
+    pub fn read(&self, names: &[&str]) -> Vec<(String, f64)> {
+        let mut conn = self.connect();
+        conn.wait_heartbeat(Duration::from_secs(5), None).unwrap();
+        read_all(&mut conn, names)
+            .unwrap()
+            .into_iter()
+            .map(|p| (p.name, p.value))
+            .collect()
+    }
+
+    /// Stops the twin and returns what it saw.
+    pub fn finish(self) -> TwinReport {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.join().unwrap()
+    }
 }
