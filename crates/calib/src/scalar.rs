@@ -33,7 +33,7 @@ use crate::coverage::{Coverage, SphereGrid, capped_cell_weights, describe, spher
 use crate::frames::{self, Mat3};
 use crate::model::Model;
 use crate::robust::{self, RobustProblem, quantile};
-use crate::vector::TIME_BLOCKS;
+use crate::vector::{HalfFit, TIME_BLOCKS};
 
 /// What the scalar method cannot see, in words for reports.
 pub const ROTATION_NOTE: &str = "the scalar method constrains only |B|, and a rotation of the calibrated field leaves \
@@ -982,7 +982,7 @@ impl Problem<'_> {
     /// How much more the fits of the recording's two halves in time disagree than their own covariances say (as
     /// the vector fit's, see [`crate::vector`]): `κ = dᵀ·(V₁ + V₂)⁻¹·d / P`, each half's fit one Gauss–Newton step from
     /// the whole one on its blocks' sums (`θ_h − θ = −H_h⁻¹·g_h`, the prior in each half), `V_h` the larger of its
-    /// model-based covariance and its sandwich over its blocks. At least 1; 1 when a half cannot determine the fit.
+    /// model-based covariance and its sandwich over its blocks ([`HalfFit`]). 1 when a half cannot determine the fit.
     fn split_dispersion(
         &self,
         sol: &Solution,
@@ -996,39 +996,29 @@ impl Problem<'_> {
         }
         let prior = self.q * sol.sigma2;
         let prior_score = self.q * sol.p * sol.sigma2;
-        let half = |blocks: &[usize]| -> Option<(SVector<f64, P>, SMatrix<f64, P, P>)> {
+        let half = |blocks: &[usize]| -> Option<HalfFit> {
             let h = blocks
                 .iter()
                 .map(|&k| mirror(&block_info[k - ncell]))
                 .sum::<SMatrix<f64, P, P>>()
                 + prior;
             let h_inv = h.cholesky()?.inverse();
-            let score: SVector<f64, P> = blocks.iter().map(|&k| scores[k]).sum();
-            let mean = score / blocks.len() as f64;
-            let g = blocks.len() as f64;
-            let meat = blocks
-                .iter()
-                .map(|&k| (scores[k] - mean) * (scores[k] - mean).transpose())
-                .sum::<SMatrix<f64, P, P>>()
-                * (g / (g - 1.0));
-            let covariance = crate::vector::loewner_max(
-                &DMatrix::from_column_slice(P, P, (h_inv * sol.sigma2).as_slice()),
-                &DMatrix::from_column_slice(P, P, (h_inv * meat * h_inv).as_slice()),
-            );
-            Some((
+            let block_scores: Vec<SVector<f64, P>> = blocks.iter().map(|&k| scores[k]).collect();
+            let score: SVector<f64, P> = block_scores.iter().sum();
+            Some(HalfFit::new(
+                h_inv,
+                sol.sigma2,
                 -(h_inv * (score + prior_score)),
-                SMatrix::from_column_slice(covariance.as_slice()),
+                &block_scores,
             ))
         };
         let (first, second) = blocks_used.split_at(blocks_used.len() / 2);
-        let (Some((shift_1, v_1)), Some((shift_2, v_2))) = (half(first), half(second)) else {
+        let (Some(first), Some(second)) = (half(first), half(second)) else {
             return 1.0;
         };
-        let d = shift_1 - shift_2;
-        let Some(v) = (v_1 + v_2).cholesky() else {
-            return 1.0;
-        };
-        (d.dot(&v.solve(&d)) / P as f64).max(1.0)
+        first
+            .disagreement(&second)
+            .map_or(1.0, |statistic| statistic / P as f64)
     }
 
     /// From the plain fit: refuse what the coverage cannot determine, remove the noise's share of the score, and
