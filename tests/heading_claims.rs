@@ -329,13 +329,29 @@ fn study(region: Region, method: Method) -> Row {
     }
 }
 
-/// The docs' table between its markers.
-fn docs() -> (String, String) {
+/// Compares `table` with the one between the markers `begin` and `end` of docs/reading-the-results.md, or writes it
+/// there with `MAGCAL_BLESS=1`; a failure when they differ.
+fn docs_table(begin: &str, end: &str, table: &str) -> Option<String> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/reading-the-results.md");
-    (
-        path.display().to_string(),
-        std::fs::read_to_string(path).unwrap(),
-    )
+    let text = std::fs::read_to_string(&path).unwrap();
+    let (head, rest) = text
+        .split_once(begin)
+        .unwrap_or_else(|| panic!("{}: no {begin}", path.display()));
+    let (old, tail) = rest
+        .split_once(end)
+        .unwrap_or_else(|| panic!("{}: no {end}", path.display()));
+    if std::env::var("MAGCAL_BLESS").is_ok() {
+        std::fs::write(&path, format!("{head}{begin}{table}{end}{tail}")).unwrap();
+        None
+    } else {
+        (old != table).then(|| {
+            format!(
+                "{}'s table after {} differs from the study's (MAGCAL_BLESS=1 rewrites it):\n{old}",
+                path.display(),
+                begin.trim_end()
+            )
+        })
+    }
 }
 
 const BEGIN: &str = "<!-- heading-claims: begin (tests/heading_claims.rs) -->\n";
@@ -400,20 +416,7 @@ fn heading_claims_are_calibrated_on_caps_bands_and_the_sphere() {
         }
     }
     println!("{table}");
-    let (path, text) = docs();
-    let (head, rest) = text
-        .split_once(BEGIN)
-        .expect("the docs' heading-claims markers");
-    let (old, tail) = rest
-        .split_once(END)
-        .expect("the docs' heading-claims end marker");
-    if std::env::var("MAGCAL_BLESS").is_ok() {
-        std::fs::write(&path, format!("{head}{BEGIN}{table}{END}{tail}")).unwrap();
-    } else if old != table {
-        failures.push(format!(
-            "{path}'s heading-claims table differs from the study's (MAGCAL_BLESS=1 rewrites it):\n{old}"
-        ));
-    }
+    failures.extend(docs_table(BEGIN, END, &table));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
@@ -591,19 +594,6 @@ fn heading_claims_hold_through_a_field_that_varies_along_the_path() {
         }
     }
     println!("{table}");
-    let (path, text) = docs();
-    let (head, rest) = text
-        .split_once(PATH_BEGIN)
-        .expect("the docs' path-field markers");
-    let (old, tail) = rest
-        .split_once(PATH_END)
-        .expect("the docs' path-field end marker");
-    if std::env::var("MAGCAL_BLESS").is_ok() {
-        std::fs::write(&path, format!("{head}{PATH_BEGIN}{table}{PATH_END}{tail}")).unwrap();
-    } else if old != table {
-        failures.push(format!(
-            "{path}'s path-field table differs from the study's (MAGCAL_BLESS=1 rewrites it):\n{old}"
-        ));
-    }
+    failures.extend(docs_table(PATH_BEGIN, PATH_END, &table));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -16,7 +16,7 @@ use std::process::{Command, Output};
 use magcal_app::params::ParamsFile;
 use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
 use magcal_autopilot::Autopilot;
-use magcal_calib::{Effect, Model};
+use magcal_calib::{Effect, Model, frames};
 use magcal_driver::ChipKind;
 use magcal_mockhw::autopilot::{CurrentProfile, TwinConfig};
 use magcal_recording::Recording;
@@ -112,25 +112,7 @@ fn vector(v: &serde_json::Value) -> [f64; 3] {
 /// The heading error of a field `delta_sensor_ut` in sensor axes, the sensor at `q` (sensor → NED) in the field
 /// `field_ned_ut`, by hand: the turn of the horizontal field, degrees.
 fn heading_by_hand(q: [f64; 4], delta_sensor_ut: [f64; 3], field_ned_ut: [f64; 3]) -> f64 {
-    let [w, x, y, z] = q;
-    let r = [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ];
-    let d: [f64; 3] = std::array::from_fn(|j| (0..3).map(|k| r[j][k] * delta_sensor_ut[k]).sum());
+    let d = frames::mat_vec(&frames::quat_to_matrix(q), delta_sensor_ut);
     let before = field_ned_ut[1].atan2(field_ned_ut[0]);
     let after = (field_ned_ut[1] + d[1]).atan2(field_ned_ut[0] + d[0]);
     let mut turn = (after - before).to_degrees().abs();

@@ -418,11 +418,16 @@ mod tests {
 
     fn fit(coef: [f64; 3], lag_s: f64) -> MotorFit {
         let (t, field, i) = recording(coef, lag_s, 0.1);
+        fit_on(&t, &field, &i, 0.1)
+    }
+
+    /// The fit of a recording with a noise floor of `floor_ut` on each axis, lags scanned up to 0.5 s.
+    fn fit_on(t: &[f64], field: &[[f64; 3]], current: &[f64], floor_ut: f64) -> MotorFit {
         fit_motors(&MotorInput {
-            t_s: &t,
-            field_ut: &field,
-            current_a: &i,
-            noise_floor_ut: [0.1; 3],
+            t_s: t,
+            field_ut: field,
+            current_a: current,
+            noise_floor_ut: [floor_ut; 3],
             max_lag_s: 0.5,
         })
         .unwrap()
@@ -472,14 +477,7 @@ mod tests {
         let (mut within, mut all) = (0, 0);
         for seed in 1..=200 {
             let (t, field, i) = recording_seeded(coef, 0.013, 0.3, rho, seed);
-            let f = fit_motors(&MotorInput {
-                t_s: &t,
-                field_ut: &field,
-                current_a: &i,
-                noise_floor_ut: [0.3; 3],
-                max_lag_s: 0.5,
-            })
-            .unwrap();
+            let f = fit_on(&t, &field, &i, 0.3);
             let term = f.current.unwrap();
             for k in 0..3 {
                 all += 1;
@@ -507,16 +505,7 @@ mod tests {
             let found = (1..=200u64)
                 .filter(|&seed| {
                     let (t, field, i) = recording_seeded([0.0; 3], 0.0, 0.3, rho, 1000 + seed);
-                    fit_motors(&MotorInput {
-                        t_s: &t,
-                        field_ut: &field,
-                        current_a: &i,
-                        noise_floor_ut: [0.3; 3],
-                        max_lag_s: 0.5,
-                    })
-                    .unwrap()
-                    .current
-                    .is_some()
+                    fit_on(&t, &field, &i, 0.3).current.is_some()
                 })
                 .count();
             println!("AR(1) {rho}: a current term found in {found} of 200 null tests");
@@ -533,14 +522,7 @@ mod tests {
         assert!(f.current.is_none() && f.untestable.is_none(), "{f:?}");
         let (t, field, _) = recording([0.0; 3], 0.0, 0.1);
         let steady = vec![3.0; t.len()];
-        let f = fit_motors(&MotorInput {
-            t_s: &t,
-            field_ut: &field,
-            current_a: &steady,
-            noise_floor_ut: [0.1; 3],
-            max_lag_s: 0.5,
-        })
-        .unwrap();
+        let f = fit_on(&t, &field, &steady, 0.1);
         assert!(f.current.is_none() && f.untestable.is_some(), "{f:?}");
     }
 
