@@ -2,8 +2,9 @@
 //! pseudo-terminal's master for the tools, a [`magcal_autopilot::MemoryPort`] in unit tests).
 //!
 //! Its compass is the simulator's [`Bench`]: a sensor with hard and soft iron ([`BenchConfig::sensor`]) and any
-//! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`]), a time
-//! lag — computed by the same function the fitter's regressors use. The hand turns it, or holds it still for a bench
+//! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`], the field
+//! following it [`TwinConfig::current_lag_s`] late), a time lag — computed by the same function the fitter's
+//! regressors use. The hand turns it, or holds it still for a bench
 //! motor test ([`TwinConfig::held`]). Like the real firmware it applies its own
 //! calibration to what it sends, with its parameters as they are at that moment:
 //!
@@ -86,6 +87,10 @@ pub struct TwinConfig {
     pub bench: BenchConfig,
     /// The battery current; `None`: 0 A and no `BATTERY_STATUS`.
     pub current: Option<CurrentProfile>,
+    /// How late the compass's field follows the battery current, s: the bench's effects are given the current of
+    /// that long before (a `CurrentBias` gives `k·I(t − lag)`), while `BATTERY_STATUS` and the autopilot's own motor
+    /// compensation carry `I(t)`. (A lag of the field the hand turns is the bench's `TimeLag` effect.)
+    pub current_lag_s: f64,
     /// Compass, attitude and battery messages per second of bench time, Hz: the fastest it sends any of them (a
     /// request for more gets this).
     pub rate_hz: f64,
@@ -106,13 +111,14 @@ pub struct TwinConfig {
 }
 
 impl TwinConfig {
-    /// `autopilot` on `bench`, no current, streaming at 50 Hz, 10 times faster than real time, its calibration
+    /// `autopilot` on `bench`, no current (nor lag), streaming at 50 Hz, 10 times faster than real time, its calibration
     /// parameters at their defaults (no correction), turned by the hand.
     pub fn new(autopilot: Autopilot, bench: BenchConfig) -> TwinConfig {
         TwinConfig {
             autopilot,
             bench,
             current: None,
+            current_lag_s: 0.0,
             rate_hz: 50.0,
             speed: 10.0,
             stream: true,
@@ -464,8 +470,11 @@ impl<P: Read + Write> AutopilotTwin<P> {
         if due == [false; 3] {
             return;
         }
-        let current_a = self.config.current.map_or(0.0, |c| c.at(t_s));
-        let s = self.bench.sample_with_currents(t_s, &[current_a]);
+        let current_at = |t_s| self.config.current.map_or(0.0, |c| c.at(t_s));
+        let current_a = current_at(t_s);
+        let s = self
+            .bench
+            .sample_with_currents(t_s, &[current_at(t_s - self.config.current_lag_s)]);
         let v = |n: &str| self.value(n);
         let time_usec = (t_s * 1e6) as u64;
         let (msg, sent_ut) = match self.config.autopilot {
