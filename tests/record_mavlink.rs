@@ -16,14 +16,13 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::{self};
 use std::time::Duration;
 
 use magcal_app::source::sim::{FIELD_NED_UT, TruthFile, bench_config};
-use magcal_autopilot::{Autopilot, Telemetry, UdpPort, parse_param_file, telemetry};
+use magcal_autopilot::{Autopilot, Telemetry, parse_param_file, telemetry};
 use magcal_calib::Effect;
 use magcal_driver::ChipKind;
-use magcal_mockhw::autopilot::{AutopilotTwin, CurrentProfile, TwinConfig};
+use magcal_mockhw::autopilot::{CurrentProfile, TwinConfig};
 use magcal_mockhw::firmware::FirmwareConfig;
 use magcal_recording::Recording;
 use nalgebra::Matrix3;
@@ -381,27 +380,13 @@ fn a_twin_over_udp_is_recorded_whichever_side_listens() {
         let seed = 371 + i as u64;
         // PX4 as a simulator sends to the recorder's port (found free first); ArduPilot as a router's server
         // endpoint listens, and the recorder, finding the port taken, sends to it first.
-        let (port, addr) = if autopilot == Autopilot::Px4 {
-            let addr = std::net::UdpSocket::bind("127.0.0.1:0")
-                .unwrap()
-                .local_addr()
-                .unwrap();
-            (UdpPort::connect(addr).unwrap(), addr)
-        } else {
-            let port = UdpPort::listen("127.0.0.1:0".parse().unwrap()).unwrap();
-            let addr = port.local_addr().unwrap();
-            (port, addr)
-        };
-        let twin =
-            AutopilotTwin::new(port, config(autopilot, seed, &before(autopilot, false))).unwrap();
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
+        let twin = Twin::start_udp(
+            config(autopilot, seed, &before(autopilot, false)),
+            autopilot == Autopilot::ArduPilot,
+        );
         let rec = dir.path().join(format!("udp-{}.csv", autopilot.name()));
-        let device = format!("mavlink:udp:{addr}");
-        let said = record_from(&device, &rec, 20.0);
-        stop.store(true, Ordering::Relaxed);
-        let report = thread.join().unwrap();
+        let said = record_from(&format!("mavlink:{}", twin.path), &rec, 20.0);
+        let report = twin.finish();
         assert!(said.contains("mavlink_streams: asked 100 Hz"), "{said}");
         let recording = Recording::read(&rec).unwrap();
         let undone = meta(&recording, "autopilot_calibration_undone");

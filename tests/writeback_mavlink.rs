@@ -2,7 +2,8 @@
 //! --write-to mavlink:…` sets a fitted calibration in the autopilot twin — ArduPilot and PX4, told apart by the
 //! heartbeat — and what the twin then holds is the `--export` of the same fit; the undo file holds the values before,
 //! and loading it gives them back. A parameter the autopilot refuses stops the write-back, names the parameter, exits
-//! non-zero and leaves every parameter as it was; a port that speaks no MAVLink is said to be one.
+//! non-zero and leaves every parameter as it was; a port that speaks no MAVLink is said to be one. The write-back
+//! and its undo are also made over UDP.
 
 mod pty;
 
@@ -45,8 +46,8 @@ fn fit(args: &[&str]) -> Output {
 }
 
 /// The twin of `autopilot` with non-default calibration parameters (what the vehicle held before) and the parameter
-/// `ranges` it refuses values outside of, on a pseudo-terminal.
-fn start_twin(autopilot: Autopilot, ranges: Vec<(String, f64, f64)>) -> Twin {
+/// `ranges` it refuses values outside of.
+fn twin_config(autopilot: Autopilot, ranges: Vec<(String, f64, f64)>) -> TwinConfig {
     let mut config = TwinConfig::new(autopilot, bench_config(ChipKind::Lis3mdl, 3));
     config.speed = 1.0;
     config.values = match autopilot {
@@ -62,10 +63,10 @@ fn start_twin(autopilot: Autopilot, ranges: Vec<(String, f64, f64)>) -> Twin {
         ],
     };
     config.ranges = ranges;
-    Twin::start(config)
+    config
 }
 
-/// What [`start_twin`] gives a parameter before any write-back.
+/// What [`twin_config`] gives a parameter before any write-back.
 fn twin_default(name: &str) -> f64 {
     let set = [
         ("COMPASS_OFS_X", -35.0),
@@ -117,81 +118,104 @@ fn same(name: &str, held: f64, exported: f64) -> bool {
     (held - exported).abs() <= printed + 1e-6 * exported.abs().max(1e-3)
 }
 
+/// Writes the fit of `rec` to `twin` at `device` (`mavlink:…`) and checks it as a ground station would: the
+/// write-back says each parameter was confirmed and read back; the twin holds the `--export` of the same fit; the undo
+/// file, next to the parameters file, holds the values before; loading it over `device` gives them back.
+fn writes_back_and_undoes(rec: &Path, dir: &Path, autopilot: Autopilot, twin: Twin, device: &str) {
+    let format = autopilot.name();
+    let want = exported(rec, dir, format);
+    assert_eq!(want.len(), 9);
+    let params = dir.join(format!("{format}.toml"));
+    let out = fit(&[
+        rec.to_str().unwrap(),
+        "--out",
+        params.to_str().unwrap(),
+        "--write-to",
+        device,
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains(&format!(
+            "{device}: {autopilot} (by its heartbeat): set 9 parameters, each confirmed by the autopilot and read back"
+        )),
+        "{stdout}"
+    );
+    // The undo file, next to the parameters file, holds the values before.
+    let undo = dir.join(format!("{format}.undo.param"));
+    let old = parse_param_file(&std::fs::read_to_string(&undo).unwrap()).unwrap();
+    assert_eq!(old.len(), 9);
+    // Read back as a ground station: the export's values.
+    let names: Vec<&str> = want.iter().map(|(n, _)| n.as_str()).collect();
+    let held = twin.read(&names);
+    for ((name, value), (_, h)) in want.iter().zip(&held) {
+        assert!(
+            same(name, *h, *value),
+            "{autopilot} {name}: holds {h}, exported {value}"
+        );
+    }
+    // The write-back's own read-back lines say the same.
+    for (name, value) in &want {
+        let line = stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{name} ")))
+            .unwrap_or_else(|| panic!("{name} in {stdout}"));
+        let shown: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+        assert!(same(name, shown, *value), "{name}: {shown} vs {value}");
+    }
+    // Loading the undo file gives the old values back.
+    let spec: DeviceSpec = device.parse().unwrap();
+    let lines = load_param_file(&spec, &undo).unwrap();
+    assert!(lines[0].contains("loaded 9 parameters"), "{lines:?}");
+    let restored = twin.read(&names);
+    let report = twin.finish();
+    for ((name, value), (_, r)) in old.iter().zip(&restored) {
+        assert_eq!(*r as f32, *value as f32, "{name}");
+        assert_eq!(
+            report.param(name).map(|v| v as f32),
+            Some(*value as f32),
+            "{name}"
+        );
+    }
+    for (name, value) in &old {
+        assert_eq!(
+            *value as f32,
+            twin_default(name) as f32,
+            "the undo file holds what the twin held before: {name}"
+        );
+    }
+    assert!(report.sets_taken >= 18, "{}", report.sets_taken);
+}
+
 #[test]
 fn a_fit_written_to_each_autopilot_reads_back_as_its_export_and_the_undo_file_restores_the_old_values()
  {
     let dir = tempfile::tempdir().unwrap();
     let rec = recording(dir.path());
-    for (autopilot, format) in [(Autopilot::ArduPilot, "ardupilot"), (Autopilot::Px4, "px4")] {
-        let want = exported(&rec, dir.path(), format);
-        assert_eq!(want.len(), 9);
-        let twin = start_twin(autopilot, Vec::new());
-        let params = dir.path().join(format!("{format}.toml"));
+    for autopilot in [Autopilot::ArduPilot, Autopilot::Px4] {
+        let twin = Twin::start(twin_config(autopilot, Vec::new()));
         let device = format!("mavlink:{}:115200", twin.path);
-        let out = fit(&[
-            rec.to_str().unwrap(),
-            "--out",
-            params.to_str().unwrap(),
-            "--write-to",
-            &device,
-        ]);
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "{stdout}\n{}",
-            String::from_utf8_lossy(&out.stderr)
+        writes_back_and_undoes(&rec, dir.path(), autopilot, twin, &device);
+    }
+}
+
+/// The same over UDP (`mavlink:udp:HOST:PORT`): PX4 as a simulator sending to the tools' port, ArduPilot as a
+/// router's server endpoint the tools send to first.
+#[test]
+fn a_fit_written_over_udp_reads_back_as_its_export_and_the_undo_file_restores_the_old_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = recording(dir.path());
+    for autopilot in [Autopilot::Px4, Autopilot::ArduPilot] {
+        let twin = Twin::start_udp(
+            twin_config(autopilot, Vec::new()),
+            autopilot == Autopilot::ArduPilot,
         );
-        assert!(
-            stdout.contains(&format!(
-                "{device}: {autopilot} (by its heartbeat): set 9 parameters, each confirmed by the autopilot and read back"
-            )),
-            "{stdout}"
-        );
-        // The undo file, next to the parameters file, holds the values before.
-        let undo = dir.path().join(format!("{format}.undo.param"));
-        let old = parse_param_file(&std::fs::read_to_string(&undo).unwrap()).unwrap();
-        assert_eq!(old.len(), 9);
-        // Read back as a ground station: the export's values.
-        let names: Vec<&str> = want.iter().map(|(n, _)| n.as_str()).collect();
-        let held = twin.read(&names);
-        for ((name, value), (_, h)) in want.iter().zip(&held) {
-            assert!(
-                same(name, *h, *value),
-                "{autopilot} {name}: holds {h}, exported {value}"
-            );
-        }
-        // The write-back's own read-back lines say the same.
-        for (name, value) in &want {
-            let line = stdout
-                .lines()
-                .find(|l| l.trim_start().starts_with(&format!("{name} ")))
-                .unwrap_or_else(|| panic!("{name} in {stdout}"));
-            let shown: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
-            assert!(same(name, shown, *value), "{name}: {shown} vs {value}");
-        }
-        // Loading the undo file gives the old values back.
-        let spec: DeviceSpec = device.parse().unwrap();
-        let lines = load_param_file(&spec, &undo).unwrap();
-        assert!(lines[0].contains("loaded 9 parameters"), "{lines:?}");
-        let restored = twin.read(&names);
-        let report = twin.finish();
-        for ((name, value), (_, r)) in old.iter().zip(&restored) {
-            assert_eq!(*r as f32, *value as f32, "{name}");
-            assert_eq!(
-                report.param(name).map(|v| v as f32),
-                Some(*value as f32),
-                "{name}"
-            );
-        }
-        let was = twin_default;
-        for (name, value) in &old {
-            assert_eq!(
-                *value as f32,
-                was(name) as f32,
-                "the undo file holds what the twin held before: {name}"
-            );
-        }
-        assert!(report.sets_taken >= 18, "{}", report.sets_taken);
+        let device = format!("mavlink:{}", twin.path);
+        writes_back_and_undoes(&rec, dir.path(), autopilot, twin, &device);
     }
 }
 
@@ -204,7 +228,7 @@ fn a_refused_parameter_stops_the_write_back_names_it_and_leaves_the_previous_val
         (Autopilot::Px4, "CAL_MAG0_YSCALE"),
     ] {
         // Its range excludes whatever the fit gives.
-        let twin = start_twin(autopilot, vec![(refused.to_owned(), 5.0, 6.0)]);
+        let twin = Twin::start(twin_config(autopilot, vec![(refused.to_owned(), 5.0, 6.0)]));
         let device = format!("mavlink:{}", twin.path);
         let undo = dir.path().join(format!("{}.undo.param", autopilot.name()));
         let out = fit(&[

@@ -1,17 +1,19 @@
 //! A pseudo-terminal pair for the serial tests: the tools open the slave by its path, as they would open
 //! `/dev/ttyACM0`; the simulated firmware of `magcal-mockhw` owns the master. Dropping the master is unplugging the
-//! board.
+//! board. The flight-controller twin runs on one too, or over UDP.
 
 #![allow(dead_code, reason = "each test binary uses a different part")]
 
 use std::fs::File;
+use std::io::{Read, Write};
 use std::os::fd::OwnedFd;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
-use magcal_autopilot::{Connection, read_all};
+use magcal_app::device::{DeviceSpec, MavlinkPort};
+use magcal_autopilot::{Connection, UdpPort, read_all};
 use magcal_mockhw::autopilot::{AutopilotTwin, TwinConfig, TwinReport};
 use magcal_mockhw::firmware::{FirmwareConfig, FirmwareReport, MotionCalFirmware};
 use nix::fcntl::{FcntlArg, FdFlag, OFlag, fcntl};
@@ -65,39 +67,78 @@ pub fn firmware(
     })
 }
 
-/// A flight-controller twin running on a pseudo-terminal: the tools open `path` as they would `/dev/ttyACM0`.
+/// A flight-controller twin running in a thread, on a pseudo-terminal or over UDP.
 pub struct Twin {
-    /// The port's path.
+    /// What follows `mavlink:` in a device string: the pseudo-terminal's path (the tools open it as they would
+    /// `/dev/ttyACM0`), or `udp:HOST:PORT`.
     pub path: String,
-    _pty: Pty,
+    /// The pseudo-terminal, when on one.
+    pty: Option<Pty>,
     stop: Arc<AtomicBool>,
     thread: JoinHandle<TwinReport>,
 }
 
 impl Twin {
-    /// Starts the twin of `config` in a thread.
+    /// Starts the twin of `config` on a pseudo-terminal.
     pub fn start(config: TwinConfig) -> Twin {
         let pty = open();
         let master = pty.master.try_clone().unwrap();
-        let twin = AutopilotTwin::new(master, config).unwrap();
+        Twin::run(master, config, pty.slave_path.clone(), Some(pty))
+    }
+
+    /// Starts the twin of `config` over UDP on 127.0.0.1: listening on a port of its own, as a telemetry router's
+    /// server endpoint (the tools, finding the port taken, send to it first), or sending to a free port the tools
+    /// then listen on, as a simulator does.
+    pub fn start_udp(config: TwinConfig, listens: bool) -> Twin {
+        let (port, addr) = if listens {
+            let port = UdpPort::listen("127.0.0.1:0".parse().unwrap()).unwrap();
+            let addr = port.local_addr().unwrap();
+            (port, addr)
+        } else {
+            let addr = std::net::UdpSocket::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap();
+            (UdpPort::connect(addr).unwrap(), addr)
+        };
+        Twin::run(port, config, format!("udp:{addr}"), None)
+    }
+
+    fn run(
+        port: impl Read + Write + Send + 'static,
+        config: TwinConfig,
+        path: String,
+        pty: Option<Pty>,
+    ) -> Twin {
+        let twin = AutopilotTwin::new(port, config).unwrap();
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let thread = thread::spawn(move || twin.run(|| flag.load(Ordering::Relaxed)));
         Twin {
-            path: pty.slave_path.clone(),
-            _pty: pty,
+            path,
+            pty,
             stop,
             thread,
         }
     }
 
-    /// A ground station's connection on the twin's port.
-    pub fn connect(&self) -> Connection<File> {
-        let port = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&self.path)
-            .unwrap();
+    /// A ground station's connection to the twin: its pseudo-terminal opened, or its UDP port as the tools open it.
+    pub fn connect(&self) -> Connection<Box<dyn MavlinkPort>> {
+        let port: Box<dyn MavlinkPort> = if self.pty.is_some() {
+            Box::new(
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .open(&self.path)
+                    .unwrap(),
+            )
+        } else {
+            let Ok(DeviceSpec::Mavlink { link, .. }) = format!("mavlink:{}", self.path).parse()
+            else {
+                panic!("{} is no MAVLink device", self.path)
+            };
+            link.open().unwrap()
+        };
         Connection::new(port, &self.path)
     }
 
