@@ -1,8 +1,8 @@
 //! The autopilot twin over an in-memory duplex, as a ground station sees it: its heartbeat names the autopilot; its
 //! compass messages are the bench's raw field through its own calibration, in each autopilot's unit, so undoing its
-//! parameters gives the raw field back; the battery current follows the profile; its parameters are read, listed
-//! and set, and a value out of range is answered with the old one; a write-back that meets a refusal leaves every
-//! parameter as it was.
+//! parameters gives the raw field back; the battery current follows the profile, and the field follows the current
+//! by the lag configured; its parameters are read, listed and set, and a value out of range is answered with the old
+//! one; a write-back that meets a refusal leaves every parameter as it was.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -385,5 +385,48 @@ fn a_twin_that_awaits_requests_streams_only_what_is_asked_at_the_rate_asked_capp
             "{:?}",
             report.requests
         );
+    }
+}
+
+/// A held, noise-free, ideal sensor whose field follows the current 40 ms late: each raw reading is the constant
+/// field plus `k·I(t − 40 ms)` to rounding, while the current sent is `I(t)`.
+#[test]
+fn the_field_follows_the_current_by_the_lag() {
+    let profile = CurrentProfile {
+        idle_a: 2.0,
+        peak_a: 30.0,
+        period_s: 1.0,
+    };
+    let coef = [0.4, -0.2, 0.3];
+    let mut bench = BenchConfig::ideal([19.0, 1.0, 45.0], 5);
+    bench.effects = vec![Effect::CurrentBias {
+        channel: 0,
+        coef_ut_per_a: coef,
+    }];
+    let mut c = TwinConfig::new(Autopilot::Px4, bench);
+    c.current = Some(profile);
+    c.current_lag_s = 0.04;
+    c.held = true;
+    c.speed = 20.0;
+    let run = start(c);
+    thread::sleep(Duration::from_millis(100));
+    let sent = run.finish().sent;
+    assert!(sent.len() >= 50, "{}", sent.len());
+    // The field at zero current, by the first reading; then the largest difference of a reading from it and `k·I`,
+    // with the current of 40 ms before or of now.
+    let worst = |i_a: fn(&CurrentProfile, f64) -> f64| -> f64 {
+        let b0: [f64; 3] =
+            std::array::from_fn(|j| sent[0].raw_ut[j] - coef[j] * i_a(&profile, sent[0].t_s));
+        sent.iter()
+            .flat_map(|s| (0..3).map(move |j| (s, j)))
+            .map(|(s, j)| (s.raw_ut[j] - b0[j] - coef[j] * i_a(&profile, s.t_s)).abs())
+            .fold(0.0, f64::max)
+    };
+    let lagged = worst(|p, t| p.at(t - 0.04));
+    let present = worst(|p, t| p.at(t));
+    assert!(lagged < 1e-9, "{lagged} µT from k·I(t − lag)");
+    assert!(present > 1.0, "{present} µT from k·I(t)");
+    for s in &sent {
+        assert_eq!(s.current_a, profile.at(s.t_s));
     }
 }
