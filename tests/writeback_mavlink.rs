@@ -210,10 +210,12 @@ fn a_fit_written_over_udp_reads_back_as_its_export_and_the_undo_file_restores_th
     let dir = tempfile::tempdir().unwrap();
     let rec = recording(dir.path());
     for autopilot in [Autopilot::Px4, Autopilot::ArduPilot] {
-        let twin = Twin::start_udp(
-            twin_config(autopilot, Vec::new()),
-            autopilot == Autopilot::ArduPilot,
-        );
+        // Each of its turns ends in a read that waits 20 ms for a datagram, so it turns at most 50 times a wall
+        // second: at 10 Hz and 5 times real time its heartbeat (each bench second), which each connection waits for,
+        // comes 5 times a wall second.
+        let mut config = twin_config(autopilot, Vec::new());
+        (config.rate_hz, config.speed) = (10.0, 5.0);
+        let twin = Twin::start_udp(config, autopilot == Autopilot::ArduPilot);
         let device = format!("mavlink:{}", twin.path);
         writes_back_and_undoes(&rec, dir.path(), autopilot, twin, &device);
     }
