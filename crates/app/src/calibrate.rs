@@ -3,6 +3,7 @@
 use magcal_calib::convention;
 use magcal_calib::diagnosis::{self, Diagnosis, DiagnosisInput, Reference};
 use magcal_calib::directions::fraction_of;
+use magcal_calib::fit::Halves;
 use magcal_calib::frames;
 use magcal_calib::noise::{self, NoiseFloor, rms3};
 use std::borrow::Cow;
@@ -692,6 +693,21 @@ fn scalar_base(
     })
 }
 
+/// What the claims owe to the recording's two halves, when they disagree beyond chance ([`Halves::beyond_chance`]).
+fn halves_note(halves: Halves) -> Option<String> {
+    halves.beyond_chance().then(|| {
+        let w = halves.widening();
+        format!(
+            "the recording's first and second halves, each fitted alone, disagree by {w:.1} times what their \
+             standard errors allow (κ = {:.1}; noise alone gives about 1): the standard errors and the heading \
+             figures are widened by {w:.1} times, to hold on the next recording. Something the model does not \
+             explain changed along the recording — a field that varies along the sensor's path, an offset or a \
+             reference that drifts; turning the sensor in one place, away from metal, narrows them",
+            halves.kappa
+        )
+    })
+}
+
 /// The calibration of a base fit: what it left out and how well it covers, the noise (bounded by the residual when
 /// the readings' differences cannot measure it), and the last checks on the fit.
 fn measured(
@@ -717,6 +733,7 @@ fn measured(
     let face = fit.face();
     let residual_rms_ut = face.residual_rms_ut();
     notes.extend(face.coverage().warning());
+    notes.extend(halves_note(face.halves()));
     let model = face.model();
     let floor_of = |noise: &NoiseFloor| match &fit {
         Fit::Vector(_) => noise.calibrated_rms_ut(&model.a),

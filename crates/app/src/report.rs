@@ -549,6 +549,15 @@ pub struct CalibrationReport {
     /// Scalar method: the raw ellipsoid's semi-axes, largest first, µT.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ellipsoid_radii_ut: Option<[f64; 3]>,
+    /// How much more the base fits of the recording's two halves in time disagree than their covariances say, per
+    /// parameter (`κ`, about 1 when they agree); the base fit's standard errors are widened by `√κ` when above 1.
+    #[serde(default = "one")]
+    pub halves_dispersion: f64,
+}
+
+/// The halves' dispersion of a report written before it was measured.
+fn one() -> f64 {
+    1.0
 }
 
 /// Residual RMS against the noise floor.
@@ -673,6 +682,7 @@ impl Report {
                     Fit::Scalar(s) => Some(s.radii_ut()),
                     Fit::Vector(_) => None,
                 },
+                halves_dispersion: cal.fit.face().halves().kappa,
             },
             residual: match &cal.diagnosis {
                 Some(d) => ResidualReport {

@@ -32,11 +32,16 @@
 //!    least-squares fit.
 //! 4. **Shifted windows** (a problem that has them, see [`RobustProblem::shifted`]): in the scalar method's
 //!    magnitude a field fixed in the room for a while shows as a constant, one fixed to the sensor as `d·u` along
-//!    the field's direction `u` (which averages out over a turning window), often too little to be gross; windows of
-//!    up to a quarter of the recording where the signed residual moves so — up to a half, inside the recording, when
-//!    the evidence is ten times as strong — are found by a scan ([`shifted_windows`]) and excluded too, and the
-//!    rest fitted again, unless the rest would cover less than half the directions ([`SHIFT_KEEP_COVERAGE`]): then
-//!    they stay in, and are reported ([`Robust::mixed`]): the fit mixes two states there.
+//!    the field's direction `u` (which averages out over a turning window), often too little to be gross — through
+//!    |B| alone a second sphere centre with the same shape. Windows where the signed residual moves so are found by
+//!    a scan ([`shifted_windows`]), each judged against the noise the residual keeps once the window is fitted: up
+//!    to a quarter of the recording at the scan's false-alarm level, up to four fifths when the evidence is ten
+//!    times as strong and the window came and went (it explains the samples better than the same shift reaching
+//!    either end of the recording). A window is what comes and goes, so the state a recording starts and ends in
+//!    is the sensor's own: when the fit kept the middle and left both ends out, and one calibration explains both
+//!    ends, it is calibrated on them ([`prefer_the_ends`]). The windows are excluded and the rest fitted again,
+//!    unless the rest would cover less than half the directions ([`SHIFT_KEEP_COVERAGE`]): then they stay in, and
+//!    are reported ([`Robust::mixed`]): the fit mixes two states there.
 
 use crate::FitError;
 use crate::chunks;
@@ -559,6 +564,7 @@ fn exclude_gross_spans<P: RobustProblem>(
 /// [`SPAN_PASSES`] times: the fit without them replaces the last one if it can be made, unless the samples left
 /// would cover too few of the directions ([`SHIFT_KEEP_COVERAGE`]); then the windows stay in, as `robust.mixed`.
 fn exclude_shifted_windows<P: RobustProblem>(problem: &P, robust: &mut Robust<P::Fit>) {
+    prefer_the_ends(problem, robust);
     for _ in 0..SPAN_PASSES {
         let windows = problem.shifted(&robust.fit, &robust.kept);
         if windows.is_empty() {
@@ -582,6 +588,63 @@ fn exclude_shifted_windows<P: RobustProblem>(problem: &P, robust: &mut Robust<P:
         robust.sigma_ut = scale::<P>(&robust.residual_ut);
         robust.fit = f;
         robust.kept = k;
+    }
+}
+
+/// At most this share of the ends' samples may have been kept by the robust fit.
+const ENDS_KEPT_SHARE: f64 = 0.1;
+/// The ends' residuals may be this many times the kept state's (their medians) and be one state with it.
+const ENDS_SCALE: f64 = 1.5;
+
+/// A window is what comes and goes: when the samples `robust` kept lie between spans it left out at the start and
+/// at the end of the recording (but for [`ENDS_KEPT_SHARE`] of theirs), and one calibration explains both ends
+/// (their median residual within [`ENDS_SCALE`] of the kept samples' under the robust fit) from enough directions
+/// ([`SHIFT_KEEP_COVERAGE`]), the ends are the sensor's own state and what lies between them a window (at most
+/// [`SHIFT_LONG_MAX_SHARE`] of the samples), however much of the recording it holds: a magnet on the board for the
+/// middle 60 % of it.
+fn prefer_the_ends<P: RobustProblem>(problem: &P, robust: &mut Robust<P::Fit>) {
+    let n = robust.kept.len();
+    let runs = excluded_runs(&robust.kept);
+    let (Some(&(_, head)), Some(&(tail, _))) = (runs.first(), runs.last()) else {
+        return;
+    };
+    if tail <= head || (tail - head) as f64 > SHIFT_LONG_MAX_SHARE * n as f64 {
+        return;
+    }
+    let mut ends = vec![false; n];
+    ends[..head].fill(true);
+    ends[tail..].fill(true);
+    // The ends must be the other state: left out but for a few samples where it hardly showed.
+    let ends_kept = robust.kept[..head]
+        .iter()
+        .chain(&robust.kept[tail..])
+        .filter(|k| **k)
+        .count();
+    if ends_kept as f64 > ENDS_KEPT_SHARE * (head + n - tail) as f64 {
+        return;
+    }
+    let Ok(f) = problem.final_fit(&ends, None) else {
+        return;
+    };
+    let e = problem.residuals(&f);
+    let of = |e: &[f64], keep: &[bool]| {
+        let v: Vec<f64> = e
+            .iter()
+            .zip(keep)
+            .filter(|(_, k)| **k)
+            .map(|(x, _)| *x)
+            .collect();
+        median(&v)
+    };
+    let one_state = of(&e, &ends) <= ENDS_SCALE * of(&robust.residual_ut, &robust.kept);
+    if one_state
+        && problem.covered(&f, &ends)
+            >= SHIFT_KEEP_COVERAGE * problem.covered(&robust.fit, &robust.kept)
+    {
+        robust.sigma_ut = scale::<P>(&e);
+        robust.residual_ut = e;
+        robust.fit = f;
+        robust.kept = ends;
     }
 }
 
@@ -949,16 +1012,15 @@ pub const SHIFT_MIN_NOISE: f64 = 3.0;
 /// gradients along the path (on an undisturbed phone recording, windows of a third and a half of it), not a field
 /// that came and went.
 const SHIFT_MAX_SHARE: f64 = 0.25;
-/// A window of more than [`SHIFT_MAX_SHARE`] and up to this share of the samples (beyond, the shifted state is the
-/// recording's own) is a field that came and went only when its statistic exceeds [`SHIFT_LONG_PENALTY`]: a field
-/// of 8 µT on the board of a hand-held sensor for a third of the recording stands at 1700, the offset drift of an
-/// undisturbed phone at 120.
-const SHIFT_LONG_MAX_SHARE: f64 = 0.5;
+/// A window of more than [`SHIFT_MAX_SHARE`] and up to this share of the samples is a field on the board or in the
+/// room only when its statistic exceeds [`SHIFT_LONG_PENALTY`] and it came and went (one that reaches an end of the
+/// recording is a lasting change of the offset, which the diagnosis tests as a step); then the state the recording
+/// starts and ends in is the sensor's own, however long the window between (a magnet on the board for the middle
+/// 60 % of a recording; beyond this share, the ends are too short to calibrate on). A field of 8 µT on the board of
+/// a hand-held sensor for a third of the recording stands at 1700, the offset drift of an undisturbed phone at 120.
+const SHIFT_LONG_MAX_SHARE: f64 = 0.8;
 /// The statistic a window longer than [`SHIFT_MAX_SHARE`] must exceed…
 const SHIFT_LONG_PENALTY: f64 = 10.0 * SHIFT_SCAN_PENALTY;
-/// …and the share of the samples it must leave on each side (one that reaches an end of the recording is a lasting
-/// change of the offset, which the diagnosis tests as a step).
-const SHIFT_LONG_MARGIN: f64 = 0.1;
 /// Shifted windows are left out only if the samples left cover at least this share of the directions the samples
 /// covered with them (seen from the fit without them): on the physical BROAD 02 recording, a 4 µT pass by a magnet
 /// made the scan take 88 s holding most of the turning for a window (its statistic 313 against 307, its shift 3.6
@@ -978,7 +1040,7 @@ pub fn shifted_windows(
     kept: &[bool],
     noise: f64,
 ) -> Vec<(usize, usize)> {
-    let mut out: Vec<(usize, usize)> = Vec::new();
+    let mut out = Vec::new();
     let mut free: Vec<bool> = kept
         .iter()
         .zip(e)
@@ -993,20 +1055,33 @@ pub fn shifted_windows(
         let Some(found) = crate::scan::window_with_directions(e, u, &free, sigma2) else {
             break;
         };
+        // The statistic against the noise the window leaves once fitted, when what it leaves turned through the
+        // directions as the whole did (each state then determines its own terms): a long window shifts most blocks
+        // of the residual it is scanned on (the fit without it sits between the two states), which the long-run
+        // variance would otherwise count as the recording's own wander.
         let (a, b) = (found.scan.start, found.scan.end);
+        let Some(inside) = window_fit(e, u, &free, (a, b)) else {
+            break;
+        };
+        let stat = if turned_outside(u, &free, (a, b)) {
+            found.scan.stat * sigma2 / inside.variance.max(f64::MIN_POSITIVE)
+        } else {
+            found.scan.stat
+        };
         let len = free[a..b].iter().filter(|f| **f).count() as f64;
-        // A long window must also come and go: free samples on both sides of it.
-        let long_enough_apart = || {
-            let before = free[..a].iter().filter(|f| **f).count() as f64;
-            let after = free[b..].iter().filter(|f| **f).count() as f64;
-            before.min(after) >= SHIFT_LONG_MARGIN * m
+        // A long window must come and go: it explains the samples better than the same shift from its start to
+        // the end of the recording, or from the beginning to its end, by as much as a short one must explain.
+        let came_and_went = || {
+            [(a, e.len()), (0, b)].iter().all(|&w| {
+                window_fit(e, u, &free, w).is_some_and(|one_sided| {
+                    (one_sided.rss - inside.rss) / inside.variance >= SHIFT_SCAN_PENALTY
+                })
+            })
         };
         let acceptable = if len <= SHIFT_MAX_SHARE * m {
-            found.scan.stat >= SHIFT_SCAN_PENALTY
+            stat >= SHIFT_SCAN_PENALTY
         } else {
-            len <= SHIFT_LONG_MAX_SHARE * m
-                && found.scan.stat >= SHIFT_LONG_PENALTY
-                && long_enough_apart()
+            len <= SHIFT_LONG_MAX_SHARE * m && stat >= SHIFT_LONG_PENALTY && came_and_went()
         };
         if !acceptable || found.terms_rms < SHIFT_MIN_NOISE * noise {
             break;
@@ -1018,6 +1093,10 @@ pub fn shifted_windows(
         let last = (a..b).rev().find(|&i| free[i]).expect("a free sample");
         free[first..=last].fill(false);
         out.push((first, last + 1));
+        if len > SHIFT_MAX_SHARE * m {
+            // The residual was of a fit between the two states: what else it shows needs the fit without this one.
+            break;
+        }
     }
     out
 }
@@ -1046,6 +1125,65 @@ fn long_run_variance(x: impl Iterator<Item = f64>) -> f64 {
     let mid = means.len() / 2;
     let sd = *means.select_nth_unstable_by(mid, f64::total_cmp).1 / 0.674_49;
     sd * sd * LONG_RUN_BLOCK as f64
+}
+
+/// Whether the samples `free` outside the window `[a, b)` turned through the directions as all of them did: the
+/// smallest principal variance of the field's direction `u` outside it at least [`SHIFT_KEEP_COVERAGE`] of all the
+/// samples'. A window that holds the turning leaves rests, whose few poses the scan's terms fit whatever they hold:
+/// on the undisturbed physical BROAD 02 recording the turning between two rests stood at 1455 against the noise they
+/// left (163 against the residual's).
+fn turned_outside(u: &[[f64; 3]], free: &[bool], (a, b): (usize, usize)) -> bool {
+    let spread = |keep: &dyn Fn(usize) -> bool| {
+        let picked: Vec<nalgebra::Vector3<f64>> = (0..u.len())
+            .filter(|&i| free[i] && keep(i))
+            .map(|i| nalgebra::Vector3::from(u[i]))
+            .collect();
+        let n = picked.len().max(1) as f64;
+        let mean = picked.iter().sum::<nalgebra::Vector3<f64>>() / n;
+        let cov = picked
+            .iter()
+            .map(|x| (x - mean) * (x - mean).transpose())
+            .sum::<nalgebra::Matrix3<f64>>()
+            / n;
+        cov.symmetric_eigenvalues().min()
+    };
+    spread(&|i| !(a..b).contains(&i)) >= SHIFT_KEEP_COVERAGE * spread(&|_| true)
+}
+
+/// A window `[a, b)` of [`shifted_windows`]' terms fitted to the residual `e` among the samples `free`: `e`
+/// regressed on a constant and the field's direction `u` everywhere and again inside the window. `None` if the fit
+/// is singular.
+fn window_fit(
+    e: &[f64],
+    u: &[[f64; 3]],
+    free: &[bool],
+    (a, b): (usize, usize),
+) -> Option<WindowFit> {
+    type Terms = nalgebra::SVector<f64, 8>;
+    let terms = |i: usize| {
+        let [x, y, z] = u[i];
+        let inside = f64::from(u8::from((a..b).contains(&i)));
+        Terms::from([1.0, x, y, z, inside, inside * x, inside * y, inside * z])
+    };
+    let used = || (0..e.len()).filter(|&i| free[i]);
+    let (mut xx, mut xr) = (nalgebra::SMatrix::<f64, 8, 8>::zeros(), Terms::zeros());
+    for i in used() {
+        let x = terms(i);
+        xx += x * x.transpose();
+        xr += x * e[i];
+    }
+    let beta = xx.try_inverse()? * xr;
+    let left = || used().map(|i| e[i] - terms(i).dot(&beta));
+    let rss = left().map(|x| x * x).sum::<f64>();
+    let variance = (rss / used().count() as f64).max(long_run_variance(left()));
+    Some(WindowFit { rss, variance })
+}
+
+/// What a window's fit leaves ([`window_fit`]): the residual's sum of squares and its variance per sample (the
+/// sample variance or the long-run one, the larger).
+struct WindowFit {
+    rss: f64,
+    variance: f64,
 }
 
 /// Whether a matrix's gains are within [`PLAUSIBLE_GAIN_RATIO`] of each other.
@@ -1199,6 +1337,25 @@ mod tests {
         );
         assert_eq!(r.excluded(), 900);
         assert!(r.kept[..500].iter().all(|k| *k) && r.kept[500..1400].iter().all(|k| !*k));
+    }
+
+    #[test]
+    fn the_state_a_recording_starts_and_ends_in_is_its_own_though_the_middle_holds_most() {
+        // The middle 60 % on another state (something on the board while the sensor turned): the majority's fit
+        // leaves out both ends, which one line explains — they are the calibration, the middle the window.
+        let p = line(2000, 400..1600);
+        let t: Vec<f64> = (0..2000).map(|i| i as f64 * 0.01).collect();
+        let r = fit(&p, Some(&t)).unwrap();
+        assert!(
+            (r.fit.0 - 2.0).abs() < 0.01 && (r.fit.1 - 1.0).abs() < 0.05,
+            "{:?}",
+            r.fit
+        );
+        assert!(r.kept[..400].iter().chain(&r.kept[1600..]).all(|k| *k));
+        assert!(r.kept[400..1600].iter().all(|k| !*k));
+        // Without time (no order to tell the ends by), the majority's state stands.
+        let r = fit(&p, None).unwrap();
+        assert!((r.fit.1 - 31.0).abs() < 0.05, "{:?}", r.fit);
     }
 
     #[test]
@@ -1405,6 +1562,25 @@ mod tests {
         let (a, b) = found[0];
         assert!(
             a.abs_diff(3000) <= 20 && b.abs_diff(5700) <= 20,
+            "{found:?}"
+        );
+    }
+
+    #[test]
+    fn a_field_on_the_board_for_three_fifths_of_the_recording_is_a_shifted_window() {
+        // 8 noise along x from 1600 to 6400 of 8000 samples, the residual of a fit between the two states (the
+        // window's shift less its mean): it came and went, and the noise it leaves once fitted is the sensor's.
+        let n = 8000;
+        let u = turning(n, 400.0);
+        let mut e = white(n, 7);
+        for (i, (x, d)) in e.iter_mut().zip(&u).enumerate() {
+            *x += 8.0 * d[0] * if (1600..6400).contains(&i) { 0.4 } else { -0.6 };
+        }
+        let found = shifted_windows(&e, &u, &vec![true; n], 1.0);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let (a, b) = found[0];
+        assert!(
+            a.abs_diff(1600) <= 20 && b.abs_diff(6400) <= 20,
             "{found:?}"
         );
     }

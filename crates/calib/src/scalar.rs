@@ -131,6 +131,9 @@ pub struct ScalarFit {
     /// The direction (sensor axes) along which the centre is least certain, and the centre's standard error there
     /// (raw units, µT) as the coverage determines it (before the halves' disagreement scales the claims).
     pub weakest: ([f64; 3], f64),
+    /// How much more the fits of the recording's two halves in time disagree than their covariances say, as the
+    /// vector fit's ([`crate::vector::VectorFit::dispersion`]); the claims are scaled by it when above 1.
+    pub dispersion: f64,
 }
 
 impl ScalarFit {
@@ -387,6 +390,8 @@ struct Covariance {
     determined: SMatrix<f64, P, P>,
     /// How much the prior informs the shape.
     prior_share: f64,
+    /// The halves' disagreement the claims were scaled by (when above 1).
+    dispersion: f64,
 }
 
 /// Where one reading sits under the parameters: `d = m − c`, the direction `u` of `A·d` and `1/|A·d|`.
@@ -976,6 +981,7 @@ impl Problem<'_> {
             claimed: matrix(claimed),
             determined: matrix(larger),
             prior_share: share,
+            dispersion,
         })
     }
 
@@ -1290,6 +1296,7 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
             claimed: SMatrix::zeros(),
             determined: SMatrix::zeros(),
             prior_share: 0.0,
+            dispersion: 1.0,
         }
     } else {
         problem.refine(&mut sol, opts, target)?
@@ -1317,6 +1324,7 @@ pub fn fit(raw_ut: &[[f64; 3]], opts: &ScalarOptions<'_>) -> Result<ScalarFit, F
         direction_cells: problem.cells,
         shape_prior_share,
         weakest,
+        dispersion: covariance.dispersion,
     })
 }
 
