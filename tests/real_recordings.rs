@@ -39,8 +39,8 @@ fn broad_vector_fit_is_near_identity_with_a_small_offset() {
 
 /// Issue 37, acceptance 5: the shared BROAD trials (one sensor, one lab; in 29 and 33 a magnet's spans left out) agree
 /// pairwise within three combined standard errors in every entry of `A` and of the offset, fitted as `magcal-fit`
-/// fits them — but 02 and 29, at 3.1 in `A[1][2]` (docs/diagnosis.md, "Claims that hold on the next recording"), are
-/// held to 3.25. Before the halves' disagreement entered the standard errors, 02 and 29 differed by 5.2 of them.
+/// fits them against the lab's field: measured 2.5 (02/29, `A[1][2]`), 2.0 (02/33) and 2.3 (29/33). Before the
+/// halves' disagreement entered the standard errors, 02 and 29 differed by 5.2 of them.
 #[test]
 fn repeated_broad_recordings_agree_within_what_each_claims() {
     let names = [
@@ -48,10 +48,14 @@ fn repeated_broad_recordings_agree_within_what_each_claims() {
         "broad/broad_29_disturbed_stationary_magnet_B.csv",
         "broad/broad_33_disturbed_attached_magnet_2cm.csv",
     ];
+    // One lab, one field: BROAD 02's header holds the field fitted against its own reference, the others the lab
+    // field pooled over the undisturbed trials (the README); given two fields, the fits' A differ by the turn between
+    // them (02/29 3.1 standard errors apart in A[1][2] so, 2.5 with the one field).
+    let lab_field = ["--field-ned", "15.50,-0.24,41.07"];
     let reports: Vec<serde_json::Value> = std::thread::scope(|s| {
         let runs: Vec<_> = names
             .iter()
-            .map(|n| s.spawn(move || fit_report(&real(n), &[])))
+            .map(|n| s.spawn(move || fit_report(&real(n), &lab_field)))
             .collect();
         runs.into_iter().map(|r| r.join().unwrap()).collect()
     });
@@ -96,9 +100,8 @@ fn repeated_broad_recordings_agree_within_what_each_claims() {
                 .zip(parts(&reports[j]))
                 .map(|((x, sx), (y, sy))| (x - y).abs() / sx.hypot(sy))
                 .fold(0.0, f64::max);
-            let allowed = if (i, j) == (0, 1) { 3.25 } else { 3.0 };
             assert!(
-                worst <= allowed,
+                worst <= 3.0,
                 "{} and {}: {worst:.2} combined standard errors apart",
                 names[i],
                 names[j]
