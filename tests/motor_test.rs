@@ -188,16 +188,7 @@ fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
             lag.abs() <= 0.005,
             "{autopilot}: lag {lag} s, none injected"
         );
-        for k in 0..3 {
-            let err = got[k] - coef[k];
-            assert!(
-                err.abs() <= 0.1 * coef[k].abs() && err.abs() <= 2.0 * se[k],
-                "{autopilot} axis {k}: {} ± {} µT/A, injected {}",
-                got[k],
-                se[k],
-                coef[k]
-            );
-        }
+        assert_recovered(&autopilot.to_string(), got, se, coef);
         // The heading figures, by hand from the recording's attitude (held: its first row's) and the fitted term.
         let h = &report["heading_error"];
         let q = recording.quat.as_ref().unwrap()[0];
@@ -283,6 +274,20 @@ fn injected_motor_coefficients_are_recovered_on_a_held_vehicle() {
     }
 }
 
+/// Asserts each axis' coefficient `got ± se` within 10 % and within two standard errors of the injected `coef`.
+fn assert_recovered(who: &str, got: [f64; 3], se: [f64; 3], coef: [f64; 3]) {
+    for k in 0..3 {
+        let err = got[k] - coef[k];
+        assert!(
+            err.abs() <= 0.1 * coef[k].abs() && err.abs() <= 2.0 * se[k],
+            "{who} axis {k}: {} ± {} µT/A, injected {}",
+            got[k],
+            se[k],
+            coef[k]
+        );
+    }
+}
+
 /// The coefficients of `report`'s current term, their standard errors and its lag, s.
 fn current_term(report: &serde_json::Value) -> ([f64; 3], [f64; 3], f64) {
     let term = &report["current_bias"];
@@ -316,16 +321,7 @@ fn an_injected_lag_of_the_field_behind_the_current_is_recovered_within_5_ms() {
             "{autopilot}: lag {lag:.4} s (injected {lag_s}), {got:.4?} ± {se:.4?} µT/A, injected {coef:?}"
         );
         assert!((lag - lag_s).abs() <= 0.005, "{autopilot}: lag {lag} s");
-        for k in 0..3 {
-            let err = got[k] - coef[k];
-            assert!(
-                err.abs() <= 0.1 * coef[k].abs() && err.abs() <= 2.0 * se[k],
-                "{autopilot} axis {k}: {} ± {} µT/A, injected {}",
-                got[k],
-                se[k],
-                coef[k]
-            );
-        }
+        assert_recovered(&autopilot.to_string(), got, se, coef);
     }
 }
 

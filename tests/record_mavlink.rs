@@ -166,18 +166,6 @@ fn meta<'a>(rec: &'a Recording, key: &str) -> &'a str {
         .unwrap_or_else(|| panic!("no {key} in {:?}", rec.meta.other))
 }
 
-/// Whether `held` (a float the autopilot holds) is `exported` (printed with 3, 6 or 9 decimals).
-fn same(name: &str, held: f64, exported: f64) -> bool {
-    let printed = if name.starts_with("COMPASS_OFS") {
-        5e-4
-    } else if name.starts_with("COMPASS_") {
-        5e-7
-    } else {
-        5e-10
-    };
-    (held - exported).abs() <= printed + 1e-6 * exported.abs().max(1e-3)
-}
-
 #[test]
 fn each_autopilot_is_recorded_fitted_written_and_read_back_and_the_fit_recovers_its_sensor() {
     let dir = tempfile::tempdir().unwrap();
@@ -244,14 +232,7 @@ fn each_autopilot_is_recorded_fitted_written_and_read_back_and_the_fit_recovers_
             stdout.contains("set 9 parameters, each confirmed"),
             "{stdout}"
         );
-        let names: Vec<&str> = want.iter().map(|(n, _)| n.as_str()).collect();
-        let held = twin.read(&names);
-        for ((name, value), (_, h)) in want.iter().zip(&held) {
-            assert!(
-                same(name, *h, *value),
-                "{autopilot} {name}: holds {h}, exported {value}"
-            );
-        }
+        twin.assert_holds(&want, &autopilot.to_string());
         // The twin, with the fit written, sends a field of the true magnitude (what it sent after the write-back and
         // the read-back, 5 s of bench time or more; the autopilots' symmetric matrices hold no rotation, so the sensor's mounting
         // misalignment of up to 3° stays, and the direction is not compared), where before it was tens of µT off.

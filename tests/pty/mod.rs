@@ -153,9 +153,33 @@ impl Twin {
             .collect()
     }
 
+    /// Asserts that the twin, read as a ground station reads it, holds the exported parameters `want` (`who` names
+    /// the case in a failure).
+    pub fn assert_holds(&self, want: &[(String, f64)], who: &str) {
+        let names: Vec<&str> = want.iter().map(|(n, _)| n.as_str()).collect();
+        for ((name, value), (_, held)) in want.iter().zip(self.read(&names)) {
+            assert!(
+                same(name, held, *value),
+                "{who} {name}: holds {held}, exported {value}"
+            );
+        }
+    }
+
     /// Stops the twin and returns what it saw.
     pub fn finish(self) -> TwinReport {
         self.stop.store(true, Ordering::Relaxed);
         self.thread.join().unwrap()
     }
+}
+
+/// Whether `held` (a float the autopilot holds) is `exported` (printed with 3, 6 or 9 decimals).
+pub fn same(name: &str, held: f64, exported: f64) -> bool {
+    let printed = if name.starts_with("COMPASS_OFS") {
+        5e-4
+    } else if name.starts_with("COMPASS_") {
+        5e-7
+    } else {
+        5e-10
+    };
+    (held - exported).abs() <= printed + 1e-6 * exported.abs().max(1e-3)
 }
