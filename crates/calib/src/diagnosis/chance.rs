@@ -21,6 +21,8 @@
 //!
 //! Derivation and figures: docs/diagnosis.md ("One rule for every finding").
 
+use rayon::prelude::*;
+
 use crate::robust::GROSS_SIGMA;
 
 /// The false-alarm rate per recording a finding is judged at.
@@ -72,8 +74,10 @@ impl Chance {
             let sums: Vec<f64> = excess.chunks_exact(m).map(|c| c.iter().sum()).collect();
             (sums.len() >= MIN_BLOCKS).then(|| {
                 let ln_count = (sums.len() as f64).ln();
-                lambdas()
-                    .map(|l| {
+                // Each λ on its own thread's turn, its sum in sample order: the same on any number of threads.
+                let grid: Vec<f64> = lambdas().collect();
+                grid.par_iter()
+                    .map(|&l| {
                         let top = sums.iter().fold(f64::MIN, |a, &s| a.max(l * s));
                         top + sums.iter().map(|&s| (l * s - top).exp()).sum::<f64>().ln() - ln_count
                     })
@@ -143,6 +147,10 @@ pub(crate) fn judge(
         .iter()
         .map(|&(a, b, d)| long_enough(b - a, d))
         .collect();
+    // A span too short to be one is no finding whatever the noise: without any other, nothing to measure.
+    if !findings.contains(&true) {
+        return findings;
+    }
     for _ in 0..MAX_ROUNDS {
         let mut noise = vec![true; sizes.len()];
         for (&(a, b, _), _) in spans.iter().zip(&findings).filter(|(_, f)| **f) {
