@@ -1134,17 +1134,16 @@ fn long_run_variance(x: impl Iterator<Item = f64>) -> f64 {
 /// left (163 against the residual's).
 fn turned_outside(u: &[[f64; 3]], free: &[bool], (a, b): (usize, usize)) -> bool {
     let spread = |keep: &dyn Fn(usize) -> bool| {
-        let picked: Vec<nalgebra::Vector3<f64>> = (0..u.len())
-            .filter(|&i| free[i] && keep(i))
-            .map(|i| nalgebra::Vector3::from(u[i]))
-            .collect();
-        let n = picked.len().max(1) as f64;
-        let mean = picked.iter().sum::<nalgebra::Vector3<f64>>() / n;
-        let cov = picked
-            .iter()
-            .map(|x| (x - mean) * (x - mean).transpose())
-            .sum::<nalgebra::Matrix3<f64>>()
-            / n;
+        let (mut n, mut sum, mut outer) =
+            (0.0, nalgebra::Vector3::zeros(), nalgebra::Matrix3::zeros());
+        for i in (0..u.len()).filter(|&i| free[i] && keep(i)) {
+            let x = nalgebra::Vector3::from(u[i]);
+            n += 1.0;
+            sum += x;
+            outer += x * x.transpose();
+        }
+        let mean: nalgebra::Vector3<f64> = sum / f64::max(n, 1.0);
+        let cov: nalgebra::Matrix3<f64> = outer / f64::max(n, 1.0) - mean * mean.transpose();
         cov.symmetric_eigenvalues().min()
     };
     spread(&|i| !(a..b).contains(&i)) >= SHIFT_KEEP_COVERAGE * spread(&|_| true)
