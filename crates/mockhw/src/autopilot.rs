@@ -26,6 +26,12 @@
 //! number), its old value, which is how a ground station sees a refusal. A name it does not have gets no answer,
 //! as ArduPilot and PX4 give none. The ranges are the twin's own (wide enough for any sensor the simulator draws);
 //! a test narrows one ([`TwinConfig::ranges`]) to be refused.
+//!
+//! The link may lose messages ([`TwinConfig::loss`]: that share of the frames it sends, any message, drawn from a
+//! seed), and the autopilot may reboot ([`TwinConfig::reboot_at_s`]): silent for [`BOOT_S`], it comes back with its
+//! boot clock (`time_usec`, `time_boot_ms`) counting from the reboot, its streams at their defaults again (at
+//! [`TwinConfig::rate_hz`], or none until asked again with [`TwinConfig::await_request`]) and its parameters as
+//! they were (saved, as on the real autopilots). The bench and the hand go on through it.
 
 use std::io::{ErrorKind, Read, Write};
 use std::thread;
@@ -41,6 +47,8 @@ use mavlink::dialects::common::{
     HEARTBEAT_DATA, HIGHRES_IMU_DATA, HighresImuUpdatedFlags, MavCmd, MavMessage, MavModeFlag,
     MavParamType, MavResult, MavState, MavType, PARAM_VALUE_DATA, RAW_IMU_DATA,
 };
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
 // Deprecated by MAVLink (SET_MESSAGE_INTERVAL supersedes it), and still what ArduPilot's stream groups answer.
 #[allow(deprecated)]
 use mavlink::dialects::common::{MavDataStream, REQUEST_DATA_STREAM_DATA};
@@ -108,6 +116,12 @@ pub struct TwinConfig {
     /// The vehicle held down (a bench motor test): the hand holds it still at its first attitude instead of
     /// turning it.
     pub held: bool,
+    /// The share of the frames it sends that the link loses, 0–1 (each frame drawn independently).
+    pub loss: f64,
+    /// The seed the losses are drawn from.
+    pub loss_seed: u64,
+    /// The bench time at which it reboots, s; `None`: it does not.
+    pub reboot_at_s: Option<f64>,
 }
 
 impl TwinConfig {
@@ -126,6 +140,18 @@ impl TwinConfig {
             values: Vec::new(),
             ranges: Vec::new(),
             held: false,
+            loss: 0.0,
+            loss_seed: 0,
+            reboot_at_s: None,
+        }
+    }
+
+    /// Each stream's rate at boot, Hz: [`rate_hz`](Self::rate_hz), or 0 with [`await_request`](Self::await_request).
+    fn boot_rate_hz(&self) -> f64 {
+        if self.await_request {
+            0.0
+        } else {
+            self.rate_hz
         }
     }
 }
@@ -261,7 +287,7 @@ pub struct Sent {
 /// What the twin did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TwinReport {
-    /// Every compass message sent.
+    /// Every compass message sent (put on the port).
     pub sent: Vec<Sent>,
     /// `PARAM_SET`s taken.
     pub sets_taken: u32,
@@ -273,6 +299,10 @@ pub struct TwinReport {
     pub params: Vec<(String, f64)>,
     /// Frames the port could not take (nobody read the other side), dropped.
     pub frames_dropped: u64,
+    /// Frames the link lost ([`TwinConfig::loss`]).
+    pub frames_lost: u64,
+    /// When it rebooted, bench s.
+    pub rebooted_at_s: Option<f64>,
     /// Stream requests taken, in words (`RAW_IMU at 50 Hz (asked 100 Hz)`).
     pub requests: Vec<String>,
     /// Why it stopped.
@@ -302,6 +332,11 @@ pub struct AutopilotTwin<P> {
     due_s: [f64; 3],
     /// Bench time now, s.
     now_s: f64,
+    /// The bench time its boot clock counts from, and the bench time from which it is up (sends and answers), s.
+    boot_at_s: f64,
+    up_at_s: f64,
+    /// Draws the frames the link loses.
+    loss_rng: ChaCha8Rng,
 }
 
 /// The streams the twin sends, by index into its rates.
@@ -314,6 +349,8 @@ const SYSTEM: u32 = 1;
 const COMPONENT: u8 = 1;
 /// How long a frame may wait for the port before it is dropped.
 const SEND_TIMEOUT: Duration = Duration::from_millis(20);
+/// How long a reboot keeps it silent, bench s.
+pub const BOOT_S: f64 = 1.0;
 
 impl<P: Read + Write> AutopilotTwin<P> {
     /// The twin on `port` (reads should not block long: a non-blocking pseudo-terminal master, or a
@@ -347,21 +384,19 @@ impl<P: Read + Write> AutopilotTwin<P> {
                     })?;
             (p.min, p.max) = (*min, *max);
         }
-        let initial_hz = if config.await_request {
-            0.0
-        } else {
-            config.rate_hz
-        };
         Ok(AutopilotTwin {
+            loss_rng: magcal_sim::stream_rng(config.loss_seed, 0),
+            rates_hz: [config.boot_rate_hz(); 3],
             port,
             config,
             bench,
             params,
             frames: FrameBuffer::new(),
             sequence: 0,
-            rates_hz: [initial_hz; 3],
             due_s: [0.0; 3],
             now_s: 0.0,
+            boot_at_s: 0.0,
+            up_at_s: 0.0,
             report: TwinReport::default(),
             alive: true,
         })
@@ -393,12 +428,20 @@ impl<P: Read + Write> AutopilotTwin<P> {
                 thread::sleep(wait);
             }
             self.now_s = t_s;
+            if self.report.rebooted_at_s.is_none()
+                && self.config.reboot_at_s.is_some_and(|at| t_s >= at)
+            {
+                self.reboot(t_s);
+            }
             self.receive();
+            let up = t_s >= self.up_at_s;
             if t_s >= next_heartbeat_s {
-                self.heartbeat();
+                if up {
+                    self.heartbeat();
+                }
                 next_heartbeat_s += 1.0;
             }
-            if self.config.stream {
+            if self.config.stream && up {
                 self.telemetry(t_s);
             }
             t_s += dt;
@@ -411,7 +454,23 @@ impl<P: Read + Write> AutopilotTwin<P> {
         self.report
     }
 
-    fn send(&mut self, msg: &MavMessage) {
+    /// Reboots at bench time `t_s`; see the [module docs](self).
+    fn reboot(&mut self, t_s: f64) {
+        self.boot_at_s = t_s;
+        self.up_at_s = t_s + BOOT_S;
+        self.rates_hz = [self.config.boot_rate_hz(); 3];
+        self.due_s = [self.up_at_s; 3];
+        self.sequence = 0;
+        self.frames = FrameBuffer::new();
+        self.report.rebooted_at_s = Some(t_s);
+    }
+
+    /// Sends `msg`; returns whether it went on the port (not lost by the link, nor dropped for a full port).
+    fn send(&mut self, msg: &MavMessage) -> bool {
+        if self.config.loss > 0.0 && self.loss_rng.random_bool(self.config.loss.min(1.0)) {
+            self.report.frames_lost += 1;
+            return false;
+        }
         let header = MavHeader {
             system_id: SYSTEM,
             component_id: COMPONENT,
@@ -426,23 +485,24 @@ impl<P: Read + Write> AutopilotTwin<P> {
             match self.port.write(&bytes[at..]) {
                 Ok(0) => {
                     self.alive = false;
-                    return;
+                    return false;
                 }
                 Ok(n) => at += n,
                 Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
                     if Instant::now() >= deadline {
                         self.report.frames_dropped += 1;
-                        return;
+                        return false;
                     }
                     thread::sleep(Duration::from_millis(1));
                 }
                 Err(_) => {
                     self.alive = false;
-                    return;
+                    return false;
                 }
             }
         }
         let _ = self.port.flush();
+        true
     }
 
     fn heartbeat(&mut self) {
@@ -476,7 +536,8 @@ impl<P: Read + Write> AutopilotTwin<P> {
             .bench
             .sample_with_currents(t_s, &[current_at(t_s - self.config.current_lag_s)]);
         let v = |n: &str| self.value(n);
-        let time_usec = (t_s * 1e6) as u64;
+        let boot_s = t_s - self.boot_at_s;
+        let time_usec = (boot_s * 1e6) as u64;
         let (msg, sent_ut) = match self.config.autopilot {
             Autopilot::ArduPilot => {
                 let raw = s.raw_ut.map(|x| x * 10.0);
@@ -553,8 +614,7 @@ impl<P: Read + Write> AutopilotTwin<P> {
                 )
             }
         };
-        if due[COMPASS] {
-            self.send(&msg);
+        if due[COMPASS] && self.send(&msg) {
             self.report.sent.push(Sent {
                 t_s,
                 raw_ut: s.raw_ut,
@@ -566,7 +626,7 @@ impl<P: Read + Write> AutopilotTwin<P> {
         let [w, x, y, z] = s.quat.map(|q| q as f32);
         if due[ATTITUDE] {
             self.send(&MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
-                time_boot_ms: (t_s * 1000.0) as u32,
+                time_boot_ms: (boot_s * 1000.0) as u32,
                 q1: w,
                 q2: x,
                 q3: y,
@@ -716,6 +776,9 @@ impl<P: Read + Write> AutopilotTwin<P> {
 
     #[allow(deprecated)] // REQUEST_DATA_STREAM, which ArduPilot still takes
     fn handle(&mut self, msg: &MavMessage) {
+        if self.now_s < self.up_at_s {
+            return; // booting: nothing listens
+        }
         match msg {
             MavMessage::REQUEST_DATA_STREAM(r) => self.request_data_stream(r),
             MavMessage::COMMAND_LONG(c) => self.command(c),

@@ -2,7 +2,9 @@
 //! compass messages are the bench's raw field through its own calibration, in each autopilot's unit, so undoing its
 //! parameters gives the raw field back; the battery current follows the profile, and the field follows the current
 //! by the lag configured; its parameters are read, listed and set, and a value out of range is answered with the old
-//! one; a write-back that meets a refusal leaves every parameter as it was.
+//! one; a write-back that meets a refusal leaves every parameter as it was. A lossy link loses the share of frames
+//! configured; a reboot restarts the boot clock and the streams (at their defaults, or none until asked again) and
+//! keeps the parameters.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -428,5 +430,104 @@ fn the_field_follows_the_current_by_the_lag() {
     assert!(present > 1.0, "{present} µT from k·I(t)");
     for s in &sent {
         assert_eq!(s.current_a, profile.at(s.t_s));
+    }
+}
+
+/// 20 % of the frames lost: the compass messages that arrive are those the twin put on the port, and about a fifth
+/// of the 50 Hz grid is missing.
+#[test]
+fn a_lossy_link_loses_the_share_of_frames_configured() {
+    let mut c = config(Autopilot::ArduPilot, 8);
+    c.rate_hz = 50.0;
+    c.loss = 0.2;
+    c.loss_seed = 3;
+    let mut run = start(c);
+    let mut got = Vec::new();
+    let until = Instant::now() + Duration::from_millis(500);
+    while let Some((_, m)) = run.conn.next_message(until).unwrap() {
+        if let Some(Telemetry::Mag { t_s, .. }) = telemetry(&m) {
+            got.push(t_s);
+        }
+    }
+    let report = run.finish();
+    assert!(report.frames_lost > 0);
+    let on_grid = ((got[got.len() - 1] - got[0]) * 50.0).round() + 1.0;
+    let lost = 1.0 - got.len() as f64 / on_grid;
+    assert!((lost - 0.2).abs() < 0.07, "{lost:.3} of {on_grid} lost");
+    for t in &got {
+        assert!(
+            report.sent.iter().any(|s| (s.t_s - t).abs() < 1e-5),
+            "{t} was not sent"
+        );
+    }
+}
+
+/// A reboot at 4 s: the compass's time starts again, after `BOOT_S` of silence; the streams come back by themselves at
+/// the default rate, or, awaiting requests, only when asked again; a parameter set before it is kept.
+#[test]
+fn a_reboot_restarts_the_clock_and_the_streams_and_keeps_the_parameters() {
+    for await_request in [false, true] {
+        let mut c = config(Autopilot::ArduPilot, 9);
+        c.rate_hz = 50.0;
+        c.await_request = await_request;
+        c.reboot_at_s = Some(4.0);
+        let mut run = start(c);
+        run.conn
+            .wait_heartbeat(Duration::from_secs(5), None)
+            .unwrap();
+        let messages = magcal_autopilot::streams::recording_messages(Autopilot::ArduPilot);
+        run.conn.request_streams(&messages, 50.0).unwrap();
+        let kind = mavlink::dialects::common::MavParamType::MAV_PARAM_TYPE_REAL32;
+        run.conn.set_param("COMPASS_OFS_X", 10.0, kind).unwrap();
+        // Until 0.5 s of wall time: 10 s of bench time.
+        let listen = |conn: &mut Connection<MemoryPort>, ms: u64| {
+            let (mut times, mut heartbeats) = (Vec::new(), 0);
+            let until = Instant::now() + Duration::from_millis(ms);
+            while let Some((_, m)) = conn.next_message(until).unwrap() {
+                match (telemetry(&m), &m) {
+                    (Some(Telemetry::Mag { t_s, .. }), _) => times.push(t_s),
+                    (_, mavlink::dialects::common::MavMessage::HEARTBEAT(_)) => heartbeats += 1,
+                    _ => {}
+                }
+            }
+            (times, heartbeats)
+        };
+        let (times, heartbeats) = listen(&mut run.conn, 500);
+        let back = times.windows(2).position(|w| w[1] < w[0]);
+        if await_request {
+            // Silent after the reboot (heartbeats only), until asked again.
+            assert_eq!(back, None, "{times:?}");
+            assert!(
+                times[times.len() - 1] <= 4.0 && heartbeats >= 4,
+                "{heartbeats}"
+            );
+            run.conn.request_streams(&messages, 50.0).unwrap();
+        }
+        let (after, _) = if await_request {
+            listen(&mut run.conn, 200)
+        } else {
+            (times[back.expect("the clock went back") + 1..].to_vec(), 0)
+        };
+        let rate = (after.len() - 1) as f64 / (after[after.len() - 1] - after[0]);
+        assert!((rate - 50.0).abs() < 3.0, "{await_request}: {rate} Hz");
+        let kept = run.conn.read_param("COMPASS_OFS_X").unwrap().value;
+        assert_eq!(kept, 10.0, "{await_request}");
+        let report = run.finish();
+        let reboot_s = report.rebooted_at_s.unwrap();
+        assert!((reboot_s - 4.0).abs() < 0.03, "{reboot_s}");
+        // The time sent after it counts from the reboot, from when it came back at the earliest.
+        assert!(
+            after[0] >= magcal_mockhw::autopilot::BOOT_S - 1e-5,
+            "{after:?}"
+        );
+        for t in &after {
+            assert!(
+                report
+                    .sent
+                    .iter()
+                    .any(|s| (s.t_s - reboot_s - t).abs() < 1e-5),
+                "{await_request}: {t} is not the time since the reboot"
+            );
+        }
     }
 }

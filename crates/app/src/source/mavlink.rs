@@ -21,7 +21,8 @@
 //! (the autopilot's time stamps), turned into the sensor's axes (sensor → NED, the recording's convention: the
 //! body's FRD attitude for ArduPilot, whose compass field is in body axes; for PX4 the body attitude times the
 //! sensor's rotation), and the battery current last received. The autopilot's clock restarting (a reboot) begins a
-//! new segment of time, bridged by the host's clock.
+//! new segment of time, bridged by the host's clock. A compass silent for [`ASK_AGAIN`] (an autopilot that rebooted
+//! forgets the rates it was asked for) is asked for again, with the other streams, once per silence.
 
 use std::collections::VecDeque;
 use std::io::{Read, Write};
@@ -40,6 +41,8 @@ use super::{Reading, Source, SourceError};
 pub const HEARTBEAT_TIMEOUT: Duration = Duration::from_secs(5);
 /// How long the streams are watched after asking for them, before recording starts.
 pub const PROBE: Duration = Duration::from_millis(2000);
+/// How long the compass may be silent before the streams are asked for again (at most half the idle timeout).
+pub const ASK_AGAIN: Duration = Duration::from_secs(1);
 /// How long a read waits before the recorder looks at Ctrl-C and the clock.
 const POLL: Duration = Duration::from_millis(50);
 /// A compass sample waits at most this long (autopilot time, s) for an attitude after it; then it is recorded
@@ -113,6 +116,10 @@ pub struct MavlinkSource<P> {
     has_current: bool,
     has_temperature: bool,
     rate_hz: f64,
+    /// The rate the streams were asked for, Hz.
+    asked_hz: f64,
+    /// Whether the streams were asked for again in this silence of the compass.
+    asked_again: bool,
     metadata: Vec<(String, String)>,
     counts: Counts,
     /// Recording time = autopilot time + offset (changed at a restart of the autopilot's clock).
@@ -205,6 +212,8 @@ impl<P: Read + Write> MavlinkSource<P> {
             has_current: true,
             has_temperature: true,
             rate_hz,
+            asked_hz: rate_hz,
+            asked_again: false,
             metadata: Vec::new(),
             counts: Counts::default(),
             offset_s: None,
@@ -382,6 +391,19 @@ impl<P: Read + Write> MavlinkSource<P> {
         Some(q.map(|v| v / n))
     }
 
+    /// The link failing while recording.
+    fn link_failed(&self, e: LinkError) -> SourceError {
+        let reason = match e {
+            LinkError::Disconnected { reason, .. } => reason,
+            e => e.to_string(),
+        };
+        SourceError::Disconnected {
+            device: self.device.clone(),
+            samples: self.samples,
+            reason,
+        }
+    }
+
     /// Takes one message.
     fn handle(&mut self, msg: &MavMessage) {
         let Some(t) = telemetry(msg) else {
@@ -394,6 +416,11 @@ impl<P: Read + Write> MavlinkSource<P> {
                 temp_c,
                 t_s,
             } => {
+                if t_s < self.counts.last_s {
+                    // The clock went back while probing (a reboot): the rates are measured from then on.
+                    self.counts = Counts::default();
+                }
+                self.asked_again = false;
                 self.counts.compass += 1;
                 self.counts.first_s.get_or_insert(t_s);
                 self.counts.last_s = t_s;
@@ -488,23 +515,22 @@ impl<P: Read + Write> Source for MavlinkSource<P> {
             match self.conn.next_message(deadline) {
                 Ok(Some((_, msg))) => self.handle(&msg),
                 Ok(None) => break,
-                Err(LinkError::Disconnected { reason, .. }) => {
-                    return Err(SourceError::Disconnected {
-                        device: self.device.clone(),
-                        samples: self.samples,
-                        reason,
-                    });
-                }
-                Err(e) => {
-                    return Err(SourceError::Disconnected {
-                        device: self.device.clone(),
-                        samples: self.samples,
-                        reason: e.to_string(),
-                    });
-                }
+                Err(e) => return Err(self.link_failed(e)),
             }
         }
         let waited = self.last_compass_at.elapsed();
+        if !self.asked_again && waited >= ASK_AGAIN.min(self.idle_timeout / 2) {
+            self.asked_again = true;
+            let messages = recording_messages(self.autopilot);
+            if let Err(e) = self.conn.request_streams(&messages, self.asked_hz) {
+                return Err(self.link_failed(e));
+            }
+            let backlog: Vec<_> = self.conn.backlog.drain(..).collect();
+            for (_, msg) in backlog {
+                self.handle(&msg);
+            }
+            return Ok(None);
+        }
         if waited >= self.idle_timeout {
             let message = recording_messages(self.autopilot)[0].1;
             return Err(SourceError::NoSamples {
@@ -512,7 +538,8 @@ impl<P: Read + Write> Source for MavlinkSource<P> {
                 samples: self.samples,
                 waited_s: waited.as_secs_f64(),
                 cause: format!(
-                    "the {} stopped sending {message} (rebooted, disarmed its streams, or the link dropped?)",
+                    "the {} stopped sending {message}, and sent none when asked for it again (rebooted and \
+                     disarmed its streams, or the link dropped?)",
                     self.autopilot
                 ),
             });
