@@ -38,9 +38,13 @@ fn broad_vector_fit_is_near_identity_with_a_small_offset() {
 }
 
 /// Issue 37, acceptance 5: the shared BROAD trials (one sensor, one lab; in 29 and 33 a magnet's spans left out) agree
-/// pairwise within three combined standard errors in every entry of `A` and of the offset, fitted as `magcal-fit`
-/// fits them against the lab's field: measured 2.5 (02/29, `A[1][2]`), 2.0 (02/33) and 2.3 (29/33). Before the
-/// halves' disagreement entered the standard errors, 02 and 29 differed by 5.2 of them.
+/// pairwise within three combined standard errors in every entry of `A` and of the offset. Fitted as `magcal-fit`
+/// fits them by default, each against the field in its own header, 02 and 29 are 3.1 apart in `A[1][2]` — held to
+/// 3.25, the issue's 3 not met — 02/33 1.6 and 29/33 2.3, held to 3. Two fields: 02's header holds a field fitted
+/// against 02's own reference, 29's and 33's the lab field pooled over the undisturbed trials (the README), and a
+/// vector fit's `A` turns with the field given. Against the one lab field every pair is held to 3: measured 2.5
+/// (02/29), 2.0 (02/33), 2.3 (29/33). Before the halves' disagreement entered the standard errors, 02 and 29
+/// differed by 5.2 of them.
 #[test]
 fn repeated_broad_recordings_agree_within_what_each_claims() {
     let names = [
@@ -48,17 +52,17 @@ fn repeated_broad_recordings_agree_within_what_each_claims() {
         "broad/broad_29_disturbed_stationary_magnet_B.csv",
         "broad/broad_33_disturbed_attached_magnet_2cm.csv",
     ];
-    // One lab, one field: BROAD 02's header holds the field fitted against its own reference, the others the lab
-    // field pooled over the undisturbed trials (the README); given two fields, the fits' A differ by the turn between
-    // them (02/29 3.1 standard errors apart in A[1][2] so, 2.5 with the one field).
-    let lab_field = ["--field-ned", "15.50,-0.24,41.07"];
-    let reports: Vec<serde_json::Value> = std::thread::scope(|s| {
-        let runs: Vec<_> = names
-            .iter()
-            .map(|n| s.spawn(move || fit_report(&real(n), &lab_field)))
-            .collect();
-        runs.into_iter().map(|r| r.join().unwrap()).collect()
-    });
+    let fits = |extra: &'static [&'static str]| -> Vec<serde_json::Value> {
+        std::thread::scope(|s| {
+            let runs: Vec<_> = names
+                .iter()
+                .map(|n| s.spawn(move || fit_report(&real(n), extra)))
+                .collect();
+            runs.into_iter().map(|r| r.join().unwrap()).collect()
+        })
+    };
+    let by_default = fits(&[]);
+    let lab_field = fits(&["--field-ned", "15.50,-0.24,41.07"]);
     // BROAD 02's halves disagree far beyond chance (barely tipped along x, its halves' A[2][0] 0.067 apart against
     // claimed standard errors of 0.01): its report says by how much and that the claims were widened for it;
     // BROAD 33's agree, and nothing is said.
@@ -73,8 +77,8 @@ fn repeated_broad_recordings_agree_within_what_each_claims() {
             said,
         )
     };
-    let (kappa_02, said_02) = halves(&reports[0]);
-    let (kappa_33, said_33) = halves(&reports[2]);
+    let (kappa_02, said_02) = halves(&by_default[0]);
+    let (kappa_33, said_33) = halves(&by_default[2]);
     assert!(
         kappa_02 > 5.0 && said_02,
         "BROAD 02: κ {kappa_02}, said {said_02}"
@@ -93,19 +97,25 @@ fn repeated_broad_recordings_agree_within_what_each_claims() {
         values.extend(o.into_iter().zip(o_se));
         values
     };
-    for i in 0..3 {
-        for j in i + 1..3 {
-            let worst = parts(&reports[i])
-                .iter()
-                .zip(parts(&reports[j]))
-                .map(|((x, sx), (y, sy))| (x - y).abs() / sx.hypot(sy))
-                .fold(0.0, f64::max);
-            assert!(
-                worst <= 3.0,
-                "{} and {}: {worst:.2} combined standard errors apart",
-                names[i],
-                names[j]
-            );
+    for (reports, fitted, allowed_02_29) in [
+        (&by_default, "each against its header's field", 3.25),
+        (&lab_field, "against the lab field", 3.0),
+    ] {
+        for i in 0..3 {
+            for j in i + 1..3 {
+                let worst = parts(&reports[i])
+                    .iter()
+                    .zip(parts(&reports[j]))
+                    .map(|((x, sx), (y, sy))| (x - y).abs() / sx.hypot(sy))
+                    .fold(0.0, f64::max);
+                let allowed = if (i, j) == (0, 1) { allowed_02_29 } else { 3.0 };
+                assert!(
+                    worst <= allowed,
+                    "{} and {}, {fitted}: {worst:.2} combined standard errors apart",
+                    names[i],
+                    names[j]
+                );
+            }
         }
     }
 }
