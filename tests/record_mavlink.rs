@@ -292,11 +292,7 @@ fn injected_motor_coefficients_are_recovered_under_the_autopilots_own_compensati
         }];
         // The current's field up to 12 µT (larger fields the diagnosis leaves out as gross: docs/flight-logs.md).
         let size = coef.iter().map(|v| v * v).sum::<f64>().sqrt();
-        c.current = Some(CurrentProfile {
-            idle_a: 2.0,
-            peak_a: (12.0 / size).min(30.0),
-            period_s: 7.0,
-        });
+        c.current = Some(CurrentProfile::ramps(2.0, (12.0 / size).min(30.0), 7.0));
         let twin = Twin::start(c);
         let rec = dir.path().join(format!("motor-{}.csv", autopilot.name()));
         record(&twin.path, &rec, 90.0);

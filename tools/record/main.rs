@@ -60,11 +60,14 @@ use magcal_app::{sayln, tellln};
 ///           vector calibration (every component, misalignment included). Give the local field with --field-ned
 ///           or --location/--date.
 ///   motors  a bench motor test on a flight controller (mavlink:…): hold the vehicle still (props off or held
-///           down) and raise the throttle slowly to full and back, twice, yourself — magcal only reads, it never
-///           arms the vehicle or commands its motors. The screen shows the battery current and the field's change
-///           since the start; recording stops after two ramps up to 60 % of the highest current and back (or
-///           --max-duration, or Ctrl-C). magcal-fit then fits the current term alone (µT per A per axis) and the
-///           heading error it makes. A device without a current is refused.
+///           down) and raise the throttle slowly to full and back, twice, then blip it ten times (snap it up to
+///           high and back after half a second, a second at idle between), yourself — magcal only reads, it never
+///           arms the vehicle or commands its motors. The ramps give the coefficients, the blips the lag of the
+///           field behind the current. The screen shows the battery current and the field's change since the
+///           start; recording stops after two ramps up to 60 % of the highest current and back and ten blips that
+///           rise to it within 0.3 s (or --max-duration, or Ctrl-C). magcal-fit then fits the current term alone
+///           (µT per A per axis, and the lag) and the heading error it makes. A device without a current is
+///           refused.
 ///
 /// THE SCREEN (on a terminal):
 ///   the coverage map (the sphere of field directions, +Z half left, -Z half right, seen from outside: # covered by a
@@ -283,7 +286,7 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
     let why = match s.stop {
         Stop::Coverage => "coverage target reached",
         Stop::AllPoses => "all 24 poses taken",
-        Stop::Ramps => "throttle ramps made",
+        Stop::Ramps => "throttle ramps made, and the blips",
         Stop::Interrupted => "interrupted",
         Stop::MaxDuration => "longest duration reached",
     };
@@ -296,7 +299,7 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
         if s.poses > 0 {
             format!(", {} poses", s.poses)
         } else if opts.routine == Routine::Motors {
-            format!(", {} throttle ramps", s.ramps)
+            format!(", {} throttle ramps, {} blips", s.ramps, s.blips)
         } else {
             String::new()
         }

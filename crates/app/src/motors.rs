@@ -23,7 +23,9 @@
 use std::path::Path;
 
 use anyhow::{Context as _, bail};
-use magcal_calib::diagnosis::{MotorFit, MotorInput, fit_motors, heading_error_deg};
+use magcal_calib::diagnosis::{
+    Lag, MAX_LAG_HALF_WIDTH_S, MotorFit, MotorInput, fit_motors, heading_error_deg,
+};
 use magcal_calib::frames::{self, Mat3};
 use magcal_recording::Recording;
 
@@ -214,6 +216,35 @@ fn headings(
     })
 }
 
+/// What to do about a lag whose interval is wide.
+const LAG_ADVICE: &str = "the current changed too slowly for the field's delay to show (its information is \
+                          Σ (k·dI/dt)²/σ²): blip the throttle, snapping it from idle to high and back, ten times \
+                          (magcal-record --routine motors asks for it), and record again";
+
+/// Why the report gives no `lag_s`, when it does not.
+fn lag_not_determined(lag: Option<Lag>) -> Option<String> {
+    match lag {
+        Some(l) if l.determined() => None,
+        Some(l) if !l.current_keeps_up() => Some(format!(
+            "the current changed every {:.0} ms (the median), the field was sampled every {:.0} ms: a current \
+             measured less often than the field is held between measurements, late by up to that, so the lag found \
+             is not the field's (ArduCopter reads its battery monitor at 10 Hz whatever rate BATTERY_STATUS is \
+             streamed at); the coefficients are still fitted (with a 10 Hz current, simulated, within 7 % at \
+             0.05 µT/A and 2 % at 1 µT/A)",
+            1e3 * l.current_update_s,
+            1e3 * l.sample_interval_s
+        )),
+        Some(l) => Some(format!(
+            "its profile interval is ± {:.1} ms (one standard deviation), wider than ± {:.1} ms: {LAG_ADVICE}",
+            1e3 * l.half_width_s(),
+            1e3 * MAX_LAG_HALF_WIDTH_S
+        )),
+        None => Some(format!(
+            "no profile interval within ± {MAX_LAG_S} s (taken as 0 s): {LAG_ADVICE}"
+        )),
+    }
+}
+
 /// A number with its standard error, to the error's two significant digits.
 fn with_se(v: f64, se: f64) -> String {
     let digits = if se > 0.0 && se.is_finite() {
@@ -253,12 +284,24 @@ impl MotorsFitted {
                     10.0 * k[1],
                     10.0 * k[2]
                 );
-                s += &match term.lag {
-                    Some(l) => format!(
-                        "  lag of the field behind the recorded current: {:.3} s ({:.3} to {:.3} s)\n",
-                        l.lag_s, l.interval_s.0, l.interval_s.1
+                let why = lag_not_determined(term.lag);
+                s += &match (term.lag, why) {
+                    (Some(l), None) => format!(
+                        "  lag of the field behind the recorded current: {:.1} ms ({:.1} to {:.1} ms, one standard \
+                         deviation)\n",
+                        1e3 * l.lag_s,
+                        1e3 * l.interval_s.0,
+                        1e3 * l.interval_s.1
                     ),
-                    None => "  lag: not identified (taken as 0 s)\n".to_owned(),
+                    (Some(l), Some(why)) => format!(
+                        "  lag of the field behind the recorded current: not determined ({:.1} ms at best, where k is \
+                         fitted): {why}\n",
+                        1e3 * l.lag_s
+                    ),
+                    (None, why) => format!(
+                        "  lag of the field behind the recorded current: not identified: {}\n",
+                        why.unwrap_or_default()
+                    ),
                 };
             }
             None => {
@@ -309,8 +352,9 @@ impl MotorsFitted {
                     "coef_ut_per_a_se": t.coef_se_ut_per_a,
                 },
                 "evidence": t.evidence,
-                "lag_s": t.lag.map(|l| l.lag_s),
+                "lag_s": t.lag.filter(|l| l.determined()).map(|l| l.lag_s),
                 "lag_interval_s": t.lag.map(|l| [l.interval_s.0, l.interval_s.1]),
+                "lag_not_determined": lag_not_determined(t.lag),
             })
         });
         let headings = self.headings.as_ref().ok().map(|h| {

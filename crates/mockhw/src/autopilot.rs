@@ -2,9 +2,9 @@
 //! pseudo-terminal's master for the tools, a [`magcal_autopilot::MemoryPort`] in unit tests).
 //!
 //! Its compass is the simulator's [`Bench`]: a sensor with hard and soft iron ([`BenchConfig::sensor`]) and any
-//! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`], the field
-//! following it [`TwinConfig::current_lag_s`] late), a time lag — computed by the same function the fitter's
-//! regressors use. The hand turns it, or holds it still for a bench
+//! effects — a motor-current bias on channel 0 (the battery current, which follows a [`CurrentProfile`]: slow ramps
+//! of the throttle, then [`Blips`] when asked; the field following it [`TwinConfig::current_lag_s`] late), a time
+//! lag — computed by the same function the fitter's regressors use. The hand turns it, or holds it still for a bench
 //! motor test ([`TwinConfig::held`]). Like the real firmware it applies its own
 //! calibration to what it sends, with its parameters as they are at that moment:
 //!
@@ -64,7 +64,8 @@ fn fmt_hz(hz: f64) -> String {
 }
 
 /// The battery current over bench time: a raised cosine between `idle_a` and `peak_a` with period `period_s` (a
-/// hand raising and lowering the throttle), or constant when `period_s` is not positive.
+/// hand raising and lowering the throttle), or constant when `period_s` is not positive; with [`blips`](Self::blips),
+/// the hand then blips the throttle and leaves it at idle.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CurrentProfile {
     /// The lowest current, A.
@@ -73,16 +74,73 @@ pub struct CurrentProfile {
     pub peak_a: f64,
     /// The period of one rise and fall, s.
     pub period_s: f64,
+    /// Quick throttle steps after a number of the slow ramps; `None`: the ramps go on.
+    pub blips: Option<Blips>,
+}
+
+/// Throttle blips: the throttle snapped from idle to peak and back, the current following each step as a first-order
+/// response (an ESC and its motor take it from idle to high in 50–150 ms: 10–90 % in 2.2 time constants).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Blips {
+    /// Whole periods of the slow ramps before the blips.
+    pub after_ramps: u32,
+    /// How many blips.
+    pub count: u32,
+    /// How long the throttle rests at idle before each blip, s.
+    pub idle_s: f64,
+    /// How long the throttle is held high in each blip, s.
+    pub high_s: f64,
+    /// The current's time constant after each step of the throttle, s.
+    pub time_constant_s: f64,
 }
 
 impl CurrentProfile {
-    /// The current at `t_s`, A.
+    /// Slow ramps only: the raised cosine from `idle_a` to `peak_a` every `period_s`, for ever.
+    pub fn ramps(idle_a: f64, peak_a: f64, period_s: f64) -> CurrentProfile {
+        CurrentProfile {
+            idle_a,
+            peak_a,
+            period_s,
+            blips: None,
+        }
+    }
+
+    /// The current at `t_s` (the hand starts at 0: idle before), A.
     pub fn at(&self, t_s: f64) -> f64 {
-        if self.period_s <= 0.0 {
+        if self.period_s <= 0.0 || t_s < 0.0 {
             return self.idle_a;
         }
+        let span_a = self.peak_a - self.idle_a;
+        if let Some(b) = self.blips {
+            let start_s = f64::from(b.after_ramps) * self.period_s;
+            if t_s >= start_s {
+                return self.idle_a + span_a * b.throttle_response(t_s - start_s);
+            }
+        }
         let phase = std::f64::consts::TAU * t_s / self.period_s;
-        self.idle_a + (self.peak_a - self.idle_a) * (1.0 - phase.cos()) / 2.0
+        self.idle_a + span_a * (1.0 - phase.cos()) / 2.0
+    }
+}
+
+impl Blips {
+    /// The share of the step the current has reached `u_s` after the first blip's idle began: each step of the
+    /// throttle (up at `idle_s` into a blip, down `high_s` later) adds or removes `1 − e^(−t/τ)`.
+    fn throttle_response(&self, u_s: f64) -> f64 {
+        let tau = self.time_constant_s.max(1e-9);
+        let step = |since_s: f64| {
+            if since_s > 0.0 {
+                1.0 - (-since_s / tau).exp()
+            } else {
+                0.0
+            }
+        };
+        let cycle_s = self.idle_s + self.high_s;
+        (0..self.count)
+            .map(|n| {
+                let up_s = f64::from(n) * cycle_s + self.idle_s;
+                step(u_s - up_s) - step(u_s - up_s - self.high_s)
+            })
+            .sum()
     }
 }
 
@@ -97,8 +155,17 @@ pub struct TwinConfig {
     pub current: Option<CurrentProfile>,
     /// How late the compass's field follows the battery current, s: the bench's effects are given the current of
     /// that long before (a `CurrentBias` gives `k·I(t − lag)`), while `BATTERY_STATUS` and the autopilot's own motor
-    /// compensation carry `I(t)`. (A lag of the field the hand turns is the bench's `TimeLag` effect.)
+    /// compensation carry `I(t)` (as its battery monitor measures it, [`battery_hz`](Self::battery_hz)). (A lag of
+    /// the field the hand turns is the bench's `TimeLag` effect.)
     pub current_lag_s: f64,
+    /// How often its battery monitor measures the current, Hz; 0: at every message. `BATTERY_STATUS` and the motor
+    /// compensation carry the last measurement (ArduCopter reads its battery monitor at 10 Hz, whatever rate
+    /// `BATTERY_STATUS` is streamed at).
+    pub battery_hz: f64,
+    /// When the hand starts the throttle profile: `None`, at boot; `Some(wait_s)`, that long (bench s) after a ground
+    /// station first asks for `BATTERY_STATUS` (an operator waiting for the recorder's prompt), the current idle
+    /// until then.
+    pub throttle_after_request_s: Option<f64>,
     /// Compass, attitude and battery messages per second of bench time, Hz: the fastest it sends any of them (a
     /// request for more gets this).
     pub rate_hz: f64,
@@ -133,6 +200,8 @@ impl TwinConfig {
             bench,
             current: None,
             current_lag_s: 0.0,
+            battery_hz: 0.0,
+            throttle_after_request_s: None,
             rate_hz: 50.0,
             speed: 10.0,
             stream: true,
@@ -280,7 +349,7 @@ pub struct Sent {
     pub sent_ut: [f64; 3],
     /// The attitude, sensor (body) → NED, `[w, x, y, z]`.
     pub quat: [f64; 4],
-    /// The battery current, A.
+    /// The battery current its battery monitor last measured ([`TwinConfig::battery_hz`]), A.
     pub current_a: f64,
 }
 
@@ -337,6 +406,8 @@ pub struct AutopilotTwin<P> {
     up_at_s: f64,
     /// Draws the frames the link loses.
     loss_rng: ChaCha8Rng,
+    /// The bench time the throttle profile starts at, s (`None`: not yet, waiting for a request).
+    throttle_from_s: Option<f64>,
 }
 
 /// The streams the twin sends, by index into its rates.
@@ -386,6 +457,7 @@ impl<P: Read + Write> AutopilotTwin<P> {
         }
         Ok(AutopilotTwin {
             loss_rng: magcal_sim::stream_rng(config.loss_seed, 0),
+            throttle_from_s: config.throttle_after_request_s.is_none().then_some(0.0),
             rates_hz: [config.boot_rate_hz(); 3],
             port,
             config,
@@ -530,8 +602,14 @@ impl<P: Read + Write> AutopilotTwin<P> {
         if due == [false; 3] {
             return;
         }
-        let current_at = |t_s| self.config.current.map_or(0.0, |c| c.at(t_s));
-        let current_a = current_at(t_s);
+        let from_s = self.throttle_from_s.unwrap_or(f64::INFINITY);
+        let current_at = |t_s: f64| self.config.current.map_or(0.0, |c| c.at(t_s - from_s));
+        let measured_s = if self.config.battery_hz > 0.0 {
+            (t_s * self.config.battery_hz).floor() / self.config.battery_hz
+        } else {
+            t_s
+        };
+        let current_a = current_at(measured_s);
         let s = self
             .bench
             .sample_with_currents(t_s, &[current_at(t_s - self.config.current_lag_s)]);
@@ -662,6 +740,10 @@ impl<P: Read + Write> AutopilotTwin<P> {
         let got = asked_hz.clamp(0.0, self.config.rate_hz);
         self.rates_hz[k] = got;
         self.due_s[k] = self.now_s;
+        if k == BATTERY && got > 0.0 && self.throttle_from_s.is_none() {
+            self.throttle_from_s =
+                Some(self.now_s + self.config.throttle_after_request_s.unwrap_or(0.0));
+        }
         self.report.requests.push(format!(
             "{name} at {} Hz (asked {} Hz)",
             fmt_hz(got),

@@ -70,11 +70,7 @@ fn start(config: TwinConfig) -> Running {
 
 fn config(autopilot: Autopilot, seed: u64) -> TwinConfig {
     let mut c = TwinConfig::new(autopilot, bench(seed));
-    c.current = Some(CurrentProfile {
-        idle_a: 2.0,
-        peak_a: 30.0,
-        period_s: 4.0,
-    });
+    c.current = Some(CurrentProfile::ramps(2.0, 30.0, 4.0));
     c.speed = 20.0;
     c.values = match autopilot {
         Autopilot::ArduPilot => vec![
@@ -394,11 +390,7 @@ fn a_twin_that_awaits_requests_streams_only_what_is_asked_at_the_rate_asked_capp
 /// field plus `k·I(t − 40 ms)` to rounding, while the current sent is `I(t)`.
 #[test]
 fn the_field_follows_the_current_by_the_lag() {
-    let profile = CurrentProfile {
-        idle_a: 2.0,
-        peak_a: 30.0,
-        period_s: 1.0,
-    };
+    let profile = CurrentProfile::ramps(2.0, 30.0, 1.0);
     let coef = [0.4, -0.2, 0.3];
     let mut bench = BenchConfig::ideal([19.0, 1.0, 45.0], 5);
     bench.effects = vec![Effect::CurrentBias {

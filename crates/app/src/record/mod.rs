@@ -13,10 +13,12 @@
 //!   the take: the rows written stay (they were still, at the pose), and the pose is taken once the jig settles
 //!   again. Enter takes the next dwell whatever it holds. The settling dwell keeps the end of the move out.
 //! - **motors**: a bench motor test. The vehicle is held still (props off or held down) while the operator raises the
-//!   throttle to full and lowers it, twice; magcal only reads (it never arms the vehicle or commands its motors).
+//!   throttle to full and lowers it, twice, then blips it ([`motors::BLIPS`] quick steps up and back, which time the
+//!   field's lag behind the current); magcal only reads (it never arms the vehicle or commands its motors).
 //!   Every sample is written with its attitude and current; the live display shows the current and the field's
-//!   change since the start ([`ThrottleWatch`]); the recording stops once the ramps are made ([`motors::RAMPS`]
-//!   reaching [`motors::RAMP_SHARE`] of the highest current). A device without a current channel is refused
+//!   change since the start ([`ThrottleWatch`]); the recording stops once the ramps and the blips are made
+//!   ([`motors::RAMPS`] and [`motors::BLIPS`] reaching [`motors::RAMP_SHARE`] of the highest current). A device
+//!   without a current channel is refused
 //!   before the file is made. The field's magnitude is not watched for magnets: its change with the current is
 //!   what is measured. Its fit is the current term alone (`magcal-fit`, [`crate::motors`]).
 //!
@@ -208,7 +210,7 @@ pub enum Stop {
     Coverage,
     /// The cube routine took all its poses.
     AllPoses,
-    /// The motors routine's ramps are made.
+    /// The motors routine's ramps and blips are made.
     Ramps,
     /// Interrupted (Ctrl-C).
     Interrupted,
@@ -231,6 +233,8 @@ pub struct RecordSummary {
     pub poses: usize,
     /// Motors routine: throttle ramps made ([`motors::RAMPS`] asked for).
     pub ramps: usize,
+    /// Motors routine: throttle blips made after the ramps ([`motors::BLIPS`] asked for).
+    pub blips: usize,
     /// Samples the chip refused as saturated (not recorded).
     pub saturated: u64,
     /// Readings whose field magnitude departed from the rest's (a magnet or iron nearby; recorded, not counted as
@@ -267,10 +271,22 @@ impl RecordSummary {
                 return Some(format!(
                     "the recording stopped short of its routine: {} of the {} throttle ramps made (up to at least \
                      {:.0} % of the highest current and back). A fit may find no current term, or a loose one: \
-                     record again, raising the throttle slowly to full and back, twice",
+                     record again, raising the throttle slowly to full and back, twice, then blipping it {} times",
                     self.ramps,
                     motors::RAMPS,
-                    100.0 * motors::RAMP_SHARE
+                    100.0 * motors::RAMP_SHARE,
+                    motors::BLIPS
+                ));
+            }
+            Routine::Motors if self.blips < motors::BLIPS => {
+                return Some(format!(
+                    "the recording stopped short of its routine: the ramps made, {} of the {} throttle blips (up to \
+                     at least {:.0} % of the highest current within {:.1} s, and back). The coefficients hold; the \
+                     lag of the field behind the current may not be determined: record again with the blips",
+                    self.blips,
+                    motors::BLIPS,
+                    100.0 * motors::RAMP_SHARE,
+                    motors::BLIP_RISE_S
                 ));
             }
             _ => return None,
@@ -1031,6 +1047,7 @@ mod tests {
             coverage: 0.0,
             poses: 0,
             ramps: 1,
+            blips: 0,
             saturated: 0,
             disturbed: 0,
             clock_restarts: Vec::new(),
@@ -1042,6 +1059,14 @@ mod tests {
         assert!(
             short.contains("1 of the 2 throttle ramps made")
                 && short.contains("to full and back, twice"),
+            "{short}"
+        );
+        summary.ramps = 2;
+        summary.blips = 3;
+        let short = summary.shortfall(&opts).unwrap();
+        assert!(
+            short.contains("the ramps made, 3 of the 10 throttle blips")
+                && short.contains("the lag of the field behind the current may not be determined"),
             "{short}"
         );
         summary.stop = Stop::Ramps;

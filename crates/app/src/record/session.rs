@@ -50,6 +50,8 @@ struct Session<'o> {
     units_told: bool,
     jig: Cube,
     throttle: ThrottleWatch,
+    /// Whether the motors routine said the ramps were made and the blips are next.
+    blips_told: bool,
     seen: u64,
     /// Rows written while the magnitude departed (between cube poses, readings are looked at and not written).
     disturbed: u64,
@@ -96,6 +98,7 @@ pub(super) fn run(
         coverage: s.map.fraction(),
         poses: s.jig.taken,
         ramps: s.throttle.throttle().map_or(0, |t| t.ramps),
+        blips: s.throttle.throttle().map_or(0, |t| t.blips),
         saturated: source.saturated(),
         disturbed: s.disturbed,
         clock_restarts: source.clock_restarts().iter().map(|t| t - s.t0_s).collect(),
@@ -103,6 +106,17 @@ pub(super) fn run(
         untouched: false,
         stop,
     })
+}
+
+/// How to blip the throttle, in words.
+fn blip_how() -> String {
+    format!(
+        "snap it from idle to high (at least {:.0} % of the highest current, within {:.1} s) and back after about \
+         half a second, resting a second at idle between blips (the quick steps time the field's lag behind the \
+         current)",
+        100.0 * motors::RAMP_SHARE,
+        motors::BLIP_RISE_S
+    )
 }
 
 impl<'o> Session<'o> {
@@ -123,6 +137,7 @@ impl<'o> Session<'o> {
             units_told: false,
             jig: Cube::new((opts.dwell_s * rate_hz).round() as usize),
             throttle: ThrottleWatch::new(),
+            blips_told: false,
             seen: 0,
             disturbed: 0,
             saturated_told: (0, f64::NEG_INFINITY, false),
@@ -147,12 +162,14 @@ impl<'o> Session<'o> {
             Routine::Cube24 => prompt_pose(source, self.opts, ui, 0, &self.jig.poses[0]),
             Routine::Motors => ui.message(&format!(
                 "motor test: hold the vehicle still (props off or held down); raise the throttle slowly to full and \
-                 back, {} (magcal only reads: it never arms the vehicle or commands its motors; Ctrl-C stops early, \
-                 the file keeps everything)",
+                 back, {}; then blip it {} times: {} (magcal only reads: it never arms the vehicle or commands its \
+                 motors; Ctrl-C stops early, the file keeps everything)",
                 match motors::RAMPS {
                     2 => "twice".to_owned(),
                     n => format!("{n} times"),
-                }
+                },
+                motors::BLIPS,
+                blip_how()
             )),
         }
     }
@@ -205,7 +222,20 @@ impl<'o> Session<'o> {
         let done = match self.opts.routine {
             Routine::Motors => {
                 out.write(r, r.quat)?;
-                self.throttle.add(r.mag_ut, r.current_a);
+                self.throttle.add(t_s, r.mag_ut, r.current_a);
+                if !self.blips_told
+                    && self
+                        .throttle
+                        .throttle()
+                        .is_some_and(|t| t.ramps >= motors::RAMPS)
+                {
+                    self.blips_told = true;
+                    ui.message(&format!(
+                        "ramps made; now blip the throttle {} times: {}",
+                        motors::BLIPS,
+                        blip_how()
+                    ));
+                }
                 self.throttle.done()
             }
             Routine::Free => {

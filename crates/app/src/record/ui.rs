@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use super::Routine;
 use super::coverage::CoverageMap;
 use super::magnitude::Disturbance;
-use super::motors::{RAMP_SHARE, RAMPS, Throttle};
+use super::motors::{BLIP_RISE_S, BLIPS, RAMP_SHARE, RAMPS, Throttle};
 use super::quality::{MOTIONCAL_LIMITS, Quality};
 use crate::tty::EchoOff;
 
@@ -38,7 +38,8 @@ pub struct Progress<'a> {
     pub throttle: Option<Throttle>,
 }
 
-/// The motors routine's live lines: the current with its range and the ramps, the field's change since the start.
+/// The motors routine's live lines: the current with its range, the ramps and the blips, the field's change since
+/// the start.
 fn throttle_lines(t: Option<&Throttle>) -> String {
     let Some(t) = t else {
         return "current —: none came yet\nfield change since the start —".to_owned();
@@ -46,17 +47,33 @@ fn throttle_lines(t: Option<&Throttle>) -> String {
     let c = t.change_ut;
     format!(
         "current {:.1} A (lowest {:.1} A, highest {:.1} A); ramps {}/{RAMPS} up to {:.0} % of the highest and back\n\
+         then blips {}/{BLIPS}: up to it within {BLIP_RISE_S:.1} s and back\n\
          field change since the start {:+.2}, {:+.2}, {:+.2} µT ({:.2} µT)",
         t.current_a,
         t.range_a.0,
         t.range_a.1,
         t.ramps,
         100.0 * RAMP_SHARE,
+        t.blips,
         c[0],
         c[1],
         c[2],
         (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
     )
+}
+
+/// The live display's style from its template.
+fn style(template: &str) -> ProgressStyle {
+    ProgressStyle::with_template(template)
+        .expect("the template is valid")
+        .progress_chars("=> ")
+}
+
+/// The motors routine's bar, counting `what` (" ramps", " blips").
+fn motors_style(what: &str) -> ProgressStyle {
+    style(&format!(
+        "{{msg}}\n[{{bar:40}}] {{pos}}/{{len}}{what}  {{prefix}}"
+    ))
 }
 
 /// The coverage map's legend.
@@ -184,20 +201,16 @@ impl TerminalUi {
 
     /// A live display drawn to `target`.
     fn on(target: ProgressDrawTarget, enter: Option<EnterKey>, routine: Routine) -> TerminalUi {
-        let (len, template) = match routine {
-            Routine::Cube24 => (24, "{msg}\n[{bar:40}] {pos}/{len} poses  {prefix}"),
-            Routine::Free => (100, "{msg}\n[{bar:40}] {pos:>3}% of the sphere  {prefix}"),
-            Routine::Motors => (
-                RAMPS as u64,
-                "{msg}\n[{bar:40}] {pos}/{len} ramps  {prefix}",
+        let (len, bar_style) = match routine {
+            Routine::Cube24 => (24, style("{msg}\n[{bar:40}] {pos}/{len} poses  {prefix}")),
+            Routine::Free => (
+                100,
+                style("{msg}\n[{bar:40}] {pos:>3}% of the sphere  {prefix}"),
             ),
+            Routine::Motors => (RAMPS as u64, motors_style(" ramps")),
         };
         let bar = ProgressBar::with_draw_target(Some(len), target);
-        bar.set_style(
-            ProgressStyle::with_template(template)
-                .expect("the template is valid")
-                .progress_chars("=> "),
-        );
+        bar.set_style(bar_style);
         TerminalUi {
             bar,
             enter,
@@ -215,9 +228,17 @@ impl Ui for TerminalUi {
     fn progress(&mut self, p: &Progress<'_>) {
         match (p.poses, self.routine) {
             (Some((taken, _)), _) => self.bar.set_position(taken as u64),
-            (None, Routine::Motors) => self
-                .bar
-                .set_position(p.throttle.map_or(0, |t| t.ramps) as u64),
+            (None, Routine::Motors) => match p.throttle {
+                // The ramps made, the bar counts the blips.
+                Some(t) if t.ramps >= RAMPS => {
+                    if self.bar.length() != Some(BLIPS as u64) {
+                        self.bar.set_style(motors_style(" blips"));
+                        self.bar.set_length(BLIPS as u64);
+                    }
+                    self.bar.set_position(t.blips as u64);
+                }
+                t => self.bar.set_position(t.map_or(0, |t| t.ramps) as u64),
+            },
             (None, _) => self
                 .bar
                 .set_position((100.0 * p.coverage.fraction()).floor() as u64),
@@ -495,10 +516,11 @@ mod tests {
             current_a: 24.5,
             range_a: (1.5, 30.0),
             ramps: 1,
+            blips: 0,
             change_ut: [0.5, -3.0, 12.25],
         };
-        ui.progress(&Progress {
-            t_s: 31.0,
+        let progress = |t_s, throttle| Progress {
+            t_s,
             samples: 1550,
             coverage: &map,
             target: None,
@@ -506,15 +528,28 @@ mod tests {
             quality: None,
             disturbance: None,
             throttle: Some(throttle),
-        });
-        ui.finish();
-        let lines = screen.lines();
-        let text = lines.join("\n");
+        };
+        ui.progress(&progress(31.0, throttle));
+        let text = screen.lines().join("\n");
         for what in [
             "current 24.5 A (lowest 1.5 A, highest 30.0 A); ramps 1/2 up to 60 % of the highest and back",
+            "then blips 0/10: up to it within 0.3 s and back",
             "field change since the start +0.50, -3.00, +12.25 µT (12.62 µT)",
             "1/2 ramps  31.0 s, 1550 samples",
         ] {
+            assert!(text.contains(what), "{what}: {text}");
+        }
+        // The ramps made, the bar counts the blips.
+        let blipping = Throttle {
+            ramps: 2,
+            blips: 3,
+            ..throttle
+        };
+        ui.progress(&progress(40.0, blipping));
+        ui.finish();
+        let lines = screen.lines();
+        let text = lines.join("\n");
+        for what in ["then blips 3/10", "3/10 blips  40.0 s"] {
             assert!(text.contains(what), "{what}: {lines:#?}");
         }
         assert!(

@@ -15,7 +15,8 @@
 //!    (`RAW_IMU`, `HIGHRES_IMU`), `ATTITUDE_QUATERNION`, `BATTERY_STATUS`;
 //! 4. for [`PROBE`] the streams are watched: the compass must come; the attitude, the current and the temperature
 //!    are recorded when they come; the rate each came at is measured and written to the recording's metadata
-//!    (`sample_rate_hz` is the compass's).
+//!    (`sample_rate_hz` is the compass's); a battery current that comes less often than the compass is said
+//!    (`current_rate`): a motor test's lag cannot be timed from it.
 //!
 //! Each compass sample waits for the first attitude after it, and takes the attitude interpolated to its own time
 //! (the autopilot's time stamps), turned into the sensor's axes (sensor → NED, the recording's convention: the
@@ -30,6 +31,7 @@ use std::time::{Duration, Instant};
 
 use magcal_autopilot::streams::recording_messages;
 use magcal_autopilot::{Autopilot, Connection, LinkError, Telemetry, telemetry};
+use magcal_calib::diagnosis::MAX_CURRENT_UPDATE_INTERVALS;
 use magcal_flightlog::LoggedCalibration;
 use magcal_flightlog::recording::{matrix_to_quat, quat_mul};
 use magcal_mockhw::SharedBench;
@@ -294,6 +296,17 @@ impl<P: Read + Write> MavlinkSource<P> {
                 got(c.current, messages[2].1),
             ),
         ));
+        if self.has_current && per_s(c.current) * MAX_CURRENT_UPDATE_INTERVALS < per_s(c.compass) {
+            self.metadata.push((
+                "current_rate".to_owned(),
+                format!(
+                    "{} came at {:.1} Hz, less often than the compass: a bench motor test's lag of the field behind \
+                     the current will not be determined (magcal-fit says so; the coefficients are still fitted)",
+                    messages[2].1,
+                    per_s(c.current)
+                ),
+            ));
+        }
         let cal = &self.calibration;
         let needs_current = matches!(cal.comp_type, 2 | 3) && cal.comp != [0.0; 3];
         self.current_missing = needs_current && !self.has_current;

@@ -71,7 +71,10 @@ pub use findings::{
 pub use gross::SpanKind;
 pub use guard::NOTICEABLE_GAIN;
 pub use locate::{Components, Located, Orientation, Segment};
-pub use motors::{CurrentTerm, Lag, MotorFit, MotorInput, fit_motors, heading_error_deg};
+pub use motors::{
+    CurrentTerm, Lag, MAX_CURRENT_UPDATE_INTERVALS, MAX_LAG_HALF_WIDTH_S, MotorFit, MotorInput,
+    fit_motors, heading_error_deg,
+};
 pub use refit::diagnose_around_spans;
 
 use crate::FitError;
