@@ -329,12 +329,14 @@ fn a_field_on_the_board_gross_only_in_places_is_one_window() {
 }
 
 /// The same 5.6 µT on the board without the quaternions (the scalar method): the window scan finds it exactly, but
-/// the sensor turned most while it was there — the samples left would cover 44 % of the directions against 92 % —
-/// so it stays in the fit, which lands 5 µT off, graded usable at 4° with nothing said. It is not silent now: a
-/// warning says when the magnitude sat apart and that the calibration mixes the two states. The undisturbed
-/// recording gets no such warning.
+/// the sensor turned most while it was there — the samples left would cover 44 % of the directions against 92 %.
+/// It used to stay in the fit, which landed 5 µT off (graded usable at 4° with nothing said, then with a warning that
+/// the calibration mixed the two states). The window is now a second centre fitted with the rest: its readings give
+/// the shape, the rest the offset: measured against the undisturbed recording's calibration, A within 0.0023 and the
+/// offset 1.27 µT off — along x, where the rest turned least, 2.9 of its standard errors (0.43 µT) — graded usable,
+/// the window said as another offset.
 #[test]
-fn a_window_kept_for_its_directions_is_said_to_mix_two_states() {
+fn a_window_holding_most_of_the_turning_is_a_second_centre() {
     let dir = tempfile::tempdir().unwrap();
     let added = [Added::Effect(Effect::BiasWindow {
         t0_s: 103.912,
@@ -343,25 +345,27 @@ fn a_window_kept_for_its_directions_is_said_to_mix_two_states() {
     })];
     let path = with_added(BROAD_02, dir.path(), "body.csv", &added, true);
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
-    let mixes = |r: &Value| {
+    let r = fit_report(&path, &[]);
+    assert_eq!(r["method"], "scalar");
+    let said = |what: &str| {
         r["warnings"]
             .as_array()
             .expect("the report's warnings")
             .iter()
-            .filter(|w| w.to_string().contains("mixes the two states"))
+            .filter(|w| w.to_string().contains(what))
             .map(|w| w.to_string())
             .collect::<Vec<_>>()
     };
-    let r = fit_report(&path, &[]);
-    assert_eq!(r["method"], "scalar");
-    let said = mixes(&r);
+    assert!(said("mixes the two states").is_empty(), "{}", r["warnings"]);
+    let other = said("sat on another offset");
     assert!(
-        said.len() == 1 && said[0].contains("103.9–157.0 s"),
+        other.len() == 1 && other[0].contains("103.9–157.0 s"),
         "{}",
         r["warnings"]
     );
+    let (a_err, o_err) = errors(&r, &truth(&bare));
+    assert!(a_err < 0.01 && o_err < 1.5, "A {a_err}, offset {o_err} µT");
     assert_ne!(r["verdict"]["grade"], "good", "{}", r["verdict"]);
-    assert!(mixes(&fit_report(&bare, &[])).is_empty());
 }
 
 /// 300 µT on the board for the middle 90 s, without the quaternions: the scalar method cannot calibrate it, and said

@@ -682,8 +682,15 @@ fn scalar_base(
     }
     warnings.extend(s.warning());
     let rows_coverage = fraction_of(rec.mag_ut.len(), |i| r.kept[i].then_some(rec.mag_ut[i]));
+    // The rows the calibration stands on: a window with a centre of its own lends the fit its shape, not its state.
+    let used = r
+        .kept
+        .iter()
+        .zip(&rec.mag_ut)
+        .filter(|(k, m)| **k && m.iter().all(|v| v.is_finite()))
+        .count();
     Ok(Base {
-        used: s.n,
+        used,
         fit: Fit::Scalar(s),
         noise,
         robust: RobustSummary::of(r.kept, r.sigma_ut, rec, true),

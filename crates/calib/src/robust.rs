@@ -121,6 +121,16 @@ pub trait RobustProblem: Sized + Sync {
     fn shifted(&self, _fit: &Self::Fit, _kept: &[bool]) -> Vec<(usize, usize)> {
         Vec::new()
     }
+    /// The fit of the samples `kept` and those in `windows`, each window a state of its own, from the fit `without`
+    /// them. `None` unless a problem can model such a state (the scalar method: a second centre).
+    fn with_windows(
+        &self,
+        _without: &Self::Fit,
+        _kept: &[bool],
+        _windows: &[(usize, usize)],
+    ) -> Option<OwnStates<Self::Fit>> {
+        None
+    }
     /// Weights of one more seed: the bulk of the samples by something a disturbance cannot hide in (none, unless a
     /// problem has such a thing).
     fn bulk_weights(&self) -> Option<Vec<f64>> {
@@ -136,6 +146,16 @@ pub trait RobustProblem: Sized + Sync {
     fn support(&self, _fit: &Self::Fit) -> f64 {
         1.0
     }
+}
+
+/// A fit in which windows of the samples have states of their own ([`RobustProblem::with_windows`]).
+pub struct OwnStates<F> {
+    /// The fit.
+    pub fit: F,
+    /// Each sample's residual size under it, the windows' in their own state.
+    pub residual_ut: Vec<f64>,
+    /// The windows, where the states explain the samples best.
+    pub windows: Vec<(usize, usize)>,
 }
 
 /// A robust fit and what it left out.
@@ -560,11 +580,27 @@ fn exclude_gross_spans<P: RobustProblem>(
     })
 }
 
-/// The windows of `robust`'s fit shifted too little to be gross ([`RobustProblem::shifted`]) excluded too, up to
-/// [`SPAN_PASSES`] times: the fit without them replaces the last one if it can be made, unless the samples left
-/// would cover too few of the directions ([`SHIFT_KEEP_COVERAGE`]); then the windows stay in, as `robust.mixed`.
+/// The windows of `robust`'s fit shifted too little to be gross ([`RobustProblem::shifted`]) set aside too, up to
+/// [`SPAN_PASSES`] times, and the long runs of gross samples: each a state of its own fitted with the rest when the
+/// problem can model one and that fit holds ([`own_states`]); else the shifted windows' fit without them replaces
+/// the last one if it can be made, unless the samples left would cover too few of the directions
+/// ([`SHIFT_KEEP_COVERAGE`]); then the windows stay in, as `robust.mixed`.
 fn exclude_shifted_windows<P: RobustProblem>(problem: &P, robust: &mut Robust<P::Fit>) {
     prefer_the_ends(problem, robust);
+    // The states found so far: a magnet on the board for a third of the recording is a gross run.
+    let mut states: Vec<(usize, usize)> = Vec::new();
+    let n = robust.kept.len();
+    let mut runs = excluded_runs(&robust.kept);
+    runs.retain(|(a, b)| (b - a) as f64 >= STATE_MIN_SHARE * n as f64);
+    runs.sort_by_key(|(a, b)| std::cmp::Reverse(b - a));
+    for run in runs.into_iter().take(MAX_SHIFTS) {
+        let windows: Vec<_> = states.iter().copied().chain([run]).collect();
+        if let Some((own, rest)) = own_states(problem, robust, &windows, None) {
+            (robust.fit, robust.residual_ut, robust.kept) = (own.fit, own.residual_ut, rest);
+            states = own.windows;
+            robust.sigma_ut = scale::<P>(&robust.residual_ut);
+        }
+    }
     for _ in 0..SPAN_PASSES {
         let windows = problem.shifted(&robust.fit, &robust.kept);
         if windows.is_empty() {
@@ -574,8 +610,15 @@ fn exclude_shifted_windows<P: RobustProblem>(problem: &P, robust: &mut Robust<P:
         for &(a, b) in &windows {
             k[a..b].fill(false);
         }
-
-        let Ok(f) = problem.final_fit(&k, Some(&robust.fit)) else {
+        let without = problem.final_fit(&k, Some(&robust.fit)).ok();
+        let all: Vec<_> = states.iter().chain(&windows).copied().collect();
+        if let Some((own, rest)) = own_states(problem, robust, &all, without.as_ref()) {
+            (robust.fit, robust.residual_ut, robust.kept) = (own.fit, own.residual_ut, rest);
+            states = own.windows;
+            robust.sigma_ut = scale::<P>(&robust.residual_ut);
+            continue;
+        }
+        let Some(f) = without else {
             break;
         };
         // Windows that hold most of the directions are where the recording calibrates: what is left of it,
@@ -588,7 +631,64 @@ fn exclude_shifted_windows<P: RobustProblem>(problem: &P, robust: &mut Robust<P:
         robust.sigma_ut = scale::<P>(&robust.residual_ut);
         robust.fit = f;
         robust.kept = k;
+        states.clear();
     }
+}
+
+/// A run of gross samples is tried as a state of its own when it holds at least this share of the recording:
+/// enough turning to determine one.
+const STATE_MIN_SHARE: f64 = 0.05;
+
+/// The fit in which each of `windows` has a state of its own ([`RobustProblem::with_windows`]), of the samples
+/// `robust` kept and those in the windows, from `without` (the fit without the windows, or `robust`'s): taken when
+/// it keeps the gains ([`JOINT_GAIN_CHANGE`]), explains the windows' samples as well as the rest's ([`ENDS_SCALE`],
+/// their medians) and the rest's nearly as well as `without` does ([`JOINT_REST_SCALE`]). The fit and the samples
+/// kept (the windows' left out).
+fn own_states<P: RobustProblem>(
+    problem: &P,
+    robust: &Robust<P::Fit>,
+    windows: &[(usize, usize)],
+    without: Option<&P::Fit>,
+) -> Option<(OwnStates<P::Fit>, Vec<bool>)> {
+    let own = problem.with_windows(without.unwrap_or(&robust.fit), &robust.kept, windows)?;
+    let (j, e, located) = (&own.fit, &own.residual_ut, &own.windows);
+    let mut rest = robust.kept.clone();
+    let mut inside = vec![false; rest.len()];
+    for &(a, b) in located {
+        rest[a..b].fill(false);
+        inside[a..b].fill(true);
+    }
+    let at_rest = median_where(e, &rest);
+    let before = without.map_or(at_rest, |f| median_where(&problem.residuals(f), &rest));
+    // A field on the board moves the centre; the sensor's gains stay as they were.
+    let (a_joint, a_start) = (P::model(j).a, P::model(without.unwrap_or(&robust.fit)).a);
+    let same_gains = plausible(&a_joint)
+        && (mean_gain(&a_joint) / mean_gain(&a_start) - 1.0).abs() <= JOINT_GAIN_CHANGE;
+    let one_sensor = same_gains
+        && median_where(e, &inside) <= ENDS_SCALE * at_rest
+        && at_rest <= JOINT_REST_SCALE * before;
+    one_sensor.then_some((own, rest))
+}
+
+/// A fit that gives the shifted windows states of their own may explain the rest's samples this many times worse
+/// (their median residual) than the fit without the windows: what the windows add to the shape costs the rest
+/// nearly nothing when they are one sensor with it.
+const JOINT_REST_SCALE: f64 = 1.02;
+
+/// The fit with states of their own may change the mean gain from the fit it started from by at most this share: a
+/// shape that keeps the rest's magnitude only by turning into a far larger sphere (a recording that turned through
+/// few directions) is no second state of one sensor.
+const JOINT_GAIN_CHANGE: f64 = 0.1;
+
+/// The median of the finite `e` where `keep`.
+fn median_where(e: &[f64], keep: &[bool]) -> f64 {
+    let v: Vec<f64> = e
+        .iter()
+        .zip(keep)
+        .filter(|(x, k)| **k && x.is_finite())
+        .map(|(x, _)| *x)
+        .collect();
+    median(&v)
 }
 
 /// At most this share of the ends' samples may have been kept by the robust fit.
@@ -627,16 +727,8 @@ fn prefer_the_ends<P: RobustProblem>(problem: &P, robust: &mut Robust<P::Fit>) {
         return;
     };
     let e = problem.residuals(&f);
-    let of = |e: &[f64], keep: &[bool]| {
-        let v: Vec<f64> = e
-            .iter()
-            .zip(keep)
-            .filter(|(_, k)| **k)
-            .map(|(x, _)| *x)
-            .collect();
-        median(&v)
-    };
-    let one_state = of(&e, &ends) <= ENDS_SCALE * of(&robust.residual_ut, &robust.kept);
+    let one_state =
+        median_where(&e, &ends) <= ENDS_SCALE * median_where(&robust.residual_ut, &robust.kept);
     if one_state
         && problem.covered(&f, &ends)
             >= SHIFT_KEEP_COVERAGE * problem.covered(&robust.fit, &robust.kept)
@@ -1033,12 +1125,16 @@ const MAX_SHIFTS: usize = 4;
 /// `kept` samples, each found by a window scan on the samples the previous ones left, as sample ranges
 /// `[start, end)`: while a field is fixed in the room for a while, |B| moves by a constant; while one is fixed to
 /// the sensor, by `d·u` (`u`: the field's direction per sample, sensor axes), which averages out over a turning
-/// window; either may be too small to be gross. `noise` is the noise of `e`.
+/// window; either may be too small to be gross. `noise` is the noise of `e`. A method that can fit a window in a
+/// state of its own gives `own_state`: the variance of the residual it then leaves ([`variance_with_wander`]),
+/// which judges a long window when it is below what the scan's terms leave (a fit between the two states bends with
+/// the shape, which those terms cannot follow).
 pub fn shifted_windows(
     e: &[f64],
     u: &[[f64; 3]],
     kept: &[bool],
     noise: f64,
+    own_state: Option<&dyn Fn((usize, usize)) -> Option<f64>>,
 ) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut free: Vec<bool> = kept
@@ -1063,12 +1159,16 @@ pub fn shifted_windows(
         let Some(inside) = window_fit(e, u, &free, (a, b)) else {
             break;
         };
+        let len = free[a..b].iter().filter(|f| **f).count() as f64;
         let stat = if turned_outside(u, &free, (a, b)) {
-            found.scan.stat * sigma2 / inside.variance.max(f64::MIN_POSITIVE)
+            let own = own_state
+                .filter(|_| len > SHIFT_MAX_SHARE * m)
+                .and_then(|f| f((a, b)))
+                .unwrap_or(f64::INFINITY);
+            found.scan.stat * sigma2 / inside.variance.min(own).max(f64::MIN_POSITIVE)
         } else {
             found.scan.stat
         };
-        let len = free[a..b].iter().filter(|f| **f).count() as f64;
         // A long window must come and go: it explains the samples better than the same shift from its start to
         // the end of the recording, or from the beginning to its end, by as much as a short one must explain.
         let came_and_went = || {
@@ -1099,6 +1199,16 @@ pub fn shifted_windows(
         }
     }
     out
+}
+
+/// The variance per sample of a residual `x` (NaN where unused) about its mean: the sample variance, or the
+/// long-run one ([`long_run_variance`]) when the residual wanders, the larger.
+pub fn variance_with_wander(x: &[f64]) -> f64 {
+    let used = || x.iter().copied().filter(|v| v.is_finite());
+    let n = used().count().max(1) as f64;
+    let mean = used().sum::<f64>() / n;
+    let sample = used().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    sample.max(long_run_variance(used().map(|v| v - mean)))
 }
 
 /// Samples per block of [`long_run_variance`].
@@ -1500,20 +1610,23 @@ mod tests {
         let kept = vec![true; 4000];
         let u = turning(4000, 500.0);
         for seed in 0..5 {
-            assert_eq!(shifted_windows(&white(4000, seed), &u, &kept, 1.0), vec![]);
+            assert_eq!(
+                shifted_windows(&white(4000, seed), &u, &kept, 1.0, None),
+                vec![]
+            );
         }
         let mut e = white(4000, 9);
         for x in &mut e[1200..1600] {
             *x += 5.0;
         }
-        let found = shifted_windows(&e, &u, &kept, 1.0);
+        let found = shifted_windows(&e, &u, &kept, 1.0, None);
         assert_eq!(found.len(), 1, "{found:?}");
         let (a, b) = found[0];
         assert!(a.abs_diff(1200) <= 5 && b.abs_diff(1600) <= 5, "{found:?}");
         // The samples not kept are not looked at: the window there is not found.
         let mut kept = kept;
         kept[1100..1700].fill(false);
-        assert_eq!(shifted_windows(&e, &u, &kept, 1.0), vec![]);
+        assert_eq!(shifted_windows(&e, &u, &kept, 1.0, None), vec![]);
     }
 
     #[test]
@@ -1525,7 +1638,7 @@ mod tests {
         for (x, d) in e[2000..2600].iter_mut().zip(&u[2000..2600]) {
             *x += 6.0 * d[0];
         }
-        let found = shifted_windows(&e, &u, &vec![true; 4000], 1.0);
+        let found = shifted_windows(&e, &u, &vec![true; 4000], 1.0, None);
         assert_eq!(found.len(), 1, "{found:?}");
         let (a, b) = found[0];
         assert!(
@@ -1543,7 +1656,10 @@ mod tests {
             .map(|(i, x)| x + 6.0 * (i as f64 * std::f64::consts::TAU / 2000.0).sin())
             .collect();
         let u = turning(8000, 700.0);
-        assert_eq!(shifted_windows(&e, &u, &vec![true; 8000], 1.0), vec![]);
+        assert_eq!(
+            shifted_windows(&e, &u, &vec![true; 8000], 1.0, None),
+            vec![]
+        );
     }
 
     #[test]
@@ -1556,7 +1672,7 @@ mod tests {
         for (x, d) in e[3000..5700].iter_mut().zip(&u[3000..5700]) {
             *x += 8.0 * d[0];
         }
-        let found = shifted_windows(&e, &u, &vec![true; n], 1.0);
+        let found = shifted_windows(&e, &u, &vec![true; n], 1.0, None);
         assert_eq!(found.len(), 1, "{found:?}");
         let (a, b) = found[0];
         assert!(
@@ -1575,7 +1691,7 @@ mod tests {
         for (i, (x, d)) in e.iter_mut().zip(&u).enumerate() {
             *x += 8.0 * d[0] * if (1600..6400).contains(&i) { 0.4 } else { -0.6 };
         }
-        let found = shifted_windows(&e, &u, &vec![true; n], 1.0);
+        let found = shifted_windows(&e, &u, &vec![true; n], 1.0, None);
         assert_eq!(found.len(), 1, "{found:?}");
         let (a, b) = found[0];
         assert!(
@@ -1594,7 +1710,7 @@ mod tests {
         for (x, d) in e[4800..].iter_mut().zip(&u[4800..]) {
             *x += 6.0 * d[0];
         }
-        assert_eq!(shifted_windows(&e, &u, &vec![true; n], 1.0), vec![]);
+        assert_eq!(shifted_windows(&e, &u, &vec![true; n], 1.0, None), vec![]);
     }
 
     #[test]

@@ -23,7 +23,7 @@
 //! fit. Only the magnitude is constrained, so a rotation of the calibrated field is invisible: see
 //! [`ROTATION_NOTE`].
 
-use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3, Vector4};
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, SymmetricEigen, Vector3, Vector4};
 
 use std::borrow::Cow;
 
@@ -94,6 +94,19 @@ pub struct ScalarOptions<'a> {
     /// A fit of nearly the same readings for the solver to start from (fewer passes over them); without it, the
     /// solver starts from the sphere through them.
     pub start: Option<&'a ScalarFit>,
+    /// Windows of the readings with a centre of their own (something fixed to the sensor for a while), their
+    /// readings moved back by their shifts before the fit; the shifts' uncertainty is in the covariance.
+    pub second_centres: &'a [SecondCentre],
+}
+
+/// A window of the readings `[start, end)` with a centre of its own: something fixed to the sensor (a magnet on the
+/// board) moved every raw reading in it by `shift_ut`; the shape is the same.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SecondCentre {
+    /// The first reading in the window and one past the last.
+    pub range: (usize, usize),
+    /// What it added to the raw readings, µT.
+    pub shift_ut: [f64; 3],
 }
 
 /// The result of a scalar fit.
@@ -268,8 +281,18 @@ impl RobustProblem for ScalarProblem<'_> {
             })
             .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
         let noise = (sum / count.max(1) as f64).sqrt();
+        // A window in a state of its own: a second centre fitted with the rest.
+        let own_state = |window: (usize, usize)| {
+            let (joint, centres) = self.joint(fit, kept, &[window], true)?;
+            let mut e = self.residuals_shifted(&joint, &centres);
+            e.iter_mut()
+                .zip(kept)
+                .filter(|(_, k)| !**k)
+                .for_each(|(x, _)| *x = f64::NAN);
+            Some(robust::variance_with_wander(&e))
+        };
         if noise > 0.0 {
-            robust::shifted_windows(&rho, &u, kept, noise)
+            robust::shifted_windows(&rho, &u, kept, noise, Some(&own_state))
         } else {
             Vec::new()
         }
@@ -309,6 +332,348 @@ impl RobustProblem for ScalarProblem<'_> {
     fn support(&self, fit: &ScalarFit) -> f64 {
         self.directions_covered(fit, |_| true)
     }
+
+    /// Each window a second centre ([`ScalarProblem::joint`]).
+    fn with_windows(
+        &self,
+        without: &ScalarFit,
+        kept: &[bool],
+        windows: &[(usize, usize)],
+    ) -> Option<robust::OwnStates<ScalarFit>> {
+        let (fit, centres) = self.joint(without, kept, windows, false)?;
+        let mut residual_ut = self.residuals_shifted(&fit, &centres);
+        residual_ut.iter_mut().for_each(|x| *x = x.abs());
+        Some(robust::OwnStates {
+            fit,
+            residual_ut,
+            windows: centres.iter().map(|c| c.range).collect(),
+        })
+    }
+}
+
+impl ScalarProblem<'_> {
+    /// The samples `kept` with each of `windows` a second centre ([`SecondCentre`]), fitted with the rest, from the
+    /// fit `without` them: the shape, the centre and the shifts at once ([`ScalarProblem::solve_joint`]), then each
+    /// window's bounds where the two states explain the readings best ([`ScalarProblem::relocated`]), until the
+    /// bounds settle; then the solver's own fit with the windows' readings moved back by their shifts (a quick one
+    /// when `quick`).
+    fn joint(
+        &self,
+        without: &ScalarFit,
+        kept: &[bool],
+        windows: &[(usize, usize)],
+        quick: bool,
+    ) -> Option<(ScalarFit, Vec<SecondCentre>)> {
+        let mut windows = windows.to_vec();
+        windows.sort_unstable();
+        // The readings a window may hold: the kept ones, and those left out that the windows held to begin with.
+        let mut candidate = kept.to_vec();
+        for &(a, b) in &windows {
+            candidate[a..b].fill(true);
+        }
+        let fitted = |centres: &[SecondCentre]| {
+            let mut fitted = kept.to_vec();
+            for w in centres {
+                fitted[w.range.0..w.range.1].copy_from_slice(&candidate[w.range.0..w.range.1]);
+            }
+            fitted
+        };
+        let mut centres = windows
+            .iter()
+            .map(|&range| {
+                window_shift(&self.raw_ut, &candidate, range, without)
+                    .map(|shift_ut| SecondCentre { range, shift_ut })
+            })
+            .collect::<Option<Vec<_>>>()?;
+        let mut joint = without.clone();
+        for _ in 0..RELOCATIONS {
+            joint = self.solve_joint(&joint, &fitted(&centres), &mut centres);
+            let relocated = self.relocated(&joint, &candidate, &centres);
+            if relocated
+                .iter()
+                .zip(&centres)
+                .all(|(x, y)| x.range == y.range)
+            {
+                break;
+            }
+            centres = relocated;
+        }
+        // A window's readings that its own state leaves grossly off (something else passing while the magnet sat on
+        // the board) are left out, as the base fit leaves out the rest's.
+        let mut fitted = fitted(&centres);
+        let e = self.residuals_shifted(&joint, &centres);
+        let scale = robust::median(
+            &e.iter()
+                .zip(kept)
+                .filter(|(x, k)| **k && x.is_finite())
+                .map(|(x, _)| x.abs())
+                .collect::<Vec<_>>(),
+        ) / <Self as RobustProblem>::MEDIAN_OF_UNIT;
+        let mut trimmed = false;
+        for w in &centres {
+            for i in w.range.0..w.range.1 {
+                let gross = e[i].is_nan() || e[i].abs() > robust::GROSS_SIGMA * scale;
+                if fitted[i] && gross {
+                    fitted[i] = false;
+                    trimmed = true;
+                }
+            }
+        }
+        if trimmed {
+            joint = self.solve_joint(&joint, &fitted, &mut centres);
+        }
+        if centres
+            .iter()
+            .any(|w| self.room_explains(&joint, &fitted, w))
+        {
+            return None;
+        }
+        let joint = self
+            .fit_shifted(&robust::weights_of(&fitted), quick, Some(&joint), &centres)
+            .ok()?;
+        Some((joint, centres))
+    }
+
+    /// Levenberg–Marquardt on the shape, the centre and every second centre's shift at once (least squares of the
+    /// magnitude on the `kept` readings, the magnitude of `start`, with the solver's shape prior), from `start` and
+    /// the shifts in `centres`, which it updates: the shifts and the centre pull on each other, which fitting them
+    /// in turn follows only slowly. Returns `start` with the shape and centre found.
+    fn solve_joint(
+        &self,
+        start: &ScalarFit,
+        kept: &[bool],
+        centres: &mut [SecondCentre],
+    ) -> ScalarFit {
+        let q = P + 3 * centres.len();
+        let n = self.raw_ut.len();
+        let mut window = vec![0usize; n];
+        for (k, w) in centres.iter().enumerate() {
+            window[w.range.0..w.range.1].fill(k + 1);
+        }
+        let field = start.field_ut;
+        let sums = |p: &DVector<f64>| {
+            let (c, a) = unpack(&SVector::from_iterator(p.rows(0, P).iter().copied()));
+            let chunk = |range: std::ops::Range<usize>| {
+                let (mut h, mut g, mut rss) = (DMatrix::zeros(q, q), DVector::zeros(q), 0.0);
+                let mut jq = DVector::zeros(q);
+                for i in range.filter(|&i| kept[i]) {
+                    let m = Vector3::from(self.raw_ut[i]);
+                    if !m.iter().all(|v| v.is_finite()) {
+                        continue;
+                    }
+                    let w = window[i];
+                    let centre = match w {
+                        0 => c,
+                        k => c + Vector3::from(p.fixed_rows::<3>(P + 3 * (k - 1)).into_owned()),
+                    };
+                    let (r, j, _) = residual(&m, &a, &centre, field);
+                    jq.fill(0.0);
+                    jq.rows_mut(0, P).copy_from_slice(&j);
+                    if w > 0 {
+                        jq.rows_mut(P + 3 * (w - 1), 3).copy_from_slice(&j[..3]);
+                    }
+                    h.ger(1.0, &jq, &jq, 1.0);
+                    g.axpy(r, &jq, 1.0);
+                    rss += r * r;
+                }
+                (h, g, rss)
+            };
+            chunks::fold(n, chunk, |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2))
+                .unwrap_or_else(|| chunk(0..0))
+        };
+        let mut p = DVector::zeros(q);
+        p.rows_mut(0, 3).copy_from_slice(&start.centre_ut);
+        for (idx, (r, s)) in SYM.iter().enumerate() {
+            p[3 + idx] = start.a[*r][*s];
+        }
+        for (k, w) in centres.iter().enumerate() {
+            p.rows_mut(P + 3 * k, 3).copy_from_slice(&w.shift_ut);
+        }
+        // The solver's shape prior ([`shape_precision`]), weighted by the residual variance at the start.
+        let (h0, g0, rss0) = sums(&p);
+        let used = kept.iter().filter(|k| **k).count().max(1) as f64;
+        let gain = (start.a[0][0] + start.a[1][1] + start.a[2][2]) / 3.0;
+        let mut prior = DMatrix::zeros(q, q);
+        prior
+            .view_mut((0, 0), (P, P))
+            .copy_from(&(shape_precision(gain) * (rss0 / used)));
+        let with_prior = |(h, g, rss): (DMatrix<f64>, DVector<f64>, f64), p: &DVector<f64>| {
+            let qp = &prior * p;
+            (h + &prior, g + &qp, rss + p.dot(&qp))
+        };
+        let (mut h, mut g, mut rss) = with_prior((h0, g0, rss0), &p);
+        let mut lambda = 1e-3;
+        for _ in 0..JOINT_ITERATIONS {
+            let mut damped = h.clone();
+            for k in 0..q {
+                damped[(k, k)] += lambda * h[(k, k)].max(1e-300);
+            }
+            let Some(step) = damped.cholesky().map(|ch| ch.solve(&(-&g))) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let trial = &p + &step;
+            let (th, tg, trss) = with_prior(sums(&trial), &trial);
+            if trss.is_finite() && trss <= rss {
+                let done = rss - trss <= 1e-12 * rss;
+                (p, h, g, rss) = (trial, th, tg, trss);
+                lambda = (lambda / 10.0).max(1e-12);
+                if done {
+                    break;
+                }
+            } else {
+                lambda *= 10.0;
+                if lambda > 1e12 {
+                    break;
+                }
+            }
+        }
+        for (k, w) in centres.iter_mut().enumerate() {
+            w.shift_ut = [p[P + 3 * k], p[P + 3 * k + 1], p[P + 3 * k + 2]];
+        }
+        let mut out = start.clone();
+        let (c, a) = unpack(&SVector::from_iterator(p.rows(0, P).iter().copied()));
+        out.centre_ut = c.into();
+        out.a = std::array::from_fn(|r| std::array::from_fn(|s| a[(r, s)]));
+        out.b_ut = (-(a * c)).into();
+        out
+    }
+
+    /// Whether a field fixed in the room explains the `kept` readings of the window `w` at least as well as its
+    /// second centre: under `fit`, their magnitude a constant of its own (a room's field adds about a constant to
+    /// |B| whatever the attitude, a board's moves the centre).
+    fn room_explains(&self, fit: &ScalarFit, kept: &[bool], w: &SecondCentre) -> bool {
+        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
+        let b = Vector3::from(fit.b_ut);
+        let r = |m: [f64; 3]| (a * Vector3::from(m) + b).norm() - fit.field_ut;
+        let inside: Vec<[f64; 3]> = (w.range.0..w.range.1)
+            .filter(|&i| kept[i] && self.raw_ut[i].iter().all(|v| v.is_finite()))
+            .map(|i| self.raw_ut[i])
+            .collect();
+        let n = inside.len().max(1) as f64;
+        let mean = inside.iter().map(|m| r(*m)).sum::<f64>() / n;
+        let room = inside.iter().map(|m| (r(*m) - mean).powi(2)).sum::<f64>();
+        let centre = inside
+            .iter()
+            .map(|m| r(frames::sub(*m, w.shift_ut)).powi(2))
+            .sum::<f64>();
+        room <= centre
+    }
+
+    /// Each second centre's window moved to where its state explains the `candidate` readings better than the
+    /// sensor's own under `fit` by the most (the largest sum of the two squared residuals' difference over a run of
+    /// readings, between its neighbours), or left where it is if nowhere.
+    fn relocated(
+        &self,
+        fit: &ScalarFit,
+        candidate: &[bool],
+        centres: &[SecondCentre],
+    ) -> Vec<SecondCentre> {
+        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
+        let b = Vector3::from(fit.b_ut);
+        let r = |m: [f64; 3]| (a * Vector3::from(m) + b).norm() - fit.field_ut;
+        let n = self.raw_ut.len();
+        (0..centres.len())
+            .map(|w| {
+                let lo = w.checked_sub(1).map_or(0, |p| centres[p].range.1);
+                let hi = centres.get(w + 1).map_or(n, |next| next.range.0);
+                let shift = centres[w].shift_ut;
+                let gain = (lo..hi).map(|i| {
+                    let m = self.raw_ut[i];
+                    let g = r(m).powi(2) - r(frames::sub(m, shift)).powi(2);
+                    if candidate[i] && g.is_finite() {
+                        g
+                    } else {
+                        0.0
+                    }
+                });
+                let range = best_run(gain).map_or(centres[w].range, |(s, e)| (lo + s, lo + e));
+                SecondCentre {
+                    range,
+                    ..centres[w]
+                }
+            })
+            .collect()
+    }
+}
+
+/// The run `[start, end)` of `x` with the largest positive sum (Kadane), `None` if no sum is positive.
+fn best_run(x: impl Iterator<Item = f64>) -> Option<(usize, usize)> {
+    let (mut best, mut best_sum) = (None, 0.0);
+    let (mut start, mut sum) = (0, 0.0);
+    for (i, v) in x.enumerate() {
+        if sum <= 0.0 {
+            (start, sum) = (i, 0.0);
+        }
+        sum += v;
+        if sum > best_sum {
+            (best, best_sum) = (Some((start, i + 1)), sum);
+        }
+    }
+    best
+}
+
+/// At most this many times [`ScalarProblem::joint`] moves the windows' bounds…
+const RELOCATIONS: usize = 5;
+/// …and this many steps [`ScalarProblem::solve_joint`] takes.
+const JOINT_ITERATIONS: usize = 50;
+
+/// Iterations of [`window_shift`]'s Gauss–Newton.
+const SHIFT_ITERATIONS: usize = 30;
+
+/// The shift `d` of the raw readings `[a, b)` that are `kept` which `fit` explains best: Gauss–Newton on
+/// `|A·(m − c − d)| − F` over `d`, from none, each step halved until it lowers the sum of squares. `None` if the
+/// readings do not determine it.
+fn window_shift(
+    raw_ut: &[[f64; 3]],
+    kept: &[bool],
+    (a, b): (usize, usize),
+    fit: &ScalarFit,
+) -> Option<[f64; 3]> {
+    let am = Matrix3::from_fn(|j, k| fit.a[j][k]);
+    let c = Vector3::from(fit.centre_ut);
+    let readings: Vec<Vector3<f64>> = (a..b)
+        .filter(|&i| kept[i] && raw_ut[i].iter().all(|v| v.is_finite()))
+        .map(|i| Vector3::from(raw_ut[i]))
+        .collect();
+    if readings.len() < MIN_SAMPLES {
+        return None;
+    }
+    let sums = |d: &Vector3<f64>| {
+        let centre = c + d;
+        readings.iter().fold(
+            (Matrix3::zeros(), Vector3::zeros(), 0.0),
+            |(h, g, rss), m| {
+                let (r, j, _) = residual(m, &am, &centre, fit.field_ut);
+                let jc = Vector3::new(j[0], j[1], j[2]);
+                (h + jc * jc.transpose(), g + jc * r, rss + r * r)
+            },
+        )
+    };
+    let mut d = Vector3::zeros();
+    let (mut h, mut g, mut rss) = sums(&d);
+    for _ in 0..SHIFT_ITERATIONS {
+        let mut step = -(h.cholesky()?.solve(&g));
+        let mut better = None;
+        for _ in 0..20 {
+            let at = sums(&(d + step));
+            if at.2 <= rss {
+                better = Some(at);
+                break;
+            }
+            step *= 0.5;
+        }
+        let Some(at) = better else {
+            break;
+        };
+        d += step;
+        let done = rss - at.2 <= 1e-12 * rss;
+        (h, g, rss) = at;
+        if done {
+            break;
+        }
+    }
+    Some(d.into())
 }
 
 impl ScalarProblem<'_> {
@@ -332,6 +697,17 @@ impl ScalarProblem<'_> {
         quick: bool,
         start: Option<&ScalarFit>,
     ) -> Result<ScalarFit, FitError> {
+        self.fit_shifted(weights, quick, start, &[])
+    }
+
+    /// [`Self::fit_with`] with windows of their own centres.
+    fn fit_shifted(
+        &self,
+        weights: &[f64],
+        quick: bool,
+        start: Option<&ScalarFit>,
+        second_centres: &[SecondCentre],
+    ) -> Result<ScalarFit, FitError> {
         fit(
             &self.raw_ut,
             &ScalarOptions {
@@ -341,8 +717,24 @@ impl ScalarProblem<'_> {
                 raw_noise_var_ut2: self.raw_noise_var_ut2,
                 quick,
                 start,
+                second_centres,
             },
         )
+    }
+
+    /// Each reading's residual under `fit` (signed), those in the `second_centres` moved back by their shifts.
+    fn residuals_shifted(&self, fit: &ScalarFit, second_centres: &[SecondCentre]) -> Vec<f64> {
+        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
+        let b = Vector3::from(fit.b_ut);
+        let raw = &self.raw_ut;
+        chunks::map(raw.len(), |i| {
+            let shift = second_centres
+                .iter()
+                .find(|w| (w.range.0..w.range.1).contains(&i))
+                .map_or([0.0; 3], |w| w.shift_ut);
+            let m = Vector3::from(frames::sub(raw[i], shift));
+            (a * m + b).norm() - fit.field_ut
+        })
     }
 }
 
@@ -667,6 +1059,9 @@ struct Problem<'a> {
     dof: f64,
     /// Whether every pass also sums by group ([`Groups`]): a full fit's, whose covariance comes from its last pass.
     grouped: bool,
+    /// The second centre each reading lies in ([`Usable::window`]) and how many there are.
+    window: Vec<u8>,
+    windows: usize,
 }
 
 /// A solution and the accumulation at it.
@@ -689,7 +1084,13 @@ impl<'a> Problem<'a> {
         gain: f64,
         grouped: bool,
     ) -> Problem<'a> {
-        let Usable { raw, base, n } = readings;
+        let Usable {
+            raw,
+            base,
+            n,
+            window,
+        } = readings;
+        let windows = window.iter().copied().max().map_or(0, usize::from);
         let grid = SphereGrid::new(DIRECTION_CELLS);
         let (w, cell, cells) = direction_weights(&raw, &base, c0_ut, &grid);
         let w_sum =
@@ -703,8 +1104,10 @@ impl<'a> Problem<'a> {
             grid,
             target,
             q: shape_precision(gain),
-            dof: w_sum * (n - P) as f64 / n as f64,
+            dof: w_sum * n.saturating_sub(P + 3 * windows).max(1) as f64 / n as f64,
             grouped,
+            window,
+            windows,
         }
     }
 }
@@ -975,14 +1378,52 @@ impl Problem<'_> {
             claimed = crate::vector::loewner_max(&claimed, &sandwich);
         }
         let matrix = |m: DMatrix<f64>| SMatrix::<f64, P, P>::from_column_slice(m.as_slice());
+        let (mut claimed, mut larger) = (matrix(claimed), matrix(larger));
+        if let Some(extra) = self.second_centres_share(sol, &h, &h_inv) {
+            claimed += extra * dispersion.max(1.0);
+            larger += extra;
+        }
         // How much the prior informs the shape: tr(H⁻¹·σ²Q) over the shape's five dimensions.
         let share = ((h_inv * self.q * sol.sigma2).trace() / 5.0).clamp(0.0, 1.0);
         Some(Covariance {
-            claimed: matrix(claimed),
-            determined: matrix(larger),
+            claimed,
+            determined: larger,
             prior_share: share,
             dispersion,
         })
+    }
+
+    /// What the second centres' shifts, fitted with the rest, add to the covariance of the parameters (model-based):
+    /// each window's shift moves its readings as the centre does, so its information about the centre is spent on
+    /// its own shift — `σ²·((H − Σ H_θd·H_dd⁻¹·H_dθ)⁻¹ − H⁻¹)`, `H_θd` the window's information between the
+    /// parameters and its centre. `None` without second centres.
+    fn second_centres_share(
+        &self,
+        sol: &Solution,
+        h: &SMatrix<f64, P, P>,
+        h_inv: &SMatrix<f64, P, P>,
+    ) -> Option<SMatrix<f64, P, P>> {
+        if self.windows == 0 {
+            return None;
+        }
+        let (c, a) = unpack(&sol.p);
+        let mut info = vec![[0.0; TRIANGLE]; self.windows];
+        for ((m, &w), &k) in self.raw.iter().zip(&self.w).zip(&self.window) {
+            if k == 0 || w == 0.0 {
+                continue;
+            }
+            let (_, j, _) = residual(&Vector3::from(*m), &a, &c, self.target);
+            add_upper(&mut info[usize::from(k) - 1], &j.map(|v| w * v), &j);
+        }
+        let mut marginal = *h;
+        for window in &info {
+            let i = mirror(window);
+            let cross = i.fixed_columns::<3>(0).into_owned();
+            let own = cross.fixed_rows::<3>(0).into_owned().try_inverse()?;
+            marginal -= cross * own * cross.transpose();
+        }
+        let extra = (marginal.try_inverse()? - h_inv) * sol.sigma2;
+        Some((extra + extra.transpose()) * 0.5)
     }
 
     /// How much more the fits of the recording's two halves in time disagree than their own covariances say (as
@@ -1099,6 +1540,8 @@ struct Usable<'a> {
     base: Cow<'a, [f64]>,
     /// How many there are.
     n: usize,
+    /// Which of the `second_centres` each usable reading lies in, counted from 1 (0: none); empty without any.
+    window: Vec<u8>,
 }
 
 /// The readings of `raw_ut` usable with the weights of `opts`; fewer than [`MIN_SAMPLES`] is an error.
@@ -1124,7 +1567,7 @@ fn usable_readings<'a>(
             got: n,
         });
     }
-    let (raw, base): (Cow<'_, [[f64; 3]]>, Cow<'_, [f64]>) = if n == raw_ut.len() {
+    let (mut raw, base): (Cow<'_, [[f64; 3]]>, Cow<'_, [f64]>) = if n == raw_ut.len() {
         (
             Cow::Borrowed(raw_ut),
             opts.weights
@@ -1137,7 +1580,28 @@ fn usable_readings<'a>(
             rows.map(|i| opts.weights.map_or(1.0, |w| w[i])).collect(),
         )
     };
-    Ok(Usable { raw, base, n })
+    let mut window = Vec::new();
+    if !opts.second_centres.is_empty() {
+        let of = |i: usize| {
+            opts.second_centres
+                .iter()
+                .position(|w| (w.range.0..w.range.1).contains(&i))
+                .map_or(0, |k| k as u8 + 1)
+        };
+        window = (0..raw_ut.len()).filter(|&i| usable(i)).map(of).collect();
+        let raw = raw.to_mut();
+        for (m, k) in raw.iter_mut().zip(&window) {
+            if let Some(w) = k.checked_sub(1) {
+                *m = frames::sub(*m, opts.second_centres[usize::from(w)].shift_ut);
+            }
+        }
+    }
+    Ok(Usable {
+        raw,
+        base,
+        n,
+        window,
+    })
 }
 
 /// The solver's start: the centre and matrix of `start`, the matrix scaled from its magnitude to `target` (µT),
@@ -1372,6 +1836,98 @@ mod tests {
                 [m.x, m.y, m.z].map(|v| v + noise.sample(&mut rng))
             })
             .collect()
+    }
+
+    /// 2000 readings of a distorted sensor in a 50 µT field, `change` applied to the raw readings 800–1600.
+    fn with_a_window(
+        change: impl Fn([f64; 3]) -> [f64; 3],
+    ) -> (Vec<[f64; 3]>, Matrix3<f64>, Vector3<f64>) {
+        let a_true = Matrix3::new(1.1, 0.05, -0.02, 0.05, 0.9, 0.03, -0.02, 0.03, 1.15);
+        let b_true = Vector3::new(-30.0, 12.0, 44.0);
+        let mut raw = ellipsoid(a_true, b_true, 0.1, 2000, 7);
+        raw[800..1600].iter_mut().for_each(|m| *m = change(*m));
+        (raw, a_true, b_true)
+    }
+
+    /// The fit of `raw` without the readings `[a, b)`, and the problem.
+    fn without(raw: &[[f64; 3]], (a, b): (usize, usize)) -> (ScalarProblem<'_>, ScalarFit) {
+        let problem = ScalarProblem {
+            raw_ut: Cow::Borrowed(raw),
+            field_ut: Some(50.0),
+            raw_noise_var_ut2: [0.01; 3],
+        };
+        let kept: Vec<bool> = (0..raw.len()).map(|i| !(a..b).contains(&i)).collect();
+        let fit = problem.final_fit(&kept, None).unwrap();
+        (problem, fit)
+    }
+
+    #[test]
+    fn a_field_on_the_board_is_a_second_centre_located_and_fitted_with_the_rest() {
+        let shift = [8.0, -5.0, 3.0];
+        let (raw, a_true, b_true) = with_a_window(|m| frames::add(m, shift));
+        // The window as a scan might give it, 50 readings too wide on each side.
+        let (problem, rest_only) = without(&raw, (750, 1650));
+        let kept = vec![true; raw.len()];
+        let robust::OwnStates {
+            fit: joint,
+            residual_ut: e,
+            windows: located,
+        } = problem
+            .with_windows(&rest_only, &kept, &[(750, 1650)])
+            .expect("a second centre");
+        assert_eq!(located, vec![(800, 1600)]);
+        let centres = problem
+            .joint(&rest_only, &kept, &[(750, 1650)], true)
+            .unwrap()
+            .1;
+        for k in 0..3 {
+            assert!(
+                (centres[0].shift_ut[k] - shift[k]).abs() < 0.05,
+                "{centres:?}"
+            );
+        }
+        // Every reading explained to the noise, the window's in its own state.
+        assert!(robust::median(&e) < 0.1, "{}", robust::median(&e));
+        for j in 0..3 {
+            assert!((joint.b_ut[j] - b_true[j]).abs() < 5.0 * joint.b_se_ut[j] + 1e-3);
+            for k in 0..3 {
+                assert!((joint.a[j][k] - a_true[(j, k)]).abs() < 5.0 * joint.a_se[j][k] + 1e-4);
+            }
+        }
+        // The window's readings tell the shape, not the sensor's centre: the centre's uncertainty is at least the one
+        // the same readings give when all are in one state, and the shape's less than the rest's alone.
+        let (one_state, ..) = with_a_window(|m| m);
+        let (_, all) = without(&one_state, (0, 0));
+        for k in 0..3 {
+            assert!(joint.centre_cov_ut2[k][k] > all.centre_cov_ut2[k][k]);
+            assert!(joint.a_se[k][k] < rest_only.a_se[k][k]);
+        }
+    }
+
+    #[test]
+    fn a_field_in_the_room_is_no_second_centre() {
+        // The magnitude raised by 4 µT in the window whatever the attitude: a field fixed in the room.
+        let centre = {
+            let a_true = Matrix3::new(1.1, 0.05, -0.02, 0.05, 0.9, 0.03, -0.02, 0.03, 1.15);
+            -(a_true.try_inverse().unwrap() * Vector3::new(-30.0, 12.0, 44.0))
+        };
+        let (raw, ..) = with_a_window(|m| {
+            let d = Vector3::from(m) - centre;
+            (centre + d * (54.0 / 50.0)).into()
+        });
+        let (problem, rest_only) = without(&raw, (800, 1600));
+        assert!(
+            problem
+                .joint(&rest_only, &vec![true; raw.len()], &[(800, 1600)], true)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn the_best_run_is_the_largest_positive_sum() {
+        let x = [-1.0, 2.0, -0.5, 3.0, -10.0, 4.0];
+        assert_eq!(best_run(x.iter().copied()), Some((1, 4)));
+        assert_eq!(best_run([-1.0, -2.0].iter().copied()), None);
     }
 
     #[test]
