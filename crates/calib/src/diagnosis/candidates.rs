@@ -274,6 +274,9 @@ pub(crate) fn offer<'a>(
 /// on both sides of it ([`STEP_SIDE_COVERAGE`]): from a still stretch any offset fits, and a step there soaks up what
 /// is left of a disturbance beside it. The vector method sees every step.
 fn step_seen(setup: &Setup<'_>, clean: &[bool], st: Scan) -> Result<Scan, &'static str> {
+    if setup.vector {
+        return Ok(st);
+    }
     let n = setup.samples.len();
     let covered = |r: std::ops::Range<usize>| {
         crate::coverage::sphere_fraction(
@@ -283,7 +286,7 @@ fn step_seen(setup: &Setup<'_>, clean: &[bool], st: Scan) -> Result<Scan, &'stat
     };
     let all = covered(0..n);
     let side = covered(0..st.start).min(covered(st.start..n));
-    if setup.vector || side >= STEP_SIDE_COVERAGE * all {
+    if side >= STEP_SIDE_COVERAGE * all {
         Ok(st)
     } else {
         Err(STILL_SIDE_OF_STEP)

@@ -12,7 +12,7 @@ use crate::frames;
 use super::candidates::{Candidate, Probes};
 use super::fitted::SYM;
 use super::setup::Setup;
-use super::stats::{Batches, BlockStats, Problem};
+use super::stats::{Batches, BlockStats, GramSums, Problem};
 use super::{AUTOCORRELATION_BATCHES, CV_BLOCKS};
 
 /// The step (µT) of the field along which the scalar method's regressors are differentiated for their noise.
@@ -95,8 +95,10 @@ struct SampleRows<'c> {
     mc: [f64; 3],
 }
 
-/// [`accumulate`] over the samples of one batch (`i·BATCHES/n` = `batch`); a candidate's zero regressors are left
-/// out of the rows.
+/// [`accumulate`] over the samples of one batch (`i·BATCHES/n` = `batch`). Each row is laid out in its own
+/// columns — the vector method's axis `j` has only `A`'s row `j` and `b_j` of the base columns — with the candidates'
+/// after them and the observation last, summed by [`GramSums`] per row kind and clean or not, and then put in the
+/// design's columns.
 fn accumulate_batch(
     setup: &Setup<'_>,
     batch: usize,
@@ -108,6 +110,19 @@ fn accumulate_batch(
     let s = setup.samples;
     let n = s.len();
     let dims = if setup.vector { 3 } else { 1 };
+    // A row's own columns: its base columns, the candidates', the observation.
+    let base = if setup.vector { 4 } else { setup.n_base };
+    let width = base + columns - setup.n_base + 1;
+    let design_columns: Vec<Vec<usize>> = (0..dims)
+        .map(|j| {
+            let own_base = if setup.vector {
+                4 * j..4 * j + 4
+            } else {
+                0..setup.n_base
+            };
+            own_base.chain(setup.n_base..columns).collect()
+        })
+        .collect();
     let mut part = BatchPart {
         clean: BlockStats::new(columns),
         other: BlockStats::new(columns),
@@ -115,9 +130,13 @@ fn accumulate_batch(
         batch: Batches::new(1, dims, columns),
         active: vec![0; cands.len()],
     };
+    // Per row kind, the clean rows and the other included ones.
+    let mut sums: Vec<[GramSums; 2]> = (0..dims)
+        .map(|_| [GramSums::new(width), GramSums::new(width)])
+        .collect();
     let first = (batch * n).div_ceil(AUTOCORRELATION_BATCHES);
     let end = ((batch + 1) * n).div_ceil(AUTOCORRELATION_BATCHES);
-    let mut entries: Vec<(usize, f64)> = Vec::with_capacity(columns);
+    let mut row = vec![0.0; width];
     let mut cross: Vec<(usize, f64)> = Vec::new();
     let mut regs: Vec<[[f64; 3]; 3]> = vec![[[0.0; 3]; 3]; cands.len()];
     let probes: Vec<Probes> = cands.iter().map(Candidate::probes).collect();
@@ -127,54 +146,70 @@ fn accumulate_batch(
             *reg = probe.regressors(&ctx);
         }
         let mc = frames::sub(s.raw[i], setup.raw_mean);
-        let stats = if clean[i] {
-            &mut part.clean
+        let (stats, which) = if clean[i] {
+            (&mut part.clean, 0)
         } else {
-            &mut part.other
+            (&mut part.other, 1)
         };
         stats.samples += 1;
         for kind in &mut part.by_kind {
             kind.samples += 1;
         }
-        let row = SampleRows {
-            i,
-            ctx,
-            regs: &regs,
-            mc,
-        };
         if setup.vector {
-            for j in 0..3 {
-                entries.clear();
-                entries.extend((0..3).map(|k| (4 * j + k, mc[k])));
-                entries.push((4 * j + 3, 1.0));
-                push_candidates(&mut entries, cands, &mut part.active, |c, k| -regs[c][k][j]);
-                stats.add_row(&entries, s.field[i][j]);
-                part.by_kind[j].add_row(&entries, s.field[i][j]);
-                part.batch.add_row(0, j, &entries, s.field[i][j]);
+            for (j, kind) in sums.iter_mut().enumerate() {
+                row[..3].copy_from_slice(&mc);
+                row[3] = 1.0;
+                put_candidates(
+                    &mut row[base..],
+                    setup.n_base,
+                    cands,
+                    &mut part.active,
+                    |c, k| -regs[c][k][j],
+                );
+                row[width - 1] = s.field[i][j];
+                kind[which].push(&row);
             }
         } else {
             // ρ + J·Δ − u·G·θ ≈ 0 around the base fit (ρ: its residual), with the readings centred.
             let u = setup.unit[i];
-            entries.clear();
             for (k, (r, q)) in SYM.iter().enumerate() {
-                let d = if r == q {
+                row[k] = if r == q {
                     u[*r] * mc[*q]
                 } else {
                     u[*r] * mc[*q] + u[*q] * mc[*r]
                 };
-                entries.push((k, d));
             }
-            entries.extend((0..3).map(|k| (6 + k, u[k])));
-            push_candidates(&mut entries, cands, &mut part.active, |c, k| {
-                -frames::dot(u, regs[c][k])
-            });
-            let rho = setup.base_rho(i);
-            stats.add_row(&entries, -rho);
-            part.batch.add_row(0, 0, &entries, -rho);
-            if noise_cross(setup, cands, &probes, &row, &mut cross) {
+            row[6..9].copy_from_slice(&u);
+            put_candidates(
+                &mut row[base..],
+                setup.n_base,
+                cands,
+                &mut part.active,
+                |c, k| -frames::dot(u, regs[c][k]),
+            );
+            row[width - 1] = -setup.base_rho(i);
+            sums[0][which].push(&row);
+            let rows = SampleRows {
+                i,
+                ctx,
+                regs: &regs,
+                mc,
+            };
+            if noise_cross(setup, cands, &probes, &rows, &mut cross) {
                 stats.add_noise_cross(&cross);
             }
         }
+    }
+    for (j, (kind, columns)) in sums.iter_mut().zip(&design_columns).enumerate() {
+        let [clean_rows, other_rows] = kind;
+        clean_rows.add_to(&mut part.clean, columns);
+        other_rows.add_to(&mut part.other, columns);
+        if let Some(by_kind) = part.by_kind.get_mut(j) {
+            clean_rows.add_to(by_kind, columns);
+            other_rows.add_to(by_kind, columns);
+        }
+        clean_rows.add_sums_to(&mut part.batch, 0, j, columns);
+        other_rows.add_sums_to(&mut part.batch, 0, j, columns);
     }
     part
 }
@@ -229,24 +264,23 @@ fn noise_cross(
     true
 }
 
-/// Appends the candidates' values in a row (`value(c, k)`: candidate `c`'s parameter `k`), the zeros left out, and
-/// counts the candidates that act in it.
-fn push_candidates(
-    entries: &mut Vec<(usize, f64)>,
+/// Writes the candidates' values in `row`, from the design's column `first` on (`value(c, k)`: candidate `c`'s
+/// parameter `k`), and counts the candidates that act in it (a value not zero).
+fn put_candidates(
+    row: &mut [f64],
+    first: usize,
     cands: &[Candidate],
     active: &mut [usize],
     value: impl Fn(usize, usize) -> f64,
 ) {
     for (c, cand) in cands.iter().enumerate() {
-        let before = entries.len();
-        entries.extend(
-            (0..cand.n)
-                .map(|k| (cand.first + k, value(c, k)))
-                .filter(|(_, v)| *v != 0.0),
-        );
-        if entries.len() > before {
-            active[c] += 1;
+        let mut acts = false;
+        for k in 0..cand.n {
+            let v = value(c, k);
+            row[cand.first - first + k] = v;
+            acts |= v != 0.0;
         }
+        active[c] += usize::from(acts);
     }
 }
 

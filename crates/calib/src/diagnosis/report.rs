@@ -413,8 +413,13 @@ fn located(
     } else {
         vec![setup.noise_floor_ut]
     };
-    let used: Vec<usize> = (0..n).filter(|&i| round.included[i]).collect();
-    let all_used = used.len() == n;
+    // The rows used, listed only when some are not (a list of every row is as large as a column).
+    let all_used = round.included.iter().all(|&i| i);
+    let used: Vec<usize> = if all_used {
+        Vec::new()
+    } else {
+        (0..n).filter(|&i| round.included[i]).collect()
+    };
     let used_only =
         (!all_used).then(|| Components::of(used.iter().map(|&i| &base_residual[i]), dims));
     let base_rows = Components::from_residuals(base_residual, dims);
@@ -458,7 +463,7 @@ fn located(
         &channel_values,
     );
     drop(used_rows);
-    (located, base_rows, used.len())
+    (located, base_rows, if all_used { n } else { used.len() })
 }
 
 /// A scanned time was located on the base residual, which the base fit had partly bent to the effect; locate it

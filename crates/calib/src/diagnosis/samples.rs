@@ -3,6 +3,7 @@
 
 use std::borrow::Cow;
 
+use crate::chunks;
 use crate::effects::{Context, WorldContext};
 use crate::frames::{self, Mat3};
 use crate::model::{Inputs, Model};
@@ -100,11 +101,9 @@ impl<'a> Samples<'a> {
     pub fn gather(input: &DiagnosisInput<'a>, base: &Model, linearise: bool) -> Samples<'a> {
         let n = input.raw_ut.len();
         let expected: Option<Vec<[f64; 3]>> = match &input.reference {
-            Reference::Attitude { quat, field_ned_ut } => Some(
-                quat.iter()
-                    .map(|q| frames::expected_sensor_field(*q, *field_ned_ut))
-                    .collect(),
-            ),
+            Reference::Attitude { quat, field_ned_ut } => Some(chunks::map(quat.len(), |i| {
+                frames::expected_sensor_field(quat[i], *field_ned_ut)
+            })),
             Reference::Field { expected_ut } => Some(expected_ut.to_vec()),
             Reference::Magnitude { .. } => None,
         };
@@ -126,7 +125,10 @@ impl<'a> Samples<'a> {
             }
         }
         let raw = pick(input.raw_ut, &index);
-        let mut field: Vec<[f64; 3]> = match &expected {
+        let has_expected = expected.is_some();
+        let mut field: Vec<[f64; 3]> = match expected {
+            // Every row usable: the expected field as it is.
+            Some(e) if e.len() == index.len() => e,
             Some(e) => index.iter().map(|&i| e[i]).collect(),
             None => raw.iter().map(|m| base.apply(*m, &Inputs::NONE)).collect(),
         };
@@ -135,8 +137,8 @@ impl<'a> Samples<'a> {
             None => Cow::Owned(vec![0.0; index.len()]),
         };
         let mut lag0_s = 0.0;
-        let rate = match (&expected, input.t_s) {
-            (Some(_), Some(_)) => {
+        let rate = match (has_expected, input.t_s) {
+            (true, Some(_)) => {
                 let step_s = timing::typical_step(&t);
                 let links = links(&t, &index, step_s);
                 let mut rate = field_rate(&field, &t, &links);
@@ -199,22 +201,20 @@ fn links(t: &[f64], index: &[usize], step_s: f64) -> Vec<bool> {
 }
 
 /// Central differences of the field over time; one-sided at the ends and at gaps (samples not [`links`]ed), zero
-/// where neither side is usable.
+/// where neither side is usable. Computed on all threads.
 fn field_rate(field: &[[f64; 3]], t: &[f64], links: &timing::Links) -> Vec<[f64; 3]> {
     let n = field.len();
-    (0..n)
-        .map(|i| {
-            let prev = i > 0 && links[i - 1];
-            let next = i + 1 < n && links[i];
-            let (a, b) = match (prev, next) {
-                (true, true) => (i - 1, i + 1),
-                (true, false) => (i - 1, i),
-                (false, true) => (i, i + 1),
-                (false, false) => return [0.0; 3],
-            };
-            frames::scale(frames::sub(field[b], field[a]), 1.0 / (t[b] - t[a]))
-        })
-        .collect()
+    chunks::map(n, |i| {
+        let prev = i > 0 && links[i - 1];
+        let next = i + 1 < n && links[i];
+        let (a, b) = match (prev, next) {
+            (true, true) => (i - 1, i + 1),
+            (true, false) => (i - 1, i),
+            (false, true) => (i, i + 1),
+            (false, false) => return [0.0; 3],
+        };
+        frames::scale(frames::sub(field[b], field[a]), 1.0 / (t[b] - t[a]))
+    })
 }
 
 #[cfg(test)]

@@ -1,6 +1,7 @@
 //! What every stage of the diagnosis shares: the samples, what the reference offers (vector or magnitude), the
 //! field's direction per sample, the noise floor in calibrated units, and the residual of a model with effects.
 
+use crate::chunks;
 use crate::effects::Effect;
 use crate::frames::{self, Mat3};
 use crate::model::Model;
@@ -44,11 +45,10 @@ impl<'a> Setup<'a> {
             samples.raw.iter().fold([0.0; 3], |s, m| frames::add(s, *m)),
             1.0 / n as f64,
         );
-        let unit: Vec<[f64; 3]> = samples
-            .field
-            .iter()
-            .map(|f| frames::scale(*f, 1.0 / frames::norm(*f)))
-            .collect();
+        let unit: Vec<[f64; 3]> = chunks::map(n, |i| {
+            let f = samples.field[i];
+            frames::scale(f, 1.0 / frames::norm(f))
+        });
         let noise_floor_ut = if vector {
             input.noise.calibrated_rms_ut(&base.a)
         } else {
@@ -79,23 +79,21 @@ impl<'a> Setup<'a> {
     }
 
     /// The residual per sample of `A·B̂ + b − Σδ` against the reference: three components (vector), or the
-    /// magnitude's in the first (scalar).
+    /// magnitude's in the first (scalar). Computed on all threads.
     pub fn residual(&self, a: &Mat3, b: [f64; 3], effects: &[Effect]) -> Vec<[f64; 3]> {
         let s = self.samples;
-        (0..s.len())
-            .map(|i| {
-                let ctx = s.context(i);
-                let delta = effects
-                    .iter()
-                    .fold([0.0; 3], |acc, e| frames::add(acc, e.perturbation_ut(&ctx)));
-                let cal = frames::sub(frames::add(frames::mat_vec(a, s.raw[i]), b), delta);
-                if self.vector {
-                    frames::sub(cal, s.field[i])
-                } else {
-                    [frames::norm(cal) - self.field_ut, 0.0, 0.0]
-                }
-            })
-            .collect()
+        chunks::map(s.len(), |i| {
+            let ctx = s.context(i);
+            let delta = effects
+                .iter()
+                .fold([0.0; 3], |acc, e| frames::add(acc, e.perturbation_ut(&ctx)));
+            let cal = frames::sub(frames::add(frames::mat_vec(a, s.raw[i]), b), delta);
+            if self.vector {
+                frames::sub(cal, s.field[i])
+            } else {
+                [frames::norm(cal) - self.field_ut, 0.0, 0.0]
+            }
+        })
     }
 
     /// A residual's size, as the robust fit judges it.
