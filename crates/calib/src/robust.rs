@@ -954,7 +954,7 @@ fn reweight<P: RobustProblem>(p: &P, w0: &[f64], iterations: usize) -> Option<(P
 /// The residual's scale: the median residual size over the usable samples, as a standard deviation per axis. Each
 /// sample counts as much as the next, so the state the recording is in most of the time sets it — still stretches
 /// included, which is what tells a clean state from a magnet attached while the sensor was turned most.
-fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
+pub(crate) fn scale<P: RobustProblem>(e: &[f64]) -> f64 {
     median(e) / P::MEDIAN_OF_UNIT
 }
 
@@ -1145,9 +1145,7 @@ pub fn shifted_windows(
     for _ in 0..MAX_SHIFTS {
         let values = || e.iter().zip(&free).filter(|(_, f)| **f).map(|(x, _)| *x);
         let m = values().count() as f64;
-        let mean = values().sum::<f64>() / m;
-        let sigma2 = values().map(|x| (x - mean).powi(2)).sum::<f64>() / m;
-        let sigma2 = sigma2.max(long_run_variance(values().map(|x| x - mean)));
+        let sigma2 = variance_with_wander(values);
         let Some(found) = crate::scan::window_with_directions(e, u, &free, sigma2) else {
             break;
         };
@@ -1201,14 +1199,13 @@ pub fn shifted_windows(
     out
 }
 
-/// The variance per sample of a residual `x` (NaN where unused) about its mean: the sample variance, or the
+/// The variance per sample of the residual `x()` yields (in time order) about its mean: the sample variance, or the
 /// long-run one ([`long_run_variance`]) when the residual wanders, the larger.
-pub fn variance_with_wander(x: &[f64]) -> f64 {
-    let used = || x.iter().copied().filter(|v| v.is_finite());
-    let n = used().count().max(1) as f64;
-    let mean = used().sum::<f64>() / n;
-    let sample = used().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
-    sample.max(long_run_variance(used().map(|v| v - mean)))
+pub fn variance_with_wander<I: Iterator<Item = f64>>(x: impl Fn() -> I) -> f64 {
+    let n = x().count() as f64;
+    let mean = x().sum::<f64>() / n;
+    let sample = x().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    sample.max(long_run_variance(x().map(|v| v - mean)))
 }
 
 /// Samples per block of [`long_run_variance`].

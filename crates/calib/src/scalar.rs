@@ -150,6 +150,13 @@ pub struct ScalarFit {
 }
 
 impl ScalarFit {
+    /// The magnitude residual `|A·m + b| − F` (µT) of a raw reading `m` under the fit.
+    fn misfit(&self) -> impl Fn([f64; 3]) -> f64 + Sync + '_ {
+        let a = Matrix3::from_fn(|j, k| self.a[j][k]);
+        let b = Vector3::from(self.b_ut);
+        move |m| (a * Vector3::from(m) + b).norm() - self.field_ut
+    }
+
     /// The fitted linear model.
     pub fn model(&self) -> Model {
         Model::linear(self.a, self.b_ut)
@@ -238,12 +245,9 @@ impl RobustProblem for ScalarProblem<'_> {
     }
 
     fn residuals(&self, fit: &ScalarFit) -> Vec<f64> {
-        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
-        let b = Vector3::from(fit.b_ut);
+        let r = fit.misfit();
         let raw = &self.raw_ut;
-        chunks::map(raw.len(), |i| {
-            ((a * Vector3::from(raw[i]) + b).norm() - fit.field_ut).abs()
-        })
+        chunks::map(raw.len(), |i| r(raw[i]).abs())
     }
 
     fn model(fit: &ScalarFit) -> Model {
@@ -258,9 +262,8 @@ impl RobustProblem for ScalarProblem<'_> {
         let b = Vector3::from(fit.b_ut);
         let var = Vector3::from(self.raw_noise_var_ut2);
         let raw = &self.raw_ut;
-        let rho = chunks::map(raw.len(), |i| {
-            (a * Vector3::from(raw[i]) + b).norm() - fit.field_ut
-        });
+        let r = fit.misfit();
+        let rho = chunks::map(raw.len(), |i| r(raw[i]));
         let u = chunks::map(raw.len(), |i| {
             (a * Vector3::from(raw[i]) + b)
                 .try_normalize(0.0)
@@ -284,12 +287,13 @@ impl RobustProblem for ScalarProblem<'_> {
         // A window in a state of its own: a second centre fitted with the rest.
         let own_state = |window: (usize, usize)| {
             let (joint, centres) = self.joint(fit, kept, &[window], true)?;
-            let mut e = self.residuals_shifted(&joint, &centres);
-            e.iter_mut()
-                .zip(kept)
-                .filter(|(_, k)| !**k)
-                .for_each(|(x, _)| *x = f64::NAN);
-            Some(robust::variance_with_wander(&e))
+            let e = self.residuals_shifted(&joint, &centres);
+            Some(robust::variance_with_wander(|| {
+                e.iter()
+                    .zip(kept)
+                    .filter(|(x, k)| **k && x.is_finite())
+                    .map(|(x, _)| *x)
+            }))
         };
         if noise > 0.0 {
             robust::shifted_windows(&rho, &u, kept, noise, Some(&own_state))
@@ -402,13 +406,13 @@ impl ScalarProblem<'_> {
         // the board) are left out, as the base fit leaves out the rest's.
         let mut fitted = fitted(&centres);
         let e = self.residuals_shifted(&joint, &centres);
-        let scale = robust::median(
+        let scale = robust::scale::<Self>(
             &e.iter()
                 .zip(kept)
                 .filter(|(x, k)| **k && x.is_finite())
                 .map(|(x, _)| x.abs())
                 .collect::<Vec<_>>(),
-        ) / <Self as RobustProblem>::MEDIAN_OF_UNIT;
+        );
         let mut trimmed = false;
         for w in &centres {
             for i in w.range.0..w.range.1 {
@@ -543,9 +547,7 @@ impl ScalarProblem<'_> {
     /// second centre: under `fit`, their magnitude a constant of its own (a room's field adds about a constant to
     /// |B| whatever the attitude, a board's moves the centre).
     fn room_explains(&self, fit: &ScalarFit, kept: &[bool], w: &SecondCentre) -> bool {
-        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
-        let b = Vector3::from(fit.b_ut);
-        let r = |m: [f64; 3]| (a * Vector3::from(m) + b).norm() - fit.field_ut;
+        let r = fit.misfit();
         let inside: Vec<[f64; 3]> = (w.range.0..w.range.1)
             .filter(|&i| kept[i] && self.raw_ut[i].iter().all(|v| v.is_finite()))
             .map(|i| self.raw_ut[i])
@@ -569,9 +571,7 @@ impl ScalarProblem<'_> {
         candidate: &[bool],
         centres: &[SecondCentre],
     ) -> Vec<SecondCentre> {
-        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
-        let b = Vector3::from(fit.b_ut);
-        let r = |m: [f64; 3]| (a * Vector3::from(m) + b).norm() - fit.field_ut;
+        let r = fit.misfit();
         let n = self.raw_ut.len();
         (0..centres.len())
             .map(|w| {
@@ -724,16 +724,14 @@ impl ScalarProblem<'_> {
 
     /// Each reading's residual under `fit` (signed), those in the `second_centres` moved back by their shifts.
     fn residuals_shifted(&self, fit: &ScalarFit, second_centres: &[SecondCentre]) -> Vec<f64> {
-        let a = Matrix3::from_fn(|j, k| fit.a[j][k]);
-        let b = Vector3::from(fit.b_ut);
+        let r = fit.misfit();
         let raw = &self.raw_ut;
         chunks::map(raw.len(), |i| {
             let shift = second_centres
                 .iter()
                 .find(|w| (w.range.0..w.range.1).contains(&i))
                 .map_or([0.0; 3], |w| w.shift_ut);
-            let m = Vector3::from(frames::sub(raw[i], shift));
-            (a * m + b).norm() - fit.field_ut
+            r(frames::sub(raw[i], shift))
         })
     }
 }
