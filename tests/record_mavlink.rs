@@ -392,27 +392,35 @@ fn a_twin_over_udp_is_recorded_whichever_side_listens() {
     }
 }
 
-/// For each row, the compass message the twin sent (the nearest raw reading after the previous row's: the recorder
-/// undid the calibration to the message's rounding, and a hand at rest sends readings that close) and the angle
-/// between the row's attitude and the twin's at that message, degrees (NaN for a row without one).
+/// For each row, the compass message the twin sent and the angle between the row's attitude and the twin's at that
+/// message, degrees (NaN for a row without one). Every message the twin put on the port from the first row's on is a
+/// row, in order (the link's losses and a full port never reach `sent`): the rows are aligned with `sent` where the
+/// first rows match consecutive messages, and each row must match its own message to the rounding of the messages
+/// (the recorder undid the calibration). The nearest reading among all later messages is not a row's own: ArduPilot's
+/// whole milligauss leave a row up to 0.05 µT from its message, and a later noisy reading came within 1.1 times that
+/// of a row here (the greedy nearest match once failed CI that way).
 fn rows_as_sent(recording: &Recording, sent: &[Sent]) -> Vec<(usize, f64)> {
     let quats = recording.quat.as_ref().expect("attitudes");
-    let mut next = 0;
-    recording
-        .mag_ut
-        .iter()
+    let off = |s: &Sent, m: &[f64; 3]| {
+        (0..3)
+            .map(|k| (s.raw_ut[k] - m[k]).abs())
+            .fold(0.0, f64::max)
+    };
+    let rows = &recording.mag_ut;
+    let lead = rows.len().min(10);
+    let first = (0..sent.len().saturating_sub(lead.saturating_sub(1)))
+        .find(|&i| (0..lead).all(|r| off(&sent[i + r], &rows[r]) < 0.15))
+        .expect("the first rows are no run of consecutive messages the twin sent");
+    rows.iter()
         .zip(quats)
-        .map(|(m, q)| {
-            let off = |s: &Sent| {
-                (0..3)
-                    .map(|k| (s.raw_ut[k] - m[k]).abs())
-                    .fold(0.0, f64::max)
-            };
-            let i = (next..sent.len())
-                .min_by(|&a, &b| off(&sent[a]).total_cmp(&off(&sent[b])))
-                .unwrap();
-            next = i + 1;
-            assert!(off(&sent[i]) < 0.15, "{m:?} was not sent");
+        .enumerate()
+        .map(|(r, (m, q))| {
+            let i = first + r;
+            assert!(
+                i < sent.len() && off(&sent[i], m) < 0.15,
+                "row {r} {m:?} is not the message sent after the previous row's ({:?})",
+                sent.get(i).map(|s| s.raw_ut)
+            );
             let dot: f64 = (0..4).map(|k| q[k] * sent[i].quat[k]).sum();
             // (`min` would take NaN, a row without an attitude, for 1.)
             let angle = if dot.is_nan() {
@@ -453,11 +461,9 @@ fn through_a_lossy_link_every_row_is_a_sample_sent_with_its_own_attitude() {
     let report = twin.finish();
     assert!(report.frames_lost > 0);
     let recording = Recording::read(&rec).unwrap();
-    let rows = rows_as_sent(&recording, &report.sent);
     // Every compass message the twin put on the port from the first row's to the last is a row, in order.
+    let rows = rows_as_sent(&recording, &report.sent);
     let (first, last) = (rows[0].0, rows[rows.len() - 1].0);
-    assert!(rows.windows(2).all(|w| w[1].0 == w[0].0 + 1));
-    assert_eq!(rows.len(), last - first + 1);
     let span_s = report.sent[last].t_s - report.sent[first].t_s;
     let missing = (span_s * 50.0).round() as usize + 1 - rows.len();
     let worst = rows.iter().map(|r| r.1).fold(0.0, f64::max);
@@ -515,7 +521,6 @@ fn goes_on_after_a_reboot(
         "time stood still or went back"
     );
     let rows = rows_as_sent(&recording, &report.sent);
-    assert!(rows.windows(2).all(|w| w[1].0 == w[0].0 + 1));
     let after = rows
         .iter()
         .filter(|r| report.sent[r.0].t_s > reboot_s)

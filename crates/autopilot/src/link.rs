@@ -72,14 +72,24 @@ impl FrameBuffer {
             if self.buf.len() < len {
                 return None;
             }
-            let mut reader = mavlink::MavlinkReader::new(&self.buf[..len]);
-            match reader.read_any_message::<MavMessage>() {
-                Ok(message) => {
+            // The reader skips a frame whose checksum fails and takes the next valid one: a frame cut short (a
+            // sender that gave up mid-frame) can hold a whole short frame in its declared length. Only a frame that
+            // starts here and fills that length is this one; else the scan goes on from the next byte, and the
+            // short frame is found in its turn.
+            let frame = &self.buf[..len];
+            let whole = mavlink::MavlinkReader::new(frame)
+                .read_any_raw_message::<MavMessage>()
+                .is_ok_and(|raw| match raw {
+                    mavlink::MAVLinkMessageRaw::V1(f) => f.raw_bytes().len() == len,
+                    mavlink::MAVLinkMessageRaw::V2(f) => f.raw_bytes().len() == len,
+                });
+            match mavlink::MavlinkReader::new(frame).read_any_message::<MavMessage>() {
+                Ok(message) if whole => {
                     self.buf.drain(..len);
                     self.frames += 1;
                     return Some(message);
                 }
-                Err(_) => {
+                _ => {
                     self.skipped += 1;
                     self.buf.drain(..1);
                 }
@@ -481,6 +491,31 @@ mod tests {
         }
         assert_eq!(got, [0, 2]);
         assert_eq!(buffer.frames, 2);
+    }
+
+    #[test]
+    fn a_frame_cut_short_loses_neither_the_short_frame_it_spans_nor_the_next() {
+        let imu = MavMessage::RAW_IMU(mavlink::dialects::common::RAW_IMU_DATA {
+            time_usec: 123_456_789,
+            xmag: -89,
+            ymag: 775,
+            zmag: -37,
+            ..Default::default()
+        });
+        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
+        // The first RAW_IMU's sender gave up after 10 bytes; a heartbeat (21 bytes) lies within its declared length.
+        let cut = frame(&imu, 0);
+        assert!(cut.len() > 10 + frame(&hb, 1).len());
+        let mut bytes = cut[..10].to_vec();
+        bytes.extend(frame(&hb, 1));
+        bytes.extend(frame(&imu, 2));
+        let mut buffer = FrameBuffer::new();
+        buffer.push(&bytes);
+        let mut got = Vec::new();
+        while let Some((h, _)) = buffer.next_message() {
+            got.push(h.sequence);
+        }
+        assert_eq!(got, [1, 2]);
     }
 
     #[test]
