@@ -236,13 +236,32 @@ pub fn attitude_worth_checking(cal: &Calibration, rec: &Recording) -> bool {
         && rec.quat.is_none()
         && rec.ref_ut.is_some()
         && cal.field.vector().is_some()
-        && (fit_looks_off(
+        && attitude_in_doubt(
             cal.samples.excluded,
             cal.samples.total,
             cal.residual_rms_ut,
             cal.noise_floor_ut,
-        ) || cal.residual_rms_ut > HEADING_CHECK_RATIO * cal.noise_floor_ut
-            || cal.fit.reference_off(&cal.field).is_some())
+            &cal.field,
+        )
+}
+
+/// Whether a vector fit leaves room for a reference in another convention, out of step or whose north is not true
+/// north, which the attitude is then checked for (with the diagnosis, or without it by [`attitude_worth_checking`]):
+/// [`fit_looks_off`], a residual that is a good part of the field, or one [`HEADING_CHECK_RATIO`] times the noise (or
+/// a noise not measured). A fit that leaves the noise and no more has no misfit for another reference to explain.
+fn attitude_in_doubt(
+    excluded: usize,
+    total: usize,
+    residual_ut: f64,
+    noise_ut: f64,
+    field: &ReferenceField,
+) -> bool {
+    fit_looks_off(excluded, total, residual_ut, noise_ut)
+        || noise_ut.is_nan()
+        || residual_ut > HEADING_CHECK_RATIO * noise_ut
+        || field
+            .magnitude()
+            .is_some_and(|f| residual_ut > crate::fit::REFERENCE_OFF_SHARE * f)
 }
 
 /// Leaves out the rows of `rec` a fault of the sensor's output made ([`faults`]): an axis at its extreme while the
@@ -442,7 +461,8 @@ struct Base {
 
 /// The vector method's robust base fit against the expected field per row, with the reference's heading found and
 /// fitted when it is material ([`reference_heading`]), and the reference checked for another convention or clock
-/// when the fit looks off; what the heading search says to know goes to `notes`.
+/// when the fit looks off; neither is looked for when the fit leaves no room for them ([`attitude_in_doubt`]). What
+/// the heading search says to know goes to `notes`.
 fn vector_base(
     rec: &Recording,
     field: &ReferenceField,
@@ -458,6 +478,26 @@ fn vector_base(
     };
     let first = robust::fit(&problem, rec.t_s.as_deref());
     let expected = &problem.expected_ut;
+    let fits = first.as_ref().is_ok_and(|r| {
+        !attitude_in_doubt(
+            r.excluded(),
+            r.kept.len(),
+            rms3(r.fit.residual_rms_ut),
+            rms3(noise.floor_ut),
+            field,
+        )
+    });
+    if fits {
+        let r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
+        return Ok(vector_base_of(
+            rec,
+            expected,
+            r,
+            noise,
+            ReferenceDoubt::default(),
+            None,
+        ));
+    }
     match reference_heading::search(rec, field, &noise, first.as_ref().ok()) {
         Search::Turned(turned) => {
             return Ok(turned_base(rec, field, expected, first, turned, noise));
@@ -842,6 +882,15 @@ fn diagnose_into(rec: &Recording, cal: &mut Calibration) -> Result<(), Calibrate
     }
     match diagnose_refitted(rec, cal, &cal.base_model())? {
         Ok(d) => {
+            let stride = d.residuals.stride;
+            if stride > 1 {
+                cal.notes.push(format!(
+                    "the diagnosis looked at one sample in {stride} ({} samples; a recording this long has power to \
+                     spare): its spans are located to {stride} samples and its counts of samples are of those it \
+                     looked at; the calibration's own counts are of every row",
+                    d.residuals.rows.len()
+                ));
+            }
             cal.warnings.extend(other_offset_state(&d, rec));
             cal.sphere_coverage = used_coverage(rec, d.model, &d);
             cal.diagnosis = Some(d);

@@ -9,7 +9,7 @@ use crate::effects::Effect;
 use crate::model::Model;
 
 use super::explain::Fate;
-use super::findings::{Glitch, GrossSpan};
+use super::findings::{Glitch, GrossSpan, rows_of};
 use super::report::{glitch, gross_span};
 use super::samples::Samples;
 use super::setup::Setup;
@@ -49,8 +49,9 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
     let (scale, kept) = setup.state_kept(&residual);
     let stage = gross::stage(&setup, &residual, &kept, scale, &[]);
     let mut left_out = vec![false; input.raw_ut.len()];
-    for (k, &row) in samples.rows.iter().enumerate() {
-        left_out[row] = !stage.clean[k];
+    let gross: Vec<bool> = stage.clean.iter().map(|c| !c).collect();
+    for row in rows_of(&samples.rows, &gross, samples.stride) {
+        left_out[row] = true;
     }
     Ok(Disturbed {
         spans: stage

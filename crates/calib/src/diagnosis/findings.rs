@@ -167,6 +167,30 @@ pub struct Residuals {
     pub channels: Vec<(String, Vec<f64>)>,
     /// Per sample, whether it was left out of the calibration (a gross span not modelled).
     pub excluded: Vec<bool>,
+    /// Each sample is every `stride`-th usable row of the recording (1: every one; a recording of more than
+    /// [`MOST_SAMPLES`](super::samples::MOST_SAMPLES) samples is diagnosed on some).
+    pub stride: usize,
+}
+
+impl Residuals {
+    /// The recording rows left out of the calibration: those of the samples `excluded`, and, on a thinned
+    /// recording, the rows between two such samples in a row.
+    pub fn excluded_rows(&self) -> Vec<usize> {
+        rows_of(&self.rows, &self.excluded, self.stride)
+    }
+}
+
+/// The recording rows of the samples (at recording rows `rows`, every `stride`-th usable row) that are `flagged`:
+/// each one's own, and the rows between two flagged samples in a row.
+pub(crate) fn rows_of(rows: &[usize], flagged: &[bool], stride: usize) -> Vec<usize> {
+    let mut out = Vec::new();
+    for (k, &row) in rows.iter().enumerate().filter(|(k, _)| flagged[*k]) {
+        out.push(row);
+        if stride > 1 && flagged.get(k + 1).copied().unwrap_or(false) {
+            out.extend(row + 1..rows[k + 1]);
+        }
+    }
+    out
 }
 
 /// What the diagnosis found.
@@ -229,7 +253,8 @@ impl Diagnosis {
                 continue;
             }
             r.excluded[i] = false;
-            self.samples_left_out = self.samples_left_out.saturating_sub(1);
+            self.samples_excluded = self.samples_excluded.saturating_sub(1);
+            self.samples_used += 1;
             let at = if has_time { r.t_s[i] } else { i as f64 };
             if let Some(sp) = self
                 .spans
@@ -254,5 +279,23 @@ impl Diagnosis {
                 )
             };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rows_of;
+
+    #[test]
+    fn the_rows_between_two_samples_left_out_are_left_out_on_a_thinned_recording() {
+        // Samples at rows 0, 3, 6, 9, 12 (every third); those at 3, 6 and 12 flagged.
+        let rows = [0, 3, 6, 9, 12];
+        let flagged = [false, true, true, false, true];
+        assert_eq!(rows_of(&rows, &flagged, 3), [3, 4, 5, 6, 12]);
+        // Sample by sample, each its own row.
+        assert_eq!(
+            rows_of(&[0, 1, 2, 4], &[true, true, false, true], 1),
+            [0, 1, 4]
+        );
     }
 }

@@ -179,6 +179,7 @@ fn diagnose_at(
     // The per-sample vectors the report shares with the samples, moved rather than copied.
     diagnosis.residuals.direction = setup.unit;
     diagnosis.residuals.rows = samples.rows;
+    diagnosis.residuals.stride = samples.stride;
     diagnosis.residuals.t_s = samples.t.into_owned();
     Ok((diagnosis, lag0_s))
 }

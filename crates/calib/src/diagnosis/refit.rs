@@ -31,8 +31,7 @@ pub fn diagnose_around_spans<P: RobustProblem>(
         None => vec![true; input.raw_ut.len()],
     };
     let mut kept = robust_kept.clone();
-    let r = &first.residuals;
-    for (&row, _) in r.rows.iter().zip(&r.excluded).filter(|(_, x)| **x) {
+    for row in first.residuals.excluded_rows() {
         kept[row] = false;
     }
     if kept == robust_kept {

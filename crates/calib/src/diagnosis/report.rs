@@ -179,6 +179,15 @@ pub(crate) fn report(
     };
     let n = setup.samples.len();
     let excluded: Vec<bool> = round.included.iter().map(|i| !i).collect();
+    let extended_fit = summary(
+        setup,
+        problem,
+        &fits.last,
+        (&fits.ext_a, fits.ext_b),
+        round.sel.last_cv,
+    );
+    let se = extended_fit.se;
+    let modelled = !effects.is_empty();
     Diagnosis {
         verdict,
         effects,
@@ -192,13 +201,12 @@ pub(crate) fn report(
             (&setup.base.a, setup.base.b_ut),
             fits.base_cv,
         ),
-        extended: summary(
-            setup,
-            problem,
-            &fits.last,
-            (&fits.ext_a, fits.ext_b),
-            round.sel.last_cv,
-        ),
+        extended: FitSummary {
+            // On a thinned recording the problem's covariance is of the samples the diagnosis looked at: it
+            // describes a model fitted on them, not the base fit of every row that stands when nothing was found.
+            se: se.filter(|_| setup.samples.stride == 1 || modelled),
+            ..extended_fit
+        },
         model,
         noise_floor_ut: setup.noise_floor_ut,
         reference_floor_ut,
@@ -217,6 +225,7 @@ pub(crate) fn report(
             extended,
             channels,
             excluded,
+            stride: 1,
         },
     }
 }

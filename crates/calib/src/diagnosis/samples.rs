@@ -39,7 +39,16 @@ pub(crate) struct Samples<'a> {
     pub kept: Vec<bool>,
     /// The lag the field and its rate are linearised at ([`timing`]), s; 0 when not.
     pub lag0_s: f64,
+    /// Each sample is every `stride`-th usable row ([`MOST_SAMPLES`]); 1: every one.
+    pub stride: usize,
 }
+
+/// The diagnosis works on at most about this many samples: a longer recording is diagnosed on every `stride`-th of
+/// its usable rows, the field's rate and the coarse lag worked out from all of them first. At 10⁶ samples (100 Hz for
+/// 2.8 hours) its spans are then located to 5 samples, and its tests have the power of 200,000 samples, where an
+/// effect too small to be found is far below what a heading or a gain would notice; the physical recordings, the
+/// studies and the fixtures are shorter and diagnosed sample by sample.
+pub const MOST_SAMPLES: usize = 200_000;
 
 /// The attitudes (sensor → NED) of consecutive samples, worked out from the quaternions when asked for.
 #[derive(Clone, Copy)]
@@ -96,26 +105,64 @@ impl<'a> Samples<'a> {
         }
     }
 
-    /// Gathers the usable rows. `base` calibrates readings for the scalar method's field estimate (and finds the
-    /// coarse lag); the field is linearised at that lag if `linearise`.
+    /// Gathers the usable rows (every `stride`-th of them beyond [`MOST_SAMPLES`]). `base` calibrates readings for
+    /// the scalar method's field estimate (and finds the coarse lag); the field is linearised at that lag if
+    /// `linearise`.
     pub fn gather(input: &DiagnosisInput<'a>, base: &Model, linearise: bool) -> Samples<'a> {
+        Samples::gather_at_most(input, base, linearise, MOST_SAMPLES)
+    }
+
+    /// [`Samples::gather`], thinned beyond `most` samples.
+    fn gather_at_most(
+        input: &DiagnosisInput<'a>,
+        base: &Model,
+        linearise: bool,
+        most: usize,
+    ) -> Samples<'a> {
         let n = input.raw_ut.len();
-        let expected: Option<Vec<[f64; 3]>> = match &input.reference {
-            Reference::Attitude { quat, field_ned_ut } => Some(chunks::map(quat.len(), |i| {
-                frames::expected_sensor_field(quat[i], *field_ned_ut)
-            })),
-            Reference::Field { expected_ut } => Some(expected_ut.to_vec()),
-            Reference::Magnitude { .. } => None,
-        };
         let finite3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
         let usable = |i: usize| {
             finite3(&input.raw_ut[i])
-                && expected.as_ref().is_none_or(|e| finite3(&e[i]))
+                && match &input.reference {
+                    Reference::Attitude { quat, .. } => quat[i].iter().all(|x| x.is_finite()),
+                    Reference::Field { expected_ut } => finite3(&expected_ut[i]),
+                    Reference::Magnitude { .. } => true,
+                }
                 && input.t_s.is_none_or(|t| t[i].is_finite())
                 && input.temp_c.is_none_or(|t| t[i].is_finite())
                 && input.currents.iter().all(|(_, c)| c[i].is_finite())
         };
-        let index: Vec<usize> = (0..n).filter(|&i| usable(i)).collect();
+        let mut index: Vec<usize> = (0..n).filter(|&i| usable(i)).collect();
+        let usable_rows = index.len();
+        let stride = usable_rows.div_ceil(most).max(1);
+        if stride > 1 {
+            index = index.into_iter().step_by(stride).collect();
+        }
+        let expected: Option<Vec<[f64; 3]>> = match &input.reference {
+            Reference::Attitude { quat, field_ned_ut } => {
+                let e = chunks::map(index.len(), |k| {
+                    frames::expected_sensor_field(quat[index[k]], *field_ned_ut)
+                });
+                // A finite quaternion that turns into no attitude (all zeros) is no reference.
+                if e.iter().all(finite3) {
+                    Some(e)
+                } else {
+                    // (Rare enough to count each such sample as one row left out when thinned.)
+                    let (i, e): (Vec<usize>, Vec<[f64; 3]>) = index
+                        .iter()
+                        .zip(e)
+                        .filter(|(_, e)| finite3(e))
+                        .map(|(i, e)| (*i, e))
+                        .unzip();
+                    index = i;
+                    Some(e)
+                }
+            }
+            Reference::Field { expected_ut } => {
+                Some(index.iter().map(|&i| expected_ut[i]).collect())
+            }
+            Reference::Magnitude { .. } => None,
+        };
         // The recording's own columns when every row is usable.
         fn pick<'c, T: Copy>(column: &'c [T], index: &[usize]) -> Cow<'c, [T]> {
             if index.len() == column.len() {
@@ -127,9 +174,7 @@ impl<'a> Samples<'a> {
         let raw = pick(input.raw_ut, &index);
         let has_expected = expected.is_some();
         let mut field: Vec<[f64; 3]> = match expected {
-            // Every row usable: the expected field as it is.
-            Some(e) if e.len() == index.len() => e,
-            Some(e) => index.iter().map(|&i| e[i]).collect(),
+            Some(e) => e,
             None => raw.iter().map(|m| base.apply(*m, &Inputs::NONE)).collect(),
         };
         let t = match input.t_s {
@@ -140,7 +185,7 @@ impl<'a> Samples<'a> {
         let rate = match (has_expected, input.t_s) {
             (true, Some(_)) => {
                 let step_s = timing::typical_step(&t);
-                let links = links(&t, &index, step_s);
+                let links = links(&t, &index, stride, step_s);
                 let mut rate = field_rate(&field, &t, &links);
                 if linearise {
                     lag0_s = timing::coarse_lag_s(&raw, &field, &rate, &t, step_s, &links, base);
@@ -167,7 +212,9 @@ impl<'a> Samples<'a> {
                 .map(|&i| input.kept.is_none_or(|k| k[i]))
                 .collect(),
             lag0_s,
-            left_out: n - index.len(),
+            // Rows thinned out are not left out: each sample stands for `stride` of them.
+            left_out: n - usable_rows + (usable_rows.div_ceil(stride) - index.len()),
+            stride,
             temp: match input.temp_c {
                 Some(tc) => pick(tc, &index),
                 None => Cow::Owned(vec![f64::NAN; index.len()]),
@@ -187,15 +234,16 @@ impl<'a> Samples<'a> {
     }
 }
 
-/// Per sample but the last, whether it and the next are consecutive rows of the recording, in time order and at
-/// most five typical steps apart (the field may be differenced and interpolated between them).
-/// `step_s` is the typical step ([`timing::typical_step`]; without one, no gap is too long).
-fn links(t: &[f64], index: &[usize], step_s: f64) -> Vec<bool> {
+/// Per sample but the last, whether it and the next are consecutive samples of the recording (its rows, or every
+/// `stride`-th of them, none missing between), in time order and at most five typical steps apart (the field may be
+/// differenced and interpolated between them). `step_s` is the typical step ([`timing::typical_step`]; without one,
+/// no gap is too long).
+fn links(t: &[f64], index: &[usize], stride: usize, step_s: f64) -> Vec<bool> {
     let typical = if step_s > 0.0 { step_s } else { f64::INFINITY };
     (0..index.len().saturating_sub(1))
         .map(|a| {
             let dt = t[a + 1] - t[a];
-            index[a + 1] == index[a] + 1 && dt > 0.0 && dt <= 5.0 * typical
+            index[a + 1] - index[a] <= stride && dt > 0.0 && dt <= 5.0 * typical
         })
         .collect()
 }
@@ -237,5 +285,34 @@ mod tests {
         assert!(ctx.world.is_some());
         assert!(frames::norm(ctx.field_rate_ut_per_s) > 1.0);
         assert!(s.has_time && s.has_temp && s.kept.iter().all(|k| *k));
+    }
+
+    #[test]
+    fn a_long_recording_is_gathered_every_stride_th_row_with_the_rate_of_its_neighbours() {
+        let mut bench = Bench::new(3000, &[], 5);
+        bench.temp_c[7] = f64::NAN;
+        let input = bench.input(None, f64::NAN);
+        let all = Samples::gather(&input, &true_model(), false);
+        let thin = Samples::gather_at_most(&input, &true_model(), false, 1000);
+        assert_eq!((all.stride, thin.stride), (1, 3));
+        // Every third usable row (row 7 is not one), each with its own values; none left out but row 7.
+        assert_eq!(thin.len(), 1000);
+        assert_eq!(thin.left_out, 1);
+        let mut worst: f64 = 0.0;
+        for (k, &row) in thin.rows.iter().enumerate() {
+            let i = all.rows.iter().position(|&r| r == row).unwrap();
+            assert_eq!(i, 3 * k);
+            assert_eq!(
+                (thin.raw[k], thin.field[k], thin.t[k]),
+                (all.raw[i], all.field[i], all.t[i])
+            );
+            // The rate from the samples three rows away on each side: the field's own, to the curvature of the
+            // turn (one side at the ends and at row 7, as all rows' is, over other steps).
+            if k > 0 && k + 1 < thin.len() && row.abs_diff(7) > 3 {
+                let (r, a) = (thin.rate[k], all.rate[i]);
+                worst = worst.max(frames::norm(frames::sub(r, a)) / frames::norm(a));
+            }
+        }
+        assert!(worst < 0.01, "{worst}");
     }
 }
