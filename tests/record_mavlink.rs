@@ -457,7 +457,7 @@ fn through_a_lossy_link_every_row_is_a_sample_sent_with_its_own_attitude() {
     c.loss_seed = 1;
     let twin = Twin::start(c);
     let rec = dir.path().join("lossy.csv");
-    record(&twin.path, &rec, 20.0);
+    let said = record(&twin.path, &rec, 20.0);
     let report = twin.finish();
     assert!(report.frames_lost > 0);
     let recording = Recording::read(&rec).unwrap();
@@ -475,6 +475,20 @@ fn through_a_lossy_link_every_row_is_a_sample_sent_with_its_own_attitude() {
         100.0 * missing as f64 / (rows.len() + missing) as f64
     );
     assert!(missing > 0 && missing < rows.len() / 10, "{missing}");
+    // The frames the link lost are counted from the gaps in the autopilot's sequence numbers (but for any lost
+    // before the recorder's first frame or after its last), noted in the file and said.
+    let note = meta(&recording, "link_lost");
+    let counted: u64 = note.split(' ').next().unwrap().parse().unwrap();
+    let lost = report.frames_lost + report.frames_dropped;
+    println!("the recording notes {note}; the twin's link lost {lost}");
+    assert!(
+        counted <= lost && 10 * counted >= 9 * lost,
+        "{note}: {lost} lost"
+    );
+    assert!(
+        said.contains(&format!("the link lost {counted} of the autopilot's ")),
+        "{said}"
+    );
     assert!(
         rows.iter().all(|r| r.1.is_finite()),
         "a row without its attitude"
@@ -511,6 +525,9 @@ fn goes_on_after_a_reboot(
     );
     let recording = Recording::read(&rec).unwrap();
     let segments = meta(&recording, "segments");
+    // The reboot restarted the autopilot's numbering of its frames: no frame was lost.
+    let link = meta(&recording, "link_lost");
+    assert!(link.starts_with("0 of the autopilot's "), "{link}");
     assert!(
         segments.starts_with("2 (the device's clock restarted at t = "),
         "{segments}"

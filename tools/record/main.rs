@@ -320,6 +320,14 @@ fn print_summary(s: &RecordSummary, opts: &RecordOptions) -> std::io::Result<()>
             s.clock_restarts.len()
         )?;
     }
+    if let Some(l) = s.link_loss.filter(|l| l.lost > 0) {
+        sayln!(
+            "the link lost {} of the autopilot's {} frames ({:.1} %, by gaps in its sequence numbers): the              recording has gaps there (noted in its metadata); a cable, a faster baud rate or a slower stream rate              loses fewer",
+            l.lost,
+            l.received + l.lost,
+            100.0 * l.share()
+        )?;
+    }
     if let Some(g) = &s.garbage {
         sayln!("{g}")?;
     }

@@ -10,7 +10,7 @@ pub mod streams;
 pub mod telemetry;
 pub mod udp;
 
-pub use link::{Autopilot, Connection, FrameBuffer, LinkError, MemoryPort, duplex};
+pub use link::{Autopilot, Connection, FrameBuffer, LinkError, LinkLoss, MemoryPort, duplex};
 pub use params::{
     ParamError, ParamValue, WriteFailure, param_file, parse_param_file, read_all, write_all,
 };

@@ -198,6 +198,32 @@ pub enum LinkError {
     },
 }
 
+/// Frames the autopilot sent and the link lost, counted from the gaps in its sequence numbers (MAVLink numbers each
+/// sender's frames 0–255 in turn).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkLoss {
+    /// Frames received from the autopilot.
+    pub received: u64,
+    /// Frames it numbered between them that never came.
+    pub lost: u64,
+}
+
+impl LinkLoss {
+    /// The share of the autopilot's frames lost.
+    pub fn share(&self) -> f64 {
+        self.lost as f64 / (self.received + self.lost).max(1) as f64
+    }
+}
+
+/// A gap of this many sequence numbers or more is no loss: the autopilot's numbering restarted (a reboot) or a
+/// frame came out of order (UDP) or twice.
+const SEQUENCE_RESTART: u8 = 128;
+/// Frames further apart than this are not compared: the link was silent (a reboot, which restarts the numbering,
+/// or a dead link, which the recorder says itself).
+const SEQUENCE_SILENCE: Duration = Duration::from_millis(500);
+/// A gap that ends on one of these first numbers may be a reboot's restart of the numbering, not a loss.
+const RESTART_NUMBERS: u8 = 16;
+
 /// A MAVLink connection to one autopilot over `P`; see the [module docs](self).
 pub struct Connection<P> {
     port: P,
@@ -212,6 +238,13 @@ pub struct Connection<P> {
     disconnected: Option<String>,
     /// Messages received while a caller waited for something else (the newest 10000).
     pub backlog: VecDeque<(MavHeader, MavMessage)>,
+    /// The autopilot's frames received and lost, once its heartbeat came.
+    loss: LinkLoss,
+    /// The autopilot's last sequence number, and when its frame was read.
+    last_sequence: Option<(u8, Instant)>,
+    /// The last gap counted that ended on one of the first numbers (a reboot's, if the autopilot's clock is found
+    /// to have restarted there: [`Connection::numbering_restarted`]).
+    suspect_gap: u64,
 }
 
 /// Our own ids: a ground station (system 255) of MAVLink's "mission planner" component (190).
@@ -233,7 +266,40 @@ impl<P: Read + Write> Connection<P> {
             autopilot: None,
             disconnected: None,
             backlog: VecDeque::new(),
+            loss: LinkLoss::default(),
+            last_sequence: None,
+            suspect_gap: 0,
         }
+    }
+
+    /// The autopilot's frames received and lost on the link so far (from its heartbeat on).
+    pub fn link_loss(&self) -> LinkLoss {
+        self.loss
+    }
+
+    /// Says that the autopilot restarted (its clock went back): the gap in its numbering that a reboot's first
+    /// frames made, if one was counted, was no loss.
+    pub fn numbering_restarted(&mut self) {
+        self.loss.lost -= std::mem::take(&mut self.suspect_gap);
+    }
+
+    /// Counts a frame with `header` if the autopilot sent it.
+    fn count(&mut self, header: &MavHeader) {
+        if self.target != Some((header.system_id as u8, header.component_id)) {
+            return;
+        }
+        let now = Instant::now();
+        if let Some((last, at)) = self.last_sequence {
+            let gap = header.sequence.wrapping_sub(last).wrapping_sub(1);
+            if gap > 0 && gap < SEQUENCE_RESTART && now.duration_since(at) < SEQUENCE_SILENCE {
+                self.loss.lost += u64::from(gap);
+                if header.sequence < RESTART_NUMBERS {
+                    self.suspect_gap = u64::from(gap);
+                }
+            }
+        }
+        self.last_sequence = Some((header.sequence, now));
+        self.loss.received += 1;
     }
 
     /// The port's name.
@@ -283,6 +349,7 @@ impl<P: Read + Write> Connection<P> {
         let mut buf = [0u8; 512];
         loop {
             if let Some(m) = self.frames.next_message() {
+                self.count(&m.0);
                 return Ok(Some(m));
             }
             if let Some(reason) = &self.disconnected {
@@ -338,6 +405,7 @@ impl<P: Read + Write> Connection<P> {
                 if let Some(a) = assume.filter(|_| is_autopilot).or(found) {
                     self.target = Some((header.system_id as u8, header.component_id));
                     self.autopilot = Some(a);
+                    self.count(&header);
                     return Ok(a);
                 }
                 let what = format!("{:?}", h.autopilot);
@@ -516,6 +584,57 @@ mod tests {
             got.push(h.sequence);
         }
         assert_eq!(got, [1, 2]);
+    }
+
+    #[test]
+    fn frames_lost_are_counted_from_the_autopilots_sequence_numbers_but_not_a_reboots_restart() {
+        let (mut board, ours) = duplex();
+        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            ..HEARTBEAT_DATA::default()
+        });
+        let mut conn = Connection::new(ours, "p");
+        board.write_all(&frame(&hb, 250)).unwrap();
+        conn.wait_heartbeat(Duration::from_millis(200), None)
+            .unwrap();
+        // 251, 252 lost; 253–255 and 0–4 came (the numbering wraps); 5–9 lost; 10–200 came; then a reboot: 0, 1, 2.
+        let mut bytes = Vec::new();
+        for seq in (253..=255).chain(0..=4).chain(10..=200).chain(0..=2) {
+            bytes.extend(frame(&hb, seq));
+        }
+        // Another sender's frames are not the autopilot's.
+        let mut other = Vec::new();
+        mavlink::write_v2_msg(
+            &mut other,
+            MavHeader {
+                system_id: 42,
+                component_id: 1,
+                sequence: 100,
+            },
+            &hb,
+        )
+        .unwrap();
+        bytes.extend(other);
+        board.write_all(&bytes).unwrap();
+        let deadline = Instant::now() + Duration::from_millis(200);
+        let mut got = 0;
+        while got < 203 {
+            if conn.next_message(deadline).unwrap().is_some() {
+                got += 1;
+            }
+        }
+        // Until the autopilot's clock is found to have gone back, the reboot's gap (200 → 0) counts as 55 lost.
+        assert_eq!(
+            conn.link_loss(),
+            LinkLoss {
+                received: 203,
+                lost: 2 + 5 + 55
+            }
+        );
+        // A gap that ends on one of the first numbers is undone when the autopilot is found to have rebooted.
+        conn.numbering_restarted();
+        assert_eq!(conn.link_loss().lost, 7);
+        assert!((conn.link_loss().share() - 7.0 / 210.0).abs() < 1e-12);
     }
 
     #[test]

@@ -539,16 +539,17 @@ impl<P: Read + Write> AutopilotTwin<P> {
 
     /// Sends `msg`; returns whether it went on the port (not lost by the link, nor dropped for a full port).
     fn send(&mut self, msg: &MavMessage) -> bool {
-        if self.config.loss > 0.0 && self.loss_rng.random_bool(self.config.loss.min(1.0)) {
-            self.report.frames_lost += 1;
-            return false;
-        }
         let header = MavHeader {
             system_id: SYSTEM,
             component_id: COMPONENT,
             sequence: self.sequence,
         };
+        // The autopilot numbers every frame it sends; the link loses some of them.
         self.sequence = self.sequence.wrapping_add(1);
+        if self.config.loss > 0.0 && self.loss_rng.random_bool(self.config.loss.min(1.0)) {
+            self.report.frames_lost += 1;
+            return false;
+        }
         let mut bytes = Vec::with_capacity(64);
         mavlink::write_v2_msg(&mut bytes, header, msg).expect("writing to a Vec");
         let mut at = 0;

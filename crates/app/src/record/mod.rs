@@ -242,6 +242,8 @@ pub struct RecordSummary {
     pub disturbed: u64,
     /// Times at which the device's clock restarted and a new segment of time began, s of recording time.
     pub clock_restarts: Vec<f64>,
+    /// Frames a numbered link (MAVLink) lost.
+    pub link_loss: Option<magcal_autopilot::LinkLoss>,
     /// Garbage lines skipped (line streams).
     pub garbage: Option<Skipped>,
     /// No sample came, and the file `--force` was to replace was left as it was.
@@ -452,6 +454,25 @@ struct Out {
     t0_s: f64,
 }
 
+/// The metadata note that says how many of a numbered link's frames were lost ([`Source::link_loss`]).
+pub const LINK_NOTE: &str = "link_lost";
+/// Room for the link note, bytes.
+const LINK_WIDTH: usize = 120;
+
+/// The link note's value.
+fn link_note(loss: Option<&magcal_autopilot::LinkLoss>) -> String {
+    match loss {
+        None => "counted when the recording ends (it is still recording, or did not end cleanly)"
+            .to_owned(),
+        Some(l) => format!(
+            "{} of the autopilot's {} frames ({:.2} %: gaps in its sequence numbers)",
+            l.lost,
+            l.received + l.lost,
+            100.0 * l.share()
+        ),
+    }
+}
+
 /// The metadata note that lists the segments of a recording's time.
 pub const SEGMENTS_NOTE: &str = "segments";
 /// Room for the segments note, bytes.
@@ -509,6 +530,11 @@ impl Out {
                     width: SEGMENTS_WIDTH,
                 })
                 .into_iter()
+                .chain(source.link_loss().map(|_| Note {
+                    key: LINK_NOTE.to_owned(),
+                    value: link_note(None),
+                    width: LINK_WIDTH,
+                }))
                 .collect(),
         };
         let path = &opts.out;
@@ -577,6 +603,13 @@ impl Out {
         let relative: Vec<f64> = restarts_s.iter().map(|t| t - self.t0_s).collect();
         self.writer
             .set_note(SEGMENTS_NOTE, &segments_note(&relative))
+            .map_err(|source| self.write_failed(source))
+    }
+
+    /// Notes the frames the link lost, as counted at the end.
+    fn note_link(&mut self, loss: &magcal_autopilot::LinkLoss) -> Result<(), RecordError> {
+        self.writer
+            .set_note(LINK_NOTE, &link_note(Some(loss)))
             .map_err(|source| self.write_failed(source))
     }
 
@@ -1051,6 +1084,7 @@ mod tests {
             saturated: 0,
             disturbed: 0,
             clock_restarts: Vec::new(),
+            link_loss: None,
             garbage: None,
             untouched: false,
             stop: Stop::MaxDuration,

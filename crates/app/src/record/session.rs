@@ -91,6 +91,10 @@ pub(super) fn run(
         }
     };
     s.map.finish();
+    let link_loss = source.link_loss();
+    if let Some(loss) = &link_loss {
+        out.note_link(loss)?;
+    }
     Ok(RecordSummary {
         path: out.path().to_owned(),
         samples: out.rows(),
@@ -102,6 +106,7 @@ pub(super) fn run(
         saturated: source.saturated(),
         disturbed: s.disturbed,
         clock_restarts: source.clock_restarts().iter().map(|t| t - s.t0_s).collect(),
+        link_loss,
         garbage: Skipped::of(source),
         untouched: false,
         stop,

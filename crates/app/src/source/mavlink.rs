@@ -347,6 +347,7 @@ impl<P: Read + Write> MavlinkSource<P> {
             Some(_) if t_s < self.last_autopilot_s => {
                 let bridged = self.last_t_s + now.duration_since(self.last_host).as_secs_f64();
                 self.restarts.push(bridged);
+                self.conn.numbering_restarted();
                 bridged - t_s
             }
             Some(o) => o,
@@ -583,5 +584,9 @@ impl<P: Read + Write> Source for MavlinkSource<P> {
 
     fn clock_restarts(&self) -> &[f64] {
         &self.restarts
+    }
+
+    fn link_loss(&self) -> Option<magcal_autopilot::LinkLoss> {
+        Some(self.conn.link_loss())
     }
 }

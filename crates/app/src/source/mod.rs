@@ -165,6 +165,10 @@ pub trait Source {
     fn clock_restarts(&self) -> &[f64] {
         &[]
     }
+    /// For a link that numbers its frames (MAVLink), the frames received and lost on it so far.
+    fn link_loss(&self) -> Option<magcal_autopilot::LinkLoss> {
+        None
+    }
 }
 
 /// A chip driver polled for data-ready on a clock, with retries, temperature and saturation counting.
