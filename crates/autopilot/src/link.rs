@@ -221,8 +221,12 @@ const SEQUENCE_RESTART: u8 = 128;
 /// Frames further apart than this are not compared: the link was silent (a reboot, which restarts the numbering,
 /// or a dead link, which the recorder says itself).
 const SEQUENCE_SILENCE: Duration = Duration::from_millis(500);
-/// A gap that ends on one of these first numbers may be a reboot's restart of the numbering, not a loss.
+/// A gap that ends on one of these first numbers may be a reboot's restart of the numbering, not a loss: it is
+/// undone if the autopilot's clock is found to have gone back within [`SUSPECT_FOR`] (the recorder sees it in the
+/// first compass message after the reboot, which may wait for its streams to be asked for again).
 const RESTART_NUMBERS: u8 = 16;
+/// See [`RESTART_NUMBERS`].
+const SUSPECT_FOR: Duration = Duration::from_secs(5);
 
 /// A MAVLink connection to one autopilot over `P`; see the [module docs](self).
 pub struct Connection<P> {
@@ -242,9 +246,9 @@ pub struct Connection<P> {
     loss: LinkLoss,
     /// The autopilot's last sequence number, and when its frame was read.
     last_sequence: Option<(u8, Instant)>,
-    /// The last gap counted that ended on one of the first numbers (a reboot's, if the autopilot's clock is found
-    /// to have restarted there: [`Connection::numbering_restarted`]).
-    suspect_gap: u64,
+    /// The last gap counted that ended on one of the first numbers, and when (a reboot's, if the autopilot's clock
+    /// is found to have restarted soon after: [`Connection::numbering_restarted`]).
+    suspect_gap: Option<(u64, Instant)>,
 }
 
 /// Our own ids: a ground station (system 255) of MAVLink's "mission planner" component (190).
@@ -268,7 +272,7 @@ impl<P: Read + Write> Connection<P> {
             backlog: VecDeque::new(),
             loss: LinkLoss::default(),
             last_sequence: None,
-            suspect_gap: 0,
+            suspect_gap: None,
         }
     }
 
@@ -280,7 +284,11 @@ impl<P: Read + Write> Connection<P> {
     /// Says that the autopilot restarted (its clock went back): the gap in its numbering that a reboot's first
     /// frames made, if one was counted, was no loss.
     pub fn numbering_restarted(&mut self) {
-        self.loss.lost -= std::mem::take(&mut self.suspect_gap);
+        if let Some((gap, at)) = self.suspect_gap.take()
+            && at.elapsed() < SUSPECT_FOR
+        {
+            self.loss.lost -= gap;
+        }
     }
 
     /// Counts a frame with `header` if the autopilot sent it.
@@ -294,7 +302,7 @@ impl<P: Read + Write> Connection<P> {
             if gap > 0 && gap < SEQUENCE_RESTART && now.duration_since(at) < SEQUENCE_SILENCE {
                 self.loss.lost += u64::from(gap);
                 if header.sequence < RESTART_NUMBERS {
-                    self.suspect_gap = u64::from(gap);
+                    self.suspect_gap = Some((u64::from(gap), now));
                 }
             }
         }

@@ -44,10 +44,11 @@ pub(crate) struct Samples<'a> {
 }
 
 /// The diagnosis works on at most about this many samples: a longer recording is diagnosed on every `stride`-th of
-/// its usable rows, the field's rate and the coarse lag worked out from all of them first. At 10⁶ samples (100 Hz for
-/// 2.8 hours) its spans are then located to 5 samples, and its tests have the power of 200,000 samples, where an
-/// effect too small to be found is far below what a heading or a gain would notice; the physical recordings, the
-/// studies and the fixtures are shorter and diagnosed sample by sample.
+/// its usable rows (the smallest `stride` that leaves at most this many), the field's rate (a central difference over
+/// `stride` rows each side) and the coarse lag found from them. At 10⁶ samples (100 Hz for 2.8 hours) its spans are
+/// then located to 5 samples, and its tests have the power of 200,000 samples, where an effect too small to be found
+/// is far below what a heading or a gain would notice; the physical recordings, the studies and the fixtures are
+/// shorter and diagnosed sample by sample.
 pub const MOST_SAMPLES: usize = 200_000;
 
 /// The attitudes (sensor → NED) of consecutive samples, worked out from the quaternions when asked for.
