@@ -23,7 +23,9 @@
 //! body's FRD attitude for ArduPilot, whose compass field is in body axes; for PX4 the body attitude times the
 //! sensor's rotation), and the battery current last received. The autopilot's clock restarting (a reboot) begins a
 //! new segment of time, bridged by the host's clock. A compass silent for [`ASK_AGAIN`] (an autopilot that rebooted
-//! forgets the rates it was asked for) is asked for again, with the other streams, once per silence.
+//! forgets the rates it was asked for) is asked for again, with the other streams, once per silence. The frames the
+//! link loses are counted from the gaps in the autopilot's sequence numbers ([`Source::link_loss`]; a reboot's
+//! restart of them is undone when its clock is seen to go back) and noted in the recording when it ends.
 
 use std::collections::VecDeque;
 use std::io::{Read, Write};
