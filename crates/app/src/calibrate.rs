@@ -478,8 +478,8 @@ fn vector_base(
     };
     let first = robust::fit(&problem, rec.t_s.as_deref());
     let expected = &problem.expected_ut;
-    let fits = first.as_ref().is_ok_and(|r| {
-        !attitude_in_doubt(
+    let in_doubt = first.as_ref().map_or(true, |r| {
+        attitude_in_doubt(
             r.excluded(),
             r.kept.len(),
             rms3(r.fit.residual_rms_ut),
@@ -487,33 +487,27 @@ fn vector_base(
             field,
         )
     });
-    if fits {
-        let r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-        return Ok(vector_base_of(
-            rec,
-            expected,
-            r,
-            noise,
-            ReferenceDoubt::default(),
-            None,
-        ));
-    }
-    match reference_heading::search(rec, field, &noise, first.as_ref().ok()) {
-        Search::Turned(turned) => {
-            return Ok(turned_base(rec, field, expected, first, turned, noise));
-        }
-        Search::Left(Some(e)) if !e.determined() => {
-            if let Ok(r) = &first
-                && looks_off(r, &noise)
-            {
-                notes.push(reference_heading::undetermined_note(&e));
+    if in_doubt {
+        match reference_heading::search(rec, field, &noise, first.as_ref().ok()) {
+            Search::Turned(turned) => {
+                return Ok(turned_base(rec, field, expected, first, turned, noise));
             }
+            Search::Left(Some(e)) if !e.determined() => {
+                if let Ok(r) = &first
+                    && looks_off(r, &noise)
+                {
+                    notes.push(reference_heading::undetermined_note(&e));
+                }
+            }
+            Search::Left(_) | Search::NoAttitude => {}
         }
-        Search::Left(_) | Search::NoAttitude => {}
     }
     let mut r = first.map_err(|e| refusal(e, &rec.mag_ut, field.magnitude()))?;
-    let mut reference =
-        reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise));
+    let mut reference = if in_doubt {
+        reference_out_of_convention(rec, expected, field, &r.kept, looks_off(&r, &noise))
+    } else {
+        ReferenceDoubt::default()
+    };
     // The majority's misfit would blame the reference (a good part of the field): does any part agree with it?
     let blamed = field
         .magnitude()

@@ -76,20 +76,34 @@ impl FrameBuffer {
             // sender that gave up mid-frame) can hold a whole short frame in its declared length. Only a frame that
             // starts here and fills that length is this one; else the scan goes on from the next byte, and the
             // short frame is found in its turn.
-            let frame = &self.buf[..len];
-            let whole = mavlink::MavlinkReader::new(frame)
+            let message = mavlink::MavlinkReader::new(&self.buf[..len])
                 .read_any_raw_message::<MavMessage>()
-                .is_ok_and(|raw| match raw {
+                .ok()
+                .filter(|raw| match raw {
                     mavlink::MAVLinkMessageRaw::V1(f) => f.raw_bytes().len() == len,
                     mavlink::MAVLinkMessageRaw::V2(f) => f.raw_bytes().len() == len,
+                })
+                .and_then(|raw| {
+                    let msg = <MavMessage as mavlink::Message>::parse(
+                        raw.version(),
+                        raw.message_id(),
+                        raw.payload(),
+                    )
+                    .ok()?;
+                    let header = MavHeader {
+                        system_id: raw.system_id(),
+                        component_id: raw.component_id(),
+                        sequence: raw.sequence(),
+                    };
+                    Some((header, msg))
                 });
-            match mavlink::MavlinkReader::new(frame).read_any_message::<MavMessage>() {
-                Ok(message) if whole => {
+            match message {
+                Some(message) => {
                     self.buf.drain(..len);
                     self.frames += 1;
                     return Some(message);
                 }
-                _ => {
+                None => {
                     self.skipped += 1;
                     self.buf.drain(..1);
                 }

@@ -49,8 +49,7 @@ pub fn disturbed(input: &DiagnosisInput<'_>, model: &Model) -> Result<Disturbed,
     let (scale, kept) = setup.state_kept(&residual);
     let stage = gross::stage(&setup, &residual, &kept, scale, &[]);
     let mut left_out = vec![false; input.raw_ut.len()];
-    let gross: Vec<bool> = stage.clean.iter().map(|c| !c).collect();
-    for row in rows_of(&samples.rows, &gross, samples.stride) {
+    for row in rows_of(&samples.rows, |k| !stage.clean[k], samples.stride) {
         left_out[row] = true;
     }
     Ok(Disturbed {

@@ -176,17 +176,21 @@ impl Residuals {
     /// The recording rows left out of the calibration: those of the samples `excluded`, and, on a thinned
     /// recording, the rows between two such samples in a row.
     pub fn excluded_rows(&self) -> Vec<usize> {
-        rows_of(&self.rows, &self.excluded, self.stride)
+        rows_of(&self.rows, |k| self.excluded[k], self.stride)
     }
 }
 
-/// The recording rows of the samples (at recording rows `rows`, every `stride`-th usable row) that are `flagged`:
-/// each one's own, and the rows between two flagged samples in a row.
-pub(crate) fn rows_of(rows: &[usize], flagged: &[bool], stride: usize) -> Vec<usize> {
+/// The recording rows of the samples (at recording rows `rows`, every `stride`-th usable row) that are `flagged` (by
+/// their index): each one's own, and the rows between two flagged samples in a row.
+pub(crate) fn rows_of(
+    rows: &[usize],
+    flagged: impl Fn(usize) -> bool,
+    stride: usize,
+) -> Vec<usize> {
     let mut out = Vec::new();
-    for (k, &row) in rows.iter().enumerate().filter(|(k, _)| flagged[*k]) {
+    for (k, &row) in rows.iter().enumerate().filter(|(k, _)| flagged(*k)) {
         out.push(row);
-        if stride > 1 && flagged.get(k + 1).copied().unwrap_or(false) {
+        if stride > 1 && k + 1 < rows.len() && flagged(k + 1) {
             out.extend(row + 1..rows[k + 1]);
         }
     }
@@ -291,10 +295,10 @@ mod tests {
         // Samples at rows 0, 3, 6, 9, 12 (every third); those at 3, 6 and 12 flagged.
         let rows = [0, 3, 6, 9, 12];
         let flagged = [false, true, true, false, true];
-        assert_eq!(rows_of(&rows, &flagged, 3), [3, 4, 5, 6, 12]);
+        assert_eq!(rows_of(&rows, |k| flagged[k], 3), [3, 4, 5, 6, 12]);
         // Sample by sample, each its own row.
         assert_eq!(
-            rows_of(&[0, 1, 2, 4], &[true, true, false, true], 1),
+            rows_of(&[0, 1, 2, 4], |k| [true, true, false, true][k], 1),
             [0, 1, 4]
         );
     }
