@@ -546,7 +546,7 @@ fn magcal_apply_refuses_parameters_no_calibration_has() {
 }
 
 /// Issue 34, row 3: the parameters file holds the sensor's model; a drift of the offset the diagnosis found (a
-/// recording's own warm-up) stays in its report. `magcal-apply` on a second recording then has nothing to warn of. A
+/// recording's own warm-up) stays in its report, and the summary warns how fast the heading figures go stale. `magcal-apply` on a second recording then has nothing to warn of. A
 /// file that holds such a correction anyway (written by hand, or before) is still warned about on another recording.
 #[test]
 fn a_recordings_own_drift_stays_in_its_report_not_the_parameters() {
@@ -565,13 +565,24 @@ fn a_recordings_own_drift_stays_in_its_report_not_the_parameters() {
         dir.path().join("params.toml"),
         dir.path().join("report.json"),
     );
-    stdout(&magcal_fit(&[
+    let summary = stdout(&magcal_fit(&[
         first.to_str().unwrap(),
         "--out",
         params.to_str().unwrap(),
         "--report",
         report.to_str().unwrap(),
     ]));
+    // The heading figures are of the drift's reference time: the summary says how fast they go stale, and a
+    // calibration whose offset was still moving is not good.
+    let warning = summary
+        .lines()
+        .find(|l| l.contains("WARNING: the offset drifts with time: ") && l.contains("along +X"))
+        .unwrap_or_else(|| panic!("{summary}"));
+    assert!(
+        warning.contains("a compass gains up to") && warning.contains("magcal-apply"),
+        "{warning}"
+    );
+    assert!(summary.contains("verdict: USABLE"), "{summary}");
     let text = std::fs::read_to_string(&params).unwrap();
     let report = std::fs::read_to_string(&report).unwrap();
     assert!(

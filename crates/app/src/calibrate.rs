@@ -13,7 +13,7 @@ use magcal_calib::faults;
 use magcal_calib::robust;
 use magcal_calib::scalar::{self, ScalarProblem};
 use magcal_calib::vector::{VectorFit, VectorProblem};
-use magcal_calib::{FitError, Frame, Model};
+use magcal_calib::{Effect, FitError, Frame, Model};
 use magcal_recording::{AttitudeToReference, Metadata, ReadOptions, Recording};
 use std::path::Path;
 
@@ -886,6 +886,7 @@ fn diagnose_into(rec: &Recording, cal: &mut Calibration) -> Result<(), Calibrate
                 ));
             }
             cal.warnings.extend(other_offset_state(&d, rec));
+            cal.warnings.extend(drifting_offset(&d, rec, &cal.field));
             cal.sphere_coverage = used_coverage(rec, d.model, &d);
             cal.diagnosis = Some(d);
         }
@@ -1166,6 +1167,51 @@ fn other_offset_state(d: &Diagnosis, rec: &Recording) -> Option<String> {
          magnetic on or near the board. {state}",
         100.0 * share,
         when.join(", ")
+    ))
+}
+
+/// What an offset that drifted during the recording (a `bias_drift` the diagnosis kept) means for the next one: the
+/// calibration's offset is of the drift's reference time, the readings were that far from it within the recording,
+/// and a compass whose offset goes on drifting so gains heading error by the minute (`field`: for the horizontal
+/// field). The parameters file and the exports hold no drift (it is of this recording's clock), so the claim of the
+/// heading figures holds on the next recording only once the drift has stopped.
+fn drifting_offset(d: &Diagnosis, rec: &Recording, field: &ReferenceField) -> Option<String> {
+    let (found, rate_ut_per_s, t_ref_s) = d.effects.iter().find_map(|f| match f.effect {
+        Effect::BiasDrift {
+            rate_ut_per_s,
+            t_ref_s,
+        } => Some((f, rate_ut_per_s, t_ref_s)),
+        _ => None,
+    })?;
+    let t = rec.t_s.as_deref()?;
+    let (first, last) = (
+        t.iter().copied().find(|v| v.is_finite())?,
+        t.iter().copied().rfind(|v| v.is_finite())?,
+    );
+    let rate = frames::norm(rate_ut_per_s);
+    let farthest_ut = rate * (t_ref_s - first).abs().max((last - t_ref_s).abs());
+    let per_minute = match field.vector() {
+        Some(f) if f[0].hypot(f[1]) > 0.0 => format!(
+            "a compass gains up to {:.1}° of heading error a minute (the horizontal field is {:.1} µT)",
+            (60.0 * rate / f[0].hypot(f[1])).atan().to_degrees(),
+            f[0].hypot(f[1])
+        ),
+        _ => match field.magnitude() {
+            Some(f) => format!(
+                "the offset moves by {:.1} % of the field a minute",
+                100.0 * 60.0 * rate / f
+            ),
+            None => "the offset moves on by as much every minute".to_owned(),
+        },
+    };
+    Some(format!(
+        "{} (the diagnosis' bias_drift; the parameters and exports hold no drift): the calibration's offset is of \
+         t = {t_ref_s:.1} s, and the readings were up to {farthest_ut:.2} µT from it within the recording. If it \
+         goes on drifting so, \
+         {per_minute}, and the heading figures above hold only while it does not. An offset drifts while a board \
+         warms up, or with a current or a temperature that changes: let the device settle (run it for some minutes), \
+         record again, and check this calibration on that recording with magcal-apply",
+        found.what
     ))
 }
 
