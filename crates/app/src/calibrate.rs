@@ -1207,10 +1207,9 @@ fn drifting_offset(d: &Diagnosis, rec: &Recording, field: &ReferenceField) -> Op
     Some(format!(
         "{} (the diagnosis' bias_drift; the parameters and exports hold no drift): the calibration's offset is of \
          t = {t_ref_s:.1} s, and the readings were up to {farthest_ut:.2} µT from it within the recording. If it \
-         goes on drifting so, \
-         {per_minute}, and the heading figures above hold only while it does not. An offset drifts while a board \
-         warms up, or with a current or a temperature that changes: let the device settle (run it for some minutes), \
-         record again, and check this calibration on that recording with magcal-apply",
+         goes on drifting so, {per_minute}, and the heading figures above hold only while it does not. An offset \
+         drifts while a board warms up, or with a current or a temperature that changes: let the device settle (run \
+         it for some minutes), record again, and check this calibration on that recording with magcal-apply",
         found.what
     ))
 }
