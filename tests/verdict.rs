@@ -546,8 +546,9 @@ fn magcal_apply_refuses_parameters_no_calibration_has() {
 }
 
 /// Issue 34, row 3: the parameters file holds the sensor's model; a drift of the offset the diagnosis found (a
-/// recording's own warm-up) stays in its report, and the summary warns how fast the heading figures go stale. `magcal-apply` on a second recording then has nothing to warn of. A
-/// file that holds such a correction anyway (written by hand, or before) is still warned about on another recording.
+/// recording's own warm-up) stays in its report, and the summary warns how fast the heading figures go stale.
+/// `magcal-apply` on a second recording then has nothing to warn of. A file that holds such a correction anyway
+/// (written by hand, or before) is still warned about on another recording.
 #[test]
 fn a_recordings_own_drift_stays_in_its_report_not_the_parameters() {
     let dir = tempfile::tempdir().unwrap();

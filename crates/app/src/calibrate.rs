@@ -1190,19 +1190,17 @@ fn drifting_offset(d: &Diagnosis, rec: &Recording, field: &ReferenceField) -> Op
     );
     let rate = frames::norm(rate_ut_per_s);
     let farthest_ut = rate * (t_ref_s - first).abs().max((last - t_ref_s).abs());
-    let per_minute = match field.vector() {
-        Some(f) if f[0].hypot(f[1]) > 0.0 => format!(
-            "a compass gains up to {:.1}° of heading error a minute (the horizontal field is {:.1} µT)",
-            (60.0 * rate / f[0].hypot(f[1])).atan().to_degrees(),
-            f[0].hypot(f[1])
+    let horizontal_ut = field.vector().map(|f| f[0].hypot(f[1]));
+    let per_minute = match (horizontal_ut, field.magnitude()) {
+        (Some(h), _) if h > 0.0 => format!(
+            "a compass gains up to {:.1}° of heading error a minute (the horizontal field is {h:.1} µT)",
+            (60.0 * rate / h).atan().to_degrees()
         ),
-        _ => match field.magnitude() {
-            Some(f) => format!(
-                "the offset moves by {:.1} % of the field a minute",
-                100.0 * 60.0 * rate / f
-            ),
-            None => "the offset moves on by as much every minute".to_owned(),
-        },
+        (_, Some(f)) => format!(
+            "the offset moves by {:.1} % of the field a minute",
+            100.0 * 60.0 * rate / f
+        ),
+        _ => "the calibration's offset falls behind by that much every minute".to_owned(),
     };
     Some(format!(
         "{} (the diagnosis' bias_drift; the parameters and exports hold no drift): the calibration's offset is of \
