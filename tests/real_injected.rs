@@ -139,6 +139,33 @@ fn truth(rec: &Path) -> ([[f64; 3]; 3], [f64; 3]) {
     (matrix(&r["calibration"]["A"]), offset(&r))
 }
 
+/// The effects the fit of the undisturbed recording `rec` models, sorted: what a recording made of it with its
+/// timing shifted should find too.
+fn clean_effects(rec: &Path) -> Vec<String> {
+    let r = fit_report(rec, &[]);
+    let mut ids: Vec<String> = effect_ids(&r).into_iter().map(str::to_owned).collect();
+    ids.sort();
+    ids
+}
+
+/// The effects of a report, sorted.
+fn sorted_effects(r: &Value) -> Vec<String> {
+    let mut ids: Vec<String> = effect_ids(r).into_iter().map(str::to_owned).collect();
+    ids.sort();
+    ids
+}
+
+/// Whether the offset of `r` agrees with the undisturbed recording's (`clean`, its report) within three of their
+/// combined standard errors on every axis.
+fn offset_agrees(r: &Value, clean: &Value) -> bool {
+    let (o, c) = (offset(r), offset(clean));
+    let (so, sc) = (
+        floats(&r["calibration"]["offset_se_ut"]),
+        floats(&clean["calibration"]["offset_se_ut"]),
+    );
+    (0..3).all(|k| (o[k] - c[k]).abs() <= 3.0 * so[k].hypot(sc[k]))
+}
+
 /// Largest |A − A'| element and |offset − offset'|, µT.
 fn errors(r: &Value, truth: &([[f64; 3]; 3], [f64; 3])) -> (f64, f64) {
     let a = matrix(&r["calibration"]["A"]);
@@ -180,8 +207,12 @@ fn a_diagnosis_that_cannot_model_the_spans_does_not_refuse_the_recording() {
         String::from_utf8_lossy(&out.stderr)
     );
     let r = fit_report(&path, &[]);
+    let clean = fit_report(&real(BROAD_02), &[]);
     let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
-    assert!(a_err < 0.01 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
+    assert!(
+        a_err < 0.01 && o_err < 0.5 && offset_agrees(&r, &clean),
+        "A {a_err}, offset {o_err} µT"
+    );
     // The spans say why they were left out.
     let said = r["diagnosis"]["spans"]
         .as_array()
@@ -268,7 +299,9 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
 /// 300 µT on the board for the middle 90 s of the turning (49.9–140.1 s): the robust fit took the state with most
 /// directions — the one with the magnet — and the stretches before and after, on the sensor's own offset, for
 /// spans; the calibration was 300 µT off, graded usable with a warning that the rest "sat on another offset". The
-/// recording began and ended on that offset: the verdict is now redo, saying so.
+/// recording began and ended on that offset: the verdict became redo, saying so. With the noise measured per sample
+/// (BROAD's is alike in neighbouring samples, and its floor was read 30 % low) the fit now takes the state the
+/// recording began and ended in, the sensor's own: either is no silent error.
 #[test]
 fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() {
     let dir = tempfile::tempdir().unwrap();
@@ -279,7 +312,13 @@ fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() 
     })];
     let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
     let r = fit_report(&path, &[]);
-    assert_eq!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+    // Either the calibration is of the sensor's own state (the start's and the end's), or the verdict says it is not.
+    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+    assert!(
+        r["verdict"]["grade"] == "redo" || (a_err < 0.02 && o_err < 1.0),
+        "A {a_err}, offset {o_err} µT, {}",
+        r["verdict"]
+    );
     // The readings the fit kept are in µT: the stretches on the other offset are no unit.
     let warnings = r["warnings"].as_array().expect("the report's warnings");
     assert!(
@@ -324,8 +363,12 @@ fn a_field_on_the_board_gross_only_in_places_is_one_window() {
         (f0 - t0_s).abs() < 1.0 && (f1 - t1_s).abs() < 1.0,
         "{f0}–{f1} s"
     );
+    let clean = fit_report(&real(BROAD_02), &[]);
     let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
-    assert!(a_err < 0.01 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
+    assert!(
+        a_err < 0.01 && o_err < 0.5 && offset_agrees(&r, &clean),
+        "A {a_err}, offset {o_err} µT"
+    );
 }
 
 /// The same 5.6 µT on the board without the quaternions (the scalar method): the window scan finds it exactly, but
@@ -428,9 +471,20 @@ fn readings_late_by_tens_of_milliseconds_are_a_time_lag_not_disturbances() {
     let path = with_reference_ahead(BROAD_02, dir.path(), "ahead.csv", 7);
     let r = fit_report(&path, &[]);
     let d = &r["diagnosis"];
-    let ids = effect_ids(&r);
-    assert_eq!(ids, ["time_lag"], "{}", d["effects"]);
-    let lag_s = d["effects"][0]["params"]["lag_s"].as_f64().unwrap();
+    assert_eq!(
+        sorted_effects(&r),
+        clean_effects(&real(BROAD_02)),
+        "{}",
+        d["effects"]
+    );
+    let lag_s = d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["id"] == "time_lag")
+        .expect("a time lag")["params"]["lag_s"]
+        .as_f64()
+        .unwrap();
     assert!((lag_s - 0.0638).abs() < 0.003, "{lag_s} s");
     assert_eq!(d["spans"].as_array().unwrap().len(), 0, "{}", d["spans"]);
     let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
@@ -586,8 +640,8 @@ fn a_reference_out_of_step_with_the_readings_is_named_with_its_offset() {
         r["reference_offset"]
     );
     assert_eq!(
-        effect_ids(&r),
-        ["time_lag"],
+        sorted_effects(&r),
+        clean_effects(&real(BROAD_02)),
         "{}",
         r["diagnosis"]["effects"]
     );

@@ -97,6 +97,10 @@ pub fn noise_source(noise: &NoiseFloor) -> String {
             format!("the spread within {runs} poses ({dof} degrees of freedom)")
         }
         NoiseSource::Still { start, end } => format!("still segment, samples {start}–{end}"),
-        NoiseSource::Differences { order } => format!("differences of order {order}"),
+        NoiseSource::Differences { order, spacing: 1 } => format!("differences of order {order}"),
+        NoiseSource::Differences { order, spacing } => format!(
+            "differences of order {order}, their taps {spacing} samples apart (the noise is alike in neighbouring \
+             samples)"
+        ),
     }
 }
