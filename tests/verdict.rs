@@ -166,7 +166,9 @@ fn without_the_fields_direction_the_verdict_asks_for_it() {
         "{text}"
     );
     assert!(
-        text.contains("a tilt of the sensor on its mount not included"),
+        text.contains(
+            "not included: a tilt of the sensor on its mount, a field not the same everywhere it went"
+        ),
         "{text}"
     );
 }

@@ -62,7 +62,7 @@ fn heading_lines(h: &HeadingErrors, scalar: bool, noise_measured: bool, bound: b
         fmt_deg(h.left.worst_deg),
         fmt_deg(h.left.rms_deg),
         if scalar {
-            " (a tilt of the sensor on its mount not included)"
+            " (not included: a tilt of the sensor on its mount, a field not the same everywhere it went)"
         } else {
             ""
         },

@@ -155,8 +155,9 @@ impl<'o> Session<'o> {
         match self.opts.routine {
             Routine::Free => {
                 ui.message(&format!(
-                    "free rotation: turn the sensor through every orientation until {:.0} % of the sphere is \
-                     covered (Ctrl-C stops early; the file keeps everything)",
+                    "free rotation: turn the sensor in one spot, about its own centre and away from metal, through \
+                     every orientation until {:.0} % of the sphere is covered (Ctrl-C stops early; the file keeps \
+                     everything)",
                     100.0 * self.opts.target_coverage
                 ));
                 if let Some(bench) = source.bench() {
