@@ -42,8 +42,9 @@ fn broad_vector_fit_is_near_identity_with_a_small_offset() {
 /// (2.3) do, held to 3; 02 and 29 do not: 3.5 apart in `A[1][2]` each against its header's field, 3.75 against the
 /// one lab field, held to 4 — the 3 not met. Each trial's fit now models the field's direction
 /// (`field_direction_error`: +1.4° in 02 against its header, +1.3° in 29 and +3.0° in 33 against the lab's), so its
-/// `A` no longer turns with the field given (02's `A[1][2]` +0.001 either way); what is left is a turn of about 1.5°
-/// about x between 29's sensor and reference and 02's, which neither recording shows. Before the noise was measured
+/// `A` no longer turns with the field given (02's `A[1][2]` +0.001 either way); what is left is in both halves of each
+/// trial (29's halves, each diagnosed alone, −0.031 and −0.022; 02's −0.000 and −0.002), so it is between the trials
+/// (half a turn of about 0.8° about x, half a shear), which neither recording shows. Before the noise was measured
 /// per sample (BROAD's is alike in neighbouring samples) 02 took no field direction and the pair stood 3.1 and 2.5
 /// apart; before the halves' disagreement entered the standard errors, 5.2.
 #[test]
