@@ -388,10 +388,17 @@ fn without_reference(rel: &str, dir: &Path, no_field: bool, on_board: Option<&On
     path
 }
 
-/// The scalar A is symmetric: its error against I is what the tolerance bounds.
+/// The scalar A is symmetric: its error against I is what the tolerance bounds. Issue 37, acceptance 4: with the
+/// lab field, each trial lands within its README's own tolerances (02: A within 3 % of I, the offset within 0.5 µT;
+/// 29 and 33: 4 % and 1 µT; measured 0.025 / 0.30, 0.015 / 0.81, 0.029 / 0.71 µT), and BROAD 33's magnet on the board
+/// is located through |B| alone (40.88–98.65 s against the vector method's 40.4–98.7 s: IoU 0.99, held to 0.8).
 #[test]
 fn broad_recordings_without_quaternions_calibrate_by_the_scalar_method() {
-    for rel in [BROAD_02, BROAD_29, BROAD_33] {
+    for (rel, readme_a, readme_offset_ut) in [
+        (BROAD_02, 0.03, 0.5),
+        (BROAD_29, 0.04, 1.0),
+        (BROAD_33, 0.04, 1.0),
+    ] {
         for no_field in [false, true] {
             let dir = tempfile::tempdir().unwrap();
             let path = without_reference(rel, dir.path(), no_field, None);
@@ -399,6 +406,26 @@ fn broad_recordings_without_quaternions_calibrate_by_the_scalar_method() {
             let what = format!("{rel} without quaternions (field removed too: {no_field})");
             assert_eq!(r["method"], "scalar", "{what}");
             assert_within(&r, [0.0; 3], &what);
+            if !no_field {
+                let a = a_error(&matrix(&r["calibration"]["A"]));
+                let o = frames::norm(offset(&r));
+                assert!(
+                    a <= readme_a && o <= readme_offset_ut,
+                    "{what}: A {a:.4} off I, offset {o:.2} µT"
+                );
+            }
+            if rel == BROAD_33 {
+                let (t0, t1) = (40.4, 98.7);
+                let iou = spans(&r)
+                    .iter()
+                    .map(|&(a, b)| (b.min(t1) - a.max(t0)).max(0.0) / (b.max(t1) - a.min(t0)))
+                    .fold(0.0, f64::max);
+                assert!(
+                    iou >= 0.8,
+                    "{what}: the magnet's window at IoU {iou:.2}: {:?}",
+                    spans(&r)
+                );
+            }
             if rel == BROAD_02 {
                 let ids = effect_ids(&r);
                 assert!(
