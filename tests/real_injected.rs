@@ -133,22 +133,13 @@ fn offset(r: &Value) -> [f64; 3] {
     magcal_calib::scalar::centre(&a, [b[0], b[1], b[2]])
 }
 
-/// The truth: the fit of the undisturbed recording `rec` (A and the offset).
-fn truth(rec: &Path) -> ([[f64; 3]; 3], [f64; 3]) {
-    let r = fit_report(rec, &[]);
-    (matrix(&r["calibration"]["A"]), offset(&r))
+/// The truth: A and the offset of `clean`, the report of the undisturbed recording's fit.
+fn truth(clean: &Value) -> ([[f64; 3]; 3], [f64; 3]) {
+    (matrix(&clean["calibration"]["A"]), offset(clean))
 }
 
-/// The effects the fit of the undisturbed recording `rec` models, sorted: what a recording made of it with its
-/// timing shifted should find too.
-fn clean_effects(rec: &Path) -> Vec<String> {
-    let r = fit_report(rec, &[]);
-    let mut ids: Vec<String> = effect_ids(&r).into_iter().map(str::to_owned).collect();
-    ids.sort();
-    ids
-}
-
-/// The effects of a report, sorted.
+/// The effects of a report, sorted (a recording made of an undisturbed one with its timing shifted should find the
+/// undisturbed one's).
 fn sorted_effects(r: &Value) -> Vec<String> {
     let mut ids: Vec<String> = effect_ids(r).into_iter().map(str::to_owned).collect();
     ids.sort();
@@ -208,7 +199,7 @@ fn a_diagnosis_that_cannot_model_the_spans_does_not_refuse_the_recording() {
     );
     let r = fit_report(&path, &[]);
     let clean = fit_report(&real(BROAD_02), &[]);
-    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+    let (a_err, o_err) = errors(&r, &truth(&clean));
     assert!(
         a_err < 0.01 && o_err < 0.5 && offset_agrees(&r, &clean),
         "A {a_err}, offset {o_err} µT"
@@ -249,7 +240,7 @@ fn a_shifted_window_holding_most_of_the_turning_is_not_left_out() {
     ];
     let path = with_added(BROAD_02, dir.path(), "passes.csv", &added, true);
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
-    let truth = truth(&bare);
+    let truth = truth(&fit_report(&bare, &[]));
     for args in [&[][..], &["--no-diagnose"][..]] {
         let r = fit_report(&path, args);
         assert_eq!(r["method"], "scalar");
@@ -288,7 +279,7 @@ fn a_step_where_the_sensor_rested_on_one_side_is_not_offered_to_the_magnitude() 
     ];
     let path = with_added(BROAD_02, dir.path(), "boards.csv", &added, true);
     let bare = with_added(BROAD_02, dir.path(), "bare.csv", &[], true);
-    let truth = truth(&bare);
+    let truth = truth(&fit_report(&bare, &[]));
     let r = fit_report(&path, &[]);
     let ids = effect_ids(&r);
     assert!(!ids.contains(&"bias_step"), "{ids:?}");
@@ -312,8 +303,9 @@ fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() 
     })];
     let path = with_added(BROAD_02, dir.path(), "middle.csv", &added, false);
     let r = fit_report(&path, &[]);
+    let clean = fit_report(&real(BROAD_02), &[]);
     // Either the calibration is of the sensor's own state (the start's and the end's), or the verdict says it is not.
-    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+    let (a_err, o_err) = errors(&r, &truth(&clean));
     assert!(
         r["verdict"]["grade"] == "redo" || (a_err < 0.02 && o_err < 1.0),
         "A {a_err}, offset {o_err} µT, {}",
@@ -329,8 +321,7 @@ fn a_calibration_of_the_state_between_two_stretches_on_another_offset_is_redo() 
         "{warnings:?}"
     );
     // Without the magnet, nothing of the sort.
-    let r = fit_report(&real(BROAD_02), &[]);
-    assert_ne!(r["verdict"]["grade"], "redo", "{}", r["verdict"]);
+    assert_ne!(clean["verdict"]["grade"], "redo", "{}", clean["verdict"]);
 }
 
 /// 5.6 µT on the board for 53 s (103.9–157.0 s, 28 % of the recording): beside the reference's own error (0.9 µT)
@@ -364,7 +355,7 @@ fn a_field_on_the_board_gross_only_in_places_is_one_window() {
         "{f0}–{f1} s"
     );
     let clean = fit_report(&real(BROAD_02), &[]);
-    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+    let (a_err, o_err) = errors(&r, &truth(&clean));
     assert!(
         a_err < 0.01 && o_err < 0.5 && offset_agrees(&r, &clean),
         "A {a_err}, offset {o_err} µT"
@@ -406,7 +397,7 @@ fn a_window_holding_most_of_the_turning_is_a_second_centre() {
         "{}",
         r["warnings"]
     );
-    let (a_err, o_err) = errors(&r, &truth(&bare));
+    let (a_err, o_err) = errors(&r, &truth(&fit_report(&bare, &[])));
     assert!(a_err < 0.01 && o_err < 1.5, "A {a_err}, offset {o_err} µT");
     assert_ne!(r["verdict"]["grade"], "good", "{}", r["verdict"]);
 }
@@ -470,10 +461,11 @@ fn readings_late_by_tens_of_milliseconds_are_a_time_lag_not_disturbances() {
     let dir = tempfile::tempdir().unwrap();
     let path = with_reference_ahead(BROAD_02, dir.path(), "ahead.csv", 7);
     let r = fit_report(&path, &[]);
+    let clean = fit_report(&real(BROAD_02), &[]);
     let d = &r["diagnosis"];
     assert_eq!(
         sorted_effects(&r),
-        clean_effects(&real(BROAD_02)),
+        sorted_effects(&clean),
         "{}",
         d["effects"]
     );
@@ -487,7 +479,7 @@ fn readings_late_by_tens_of_milliseconds_are_a_time_lag_not_disturbances() {
         .unwrap();
     assert!((lag_s - 0.0638).abs() < 0.003, "{lag_s} s");
     assert_eq!(d["spans"].as_array().unwrap().len(), 0, "{}", d["spans"]);
-    let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+    let (a_err, o_err) = errors(&r, &truth(&clean));
     assert!(a_err < 0.005 && o_err < 0.3, "A {a_err}, offset {o_err} µT");
     // The summary counts the rows the final model used, and says what the base fit left out.
     let out = magcal_fit(&[path.to_str().unwrap()]);
@@ -586,6 +578,7 @@ fn a_field_in_the_room_or_on_the_board_for_a_while_is_no_other_attitude_conventi
             offset_ut: [-39.46, 4.15, -55.8],
         }),
     ];
+    let truth = truth(&fit_report(&real(BROAD_02), &[]));
     for (name, added) in [("room.csv", &room), ("board.csv", &board)] {
         let path = with_added(BROAD_02, dir.path(), name, added, false);
         let r = fit_report(&path, &[]);
@@ -594,7 +587,7 @@ fn a_field_in_the_room_or_on_the_board_for_a_while_is_no_other_attitude_conventi
             "{name}: {}",
             r["attitude_convention"]
         );
-        let (a_err, o_err) = errors(&r, &truth(&real(BROAD_02)));
+        let (a_err, o_err) = errors(&r, &truth);
         assert!(
             a_err < 0.02 && o_err < 1.0,
             "{name}: A {a_err}, offset {o_err} µT"
@@ -641,7 +634,7 @@ fn a_reference_out_of_step_with_the_readings_is_named_with_its_offset() {
     );
     assert_eq!(
         sorted_effects(&r),
-        clean_effects(&real(BROAD_02)),
+        sorted_effects(&fit_report(&real(BROAD_02), &[])),
         "{}",
         r["diagnosis"]["effects"]
     );
@@ -697,7 +690,7 @@ fn the_consistent_part_of_a_mostly_disturbed_recording_calibrates_or_is_named() 
         (BROAD_02, 0.3, 186.0, 0.03, 1.0),
         (nexus, 0.0, 64.0, 0.05, 3.0),
     ] {
-        let clean = truth(&real(rel));
+        let clean = truth(&fit_report(&real(rel), &[]));
         for share in [0.5, 0.7, 0.85] {
             let name = format!("{}_{share}.csv", rel.replace('/', "_"));
             let added = moving_sources(t0_s, t1_s, share, 1);

@@ -197,25 +197,17 @@ fn correlated_noise(raw_ut: &[[f64; 3]]) -> Option<(usize, [f64; 3])> {
 /// [`difference_sigmas`] is (the median absolute difference sets a scale, the RMS within four of it is the figure),
 /// over the readings or blocks spread evenly over them ([`DIFFERENCES_MOST`]).
 fn spaced_sigma(raw_ut: &[[f64; 3]], spacing: usize) -> [f64; 3] {
-    const TAPS: [f64; 5] = [1.0, -4.0, 6.0, -4.0, 1.0];
-    let count = raw_ut.len().saturating_sub(4 * spacing);
-    let at = |i: usize| -> [f64; 3] {
-        std::array::from_fn(|k| {
-            TAPS.iter()
-                .enumerate()
-                .map(|(j, c)| c * raw_ut[i + j * spacing][k])
-                .sum()
-        })
+    let count = raw_ut.len().saturating_sub(SPACED_ORDER * spacing);
+    let at = |i: usize| {
+        difference(
+            SPACED_ORDER - 1,
+            &std::array::from_fn(|j| raw_ut[i + j * spacing]),
+        )
     };
     let stride = count.div_ceil(MEDIAN_PROBE).max(1);
     let limit: [f64; 3] = std::array::from_fn(|k| {
         let abs: Vec<f64> = (0..count).step_by(stride).map(|i| at(i)[k].abs()).collect();
-        let m = robust::median(&abs);
-        if m > 0.0 {
-            4.0 * m / 0.674_489_75
-        } else {
-            f64::INFINITY
-        }
+        four_sigma_limit(robust::median(&abs))
     });
     let sums = chunks::fold_spread(
         count,
@@ -340,15 +332,17 @@ fn median_abs_differences(raw_ut: &[[f64; 3]]) -> [[f64; 3]; ORDERS] {
 /// The limits within which differences count: four standard deviations of a Gaussian whose median absolute value
 /// is `mad`, or none where `mad` is not positive.
 fn four_sigma_limits(mad: &[[f64; 3]; ORDERS]) -> [[f64; 3]; ORDERS] {
-    mad.map(|m| {
-        m.map(|m| {
-            if m > 0.0 {
-                4.0 * m / 0.674_489_75
-            } else {
-                f64::INFINITY
-            }
-        })
-    })
+    mad.map(|m| m.map(four_sigma_limit))
+}
+
+/// Four standard deviations of a Gaussian whose median absolute value is `mad`; none (infinite) where `mad` is not
+/// positive.
+fn four_sigma_limit(mad: f64) -> f64 {
+    if mad > 0.0 {
+        4.0 * mad / 0.674_489_75
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Per axis, the sum of the squares of one order's differences within their limit, and how many there are.
